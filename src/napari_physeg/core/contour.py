@@ -1,0 +1,138 @@
+"""Closed polylines: validation, arc-length resampling, orientation and normals.
+
+A contour is an ``(N, 2)`` float64 array of ``(row, col)`` nodes (napari's and
+scikit-image's convention), closed implicitly: the last node connects to the
+first, which is not repeated.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "as_contour",
+    "signed_area",
+    "perimeter",
+    "segment_lengths",
+    "resample",
+    "outward_normals",
+    "mean_nearest_neighbour_distance",
+    "polygon_mask",
+]
+
+
+def as_contour(points, *, name: str = "contour", min_nodes: int = 3) -> np.ndarray:
+    """Validate ``points`` as a closed contour and return it as float64 ``(N, 2)``.
+
+    A repeated closing node and consecutive duplicate nodes are dropped.
+
+    Parameters
+    ----------
+    points : array_like, shape (N, 2)
+        ``(row, col)`` nodes.
+    name : str, optional
+        The argument's name, used in error messages.
+    min_nodes : int, optional
+        The fewest distinct nodes accepted.
+
+    Raises
+    ------
+    ValueError
+        If the array is empty, not ``(N, 2)``, holds NaN or infinite values,
+        has fewer than ``min_nodes`` distinct nodes, or encloses no area
+        (all nodes on one line).
+    """
+    try:
+        arr = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{name} must be an (N, 2) array of (row, col) nodes: {err}") from None
+    if arr.size == 0:
+        raise ValueError(f"{name} is empty: draw a contour with at least {min_nodes} nodes")
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(
+            f"{name} must be an (N, 2) array of (row, col) nodes, got shape {arr.shape}"
+            + ("; for nD layers pass only the last two coordinates" if arr.ndim == 2 else "")
+        )
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or infinite coordinates")
+    # Drop consecutive duplicates, including a closing node equal to the first.
+    keep = np.any(arr != np.roll(arr, 1, axis=0), axis=1)
+    if not keep.any():  # every node identical
+        keep[0] = True
+    arr = arr[keep]
+    if len(arr) < min_nodes:
+        raise ValueError(
+            f"{name} has {len(arr)} distinct node(s); at least {min_nodes} are needed for a closed contour"
+        )
+    scale = max(np.ptp(arr, axis=0).max(), 1e-300)
+    if abs(signed_area(arr)) <= 1e-9 * scale**2:
+        raise ValueError(f"{name} is degenerate: its nodes lie on one line and enclose no area")
+    return np.ascontiguousarray(arr)
+
+
+def signed_area(contour: np.ndarray) -> float:
+    """Shoelace area with rows as the first axis; positive when the nodes run
+    counter-clockwise in the (row, col) frame."""
+    r, c = contour[:, 0], contour[:, 1]
+    return 0.5 * float(np.dot(r, np.roll(c, -1)) - np.dot(np.roll(r, -1), c))
+
+
+def segment_lengths(contour: np.ndarray) -> np.ndarray:
+    """Length of each edge ``i -> i+1`` (the last edge closes the contour)."""
+    return np.linalg.norm(np.roll(contour, -1, axis=0) - contour, axis=1)
+
+
+def perimeter(contour: np.ndarray) -> float:
+    """Length of the closed polyline."""
+    return float(segment_lengths(contour).sum())
+
+
+def resample(contour: np.ndarray, n_nodes: int | None = None, *, spacing: float | None = None) -> np.ndarray:
+    """Resample a closed contour to evenly spaced nodes along its arc length.
+
+    Exactly one of ``n_nodes`` and ``spacing`` is used; with ``spacing`` the
+    node count is ``round(perimeter / spacing)`` (at least 3). The first node
+    is kept in place, so resampling does not rotate the node numbering.
+    """
+    contour = np.asarray(contour, dtype=np.float64)
+    seg = segment_lengths(contour)
+    total = seg.sum()
+    if n_nodes is None:
+        if spacing is None or not spacing > 0:
+            raise ValueError("resample needs n_nodes or a positive spacing")
+        n_nodes = int(round(total / spacing))
+    n_nodes = max(int(n_nodes), 3)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    closed = np.vstack([contour, contour[:1]])
+    targets = np.arange(n_nodes) * (total / n_nodes)
+    return np.column_stack([np.interp(targets, s, closed[:, k]) for k in range(2)])
+
+
+def outward_normals(contour: np.ndarray) -> np.ndarray:
+    """Unit normals pointing out of the region the contour encloses.
+
+    The tangent at each node is the chord between its two neighbours (the
+    central difference), which keeps the normal well defined at corners.
+    """
+    tangent = np.roll(contour, -1, axis=0) - np.roll(contour, 1, axis=0)
+    # Rotating the tangent by -90 degrees points outward for a counter-clockwise contour.
+    normal = np.column_stack([tangent[:, 1], -tangent[:, 0]])
+    if signed_area(contour) < 0:
+        normal = -normal
+    norm = np.linalg.norm(normal, axis=1, keepdims=True)
+    return normal / np.maximum(norm, 1e-12)
+
+
+def mean_nearest_neighbour_distance(nodes: np.ndarray) -> float:
+    """Mean distance from each node to its nearest other node."""
+    from scipy.spatial import cKDTree
+
+    dist, _ = cKDTree(nodes).query(nodes, k=2)
+    return float(dist[:, 1].mean())
+
+
+def polygon_mask(contour: np.ndarray, shape) -> np.ndarray:
+    """Boolean mask of the pixels whose centres lie inside the contour."""
+    from skimage.draw import polygon2mask
+
+    return polygon2mask(tuple(shape), np.asarray(contour))
