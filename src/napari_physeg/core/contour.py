@@ -56,7 +56,7 @@ def as_contour(points, *, name: str = "contour", min_nodes: int = 3) -> np.ndarr
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} contains NaN or infinite coordinates")
     # Drop consecutive duplicates, including a closing node equal to the first.
-    keep = np.any(arr != np.roll(arr, 1, axis=0), axis=1)
+    keep = np.any(arr != np.roll(arr, -1, axis=0), axis=1)
     if not keep.any():  # every node identical
         keep[0] = True
     arr = arr[keep]

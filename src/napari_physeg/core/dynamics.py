@@ -103,12 +103,18 @@ class NewmarkIntegrator:
         self.A = np.zeros(n)
         self.divergence_limit = divergence_limit
 
+    def trial(self, F: np.ndarray) -> np.ndarray:
+        """The displacement :meth:`step` would reach under ``F``, without advancing."""
+        a0, a1, a2, a3, a4, a5 = self.constants[:6]
+        U, V, A = self.U, self.V, self.A
+        rhs = F + self.M @ (a0 * U + a2 * V + a3 * A) + self.C @ (a1 * U + a4 * V + a5 * A)
+        return self._solve(rhs)
+
     def step(self, F: np.ndarray) -> np.ndarray:
         """Advance one step under the force ``F`` at the end of the step; return ``U``."""
         a0, a1, a2, a3, a4, a5, a6, a7 = self.constants
         U, V, A = self.U, self.V, self.A
-        rhs = F + self.M @ (a0 * U + a2 * V + a3 * A) + self.C @ (a1 * U + a4 * V + a5 * A)
-        U_new = self._solve(rhs)
+        U_new = self.trial(F)
         _check_state(U_new, self.divergence_limit)
         A_new = a0 * (U_new - U) - a2 * V - a3 * A
         self.V = V + a6 * A + a7 * A_new

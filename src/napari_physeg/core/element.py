@@ -47,6 +47,7 @@ __all__ = [
     "CoefficientSystem",
     "coefficient_system",
     "MAX_CONDITION",
+    "natural_frequency_range",
 ]
 
 #: Largest accepted condition number of G; above it M loses positive definiteness.
@@ -261,3 +262,24 @@ def coefficient_system(nodes, sigma: float, material: str | Material = "rubber")
         K=blocks(stiff_scale * b11, stiff_scale * b22, stiff_scale * b12),
         sigma=float(sigma),
     )
+
+
+def natural_frequency_range(M, K) -> tuple[float, float]:
+    """Lowest and highest natural frequencies ``w = sqrt(eig(K, M))`` (rad/s).
+
+    Dense solve for small systems, ARPACK (shift-invert for the lowest) for
+    large sparse ones.
+    """
+    n = M.shape[0]
+    if n <= 600:
+        Md = M.toarray() if sp.issparse(M) else M
+        Kd = K.toarray() if sp.issparse(K) else K
+        w2 = la.eigh(Kd, Md, eigvals_only=True)
+        lo, hi = w2[0], w2[-1]
+    else:
+        from scipy.sparse.linalg import eigsh
+
+        hi = eigsh(sp.csc_matrix(K), k=1, M=sp.csc_matrix(M), which="LM", return_eigenvectors=False)[0]
+        lo = eigsh(sp.csc_matrix(K), k=1, M=sp.csc_matrix(M), sigma=0.0, which="LM",
+                   return_eigenvectors=False)[0]
+    return float(np.sqrt(max(lo, 1e-300))), float(np.sqrt(hi))

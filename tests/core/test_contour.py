@@ -1,0 +1,75 @@
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from napari_physeg.core.contour import (
+    as_contour,
+    outward_normals,
+    perimeter,
+    resample,
+    segment_lengths,
+    signed_area,
+)
+
+
+def _circle(n, r=10.0, c=(50.0, 60.0), start=0.0):
+    t = start + 2 * np.pi * np.arange(n) / n
+    return np.column_stack([c[0] + r * np.cos(t), c[1] + r * np.sin(t)])
+
+
+def test_as_contour_drops_closing_and_duplicate_nodes():
+    c = _circle(8)
+    closed = np.vstack([c[:3], c[2:3], c[3:], c[:1]])  # duplicate node 2, repeated first node
+    out = as_contour(closed)
+    assert out.dtype == np.float64 and out.shape == (8, 2)
+    assert np.array_equal(out, c)
+
+
+@pytest.mark.parametrize(
+    "points, message",
+    [
+        (np.empty((0, 2)), "empty"),
+        (np.zeros((5, 3)), r"\(N, 2\)"),
+        ([[0, 0], [1, 1]], "at least 3"),
+        ([[0, 0], [0, 0], [0, 0], [0, 0]], "at least 3"),
+        ([[0, 0], [1, 1], [2, 2], [3, 3]], "degenerate"),
+        ([[0, 0], [1, np.nan], [2, 0]], "NaN"),
+        ("abc", r"\(N, 2\)"),
+    ],
+)
+def test_as_contour_rejects_bad_input(points, message):
+    with pytest.raises(ValueError, match=message):
+        as_contour(points, name="init")
+
+
+def test_outward_normals_point_away_from_the_centre_for_both_orientations():
+    for c in (_circle(40), _circle(40)[::-1]):
+        n = outward_normals(c)
+        radial = (c - [50.0, 60.0]) / 10.0
+        assert np.allclose(np.linalg.norm(n, axis=1), 1.0)
+        assert np.all((n * radial).sum(1) > 0.99)
+
+
+def test_signed_area_of_a_square():
+    sq = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+    assert abs(signed_area(sq)) == pytest.approx(4.0)
+    assert signed_area(sq) == -signed_area(sq[::-1])
+
+
+@settings(max_examples=50, deadline=None)
+@given(n=st.integers(3, 400), start=st.floats(0, 6.3), spacing_nodes=st.integers(5, 60))
+def test_resample_gives_even_spacing_on_the_same_curve(n, start, spacing_nodes):
+    c = _circle(spacing_nodes, start=start)
+    out = resample(c, n)
+    assert out.shape == (n, 2)
+    assert np.allclose(out[0], c[0])
+    seg = segment_lengths(out)
+    assert seg.max() - seg.min() <= 2 * perimeter(c) / spacing_nodes / n + 1e-9 + 0.05 * seg.mean()
+    # every new node lies on the original polyline (here: inside the circle, near it)
+    r = np.linalg.norm(out - [50.0, 60.0], axis=1)
+    assert np.all(r <= 10.0 + 1e-9) and np.all(r >= 10.0 * np.cos(np.pi / spacing_nodes) - 1e-9)
+
+
+def test_resample_by_spacing():
+    out = resample(_circle(100), spacing=2.0)
+    assert len(out) == round(perimeter(_circle(100)) / 2.0)
