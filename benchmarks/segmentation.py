@@ -1,0 +1,186 @@
+"""Segmentation benchmark: napari-physeg next to scikit-image's contour methods.
+
+Every method gets the same image and the same initial contour, in one run on
+one machine, so the figures compare like with like. Run::
+
+    make bench            # or: .venv/bin/python benchmarks/segmentation.py [--quick] [--write]
+
+``--write`` replaces the segmentation table in ``docs/benchmarks.md``.
+
+Anchors (scikit-image):
+
+* ``active_contour`` - Kass snake on a Gaussian-smoothed image, parameters of
+  the scikit-image gallery (alpha 0.015, beta 10, gamma 0.001), 2500 iterations;
+* ``morphological_geodesic_active_contour`` (MGAC) - on
+  ``inverse_gaussian_gradient``, balloon -1 (shrinking from the initial
+  contour, which always lies outside the object here), 400 iterations;
+* ``morphological_chan_vese`` (MCV) - 200 iterations from the mask of the
+  initial contour.
+
+Timings are medians of ``--repeat`` runs (1 for the slow anchors) and include
+everything each method needs from the raw image (our feature images, the
+anchors' gradient images).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from skimage.draw import polygon2mask
+from skimage.filters import gaussian
+from skimage.segmentation import (
+    active_contour,
+    inverse_gaussian_gradient,
+    morphological_chan_vese,
+    morphological_geodesic_active_contour,
+)
+
+from napari_physeg import data
+from napari_physeg.core import segment
+from napari_physeg.core.contour import resample
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def iou(a: np.ndarray, b: np.ndarray) -> float:
+    return float((a & b).sum() / max((a | b).sum(), 1))
+
+
+def timed(fn, repeat):
+    times, out = [], None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return out, statistics.median(times)
+
+
+def run_physeg(obj, init, repeat, **kw):
+    res, t = timed(lambda: segment(obj.image, init, **kw), repeat)
+    return iou(polygon2mask(obj.image.shape, res.contour), obj.mask), t, res
+
+
+def run_snake(obj, init):
+    def go():
+        smooth = gaussian(obj.image, 3, preserve_range=False)
+        return active_contour(smooth, resample(init, 400), alpha=0.015, beta=10, gamma=0.001,
+                              max_num_iter=2500)
+    snake, t = timed(go, 1)
+    return iou(polygon2mask(obj.image.shape, snake), obj.mask), t
+
+
+def run_mgac(obj, init):
+    def go():
+        g = inverse_gaussian_gradient(obj.image)
+        return morphological_geodesic_active_contour(
+            g, 400, init_level_set=polygon2mask(obj.image.shape, init), smoothing=1, balloon=-1,
+            threshold="auto")
+    ls, t = timed(go, 1)
+    return iou(ls.astype(bool), obj.mask), t
+
+
+def run_mcv(obj, init):
+    def go():
+        return morphological_chan_vese(obj.image, 200, init_level_set=polygon2mask(obj.image.shape, init),
+                                       smoothing=2)
+    ls, t = timed(go, 1)
+    ls = ls.astype(bool)
+    # Chan-Vese labels one phase 1; take the phase that overlaps the object.
+    if iou(~ls, obj.mask) > iou(ls, obj.mask):
+        ls = ~ls
+    return iou(ls, obj.mask), t
+
+
+def cases(quick: bool):
+    sizes = [(256, 256)] if quick else [(256, 256), (512, 512)]
+    for shape in sizes:
+        yield f"ellipse {shape[0]}", data.ellipse(shape)
+        yield f"dark ellipse, noise 0.2, {shape[0]}", data.ellipse(shape, bright=False, noise=0.2)
+        yield f"blob {shape[0]}", data.blob(shape)
+        yield f"hand {shape[0]}", data.hand(shape)
+        yield f"hand, noise 0.1, {shape[0]}", data.hand(shape, noise=0.1)
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="256x256 cases only")
+    ap.add_argument("--repeat", type=int, default=5, help="repeats for napari-physeg timings")
+    ap.add_argument("--write", action="store_true", help="write the table into docs/benchmarks.md")
+    args = ap.parse_args(argv)
+
+    lines = []
+
+    def out(s=""):
+        print(s, flush=True)
+        lines.append(s)
+
+    out(f"Machine: {machine()}")
+    out(f"Command: `python benchmarks/segmentation.py{' --quick' if args.quick else ''}`")
+    out()
+    out("| case | init | physeg nodes | steps | physeg ms | physeg IoU | copper IoU | snake IoU | snake ms "
+        "| MGAC IoU | MGAC ms | MCV IoU | MCV ms |")
+    out("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    worst_margin, speedups, copper_ratio = np.inf, [], []
+    for name, obj in cases(args.quick):
+        for which in ("init_near", "init_far"):
+            init = getattr(obj, which)
+            ours, t_ours, res = run_physeg(obj, init, args.repeat)
+            cu, t_cu, res_cu = run_physeg(obj, init, args.repeat, material="copper", stiffness=1e6)
+            s_iou, s_t = run_snake(obj, init)
+            g_iou, g_t = run_mgac(obj, init)
+            c_iou, c_t = run_mcv(obj, init)
+            worst_margin = min(worst_margin, min(ours, cu) - max(s_iou, g_iou, c_iou))
+            speedups.append(g_t / t_ours)
+            copper_ratio.append(t_cu / t_ours)
+            out(f"| {name} | {which[5:]} | {res.n_nodes} | {res.steps} | {t_ours * 1e3:.0f} | {ours:.3f} | {cu:.3f} "
+                f"| {s_iou:.3f} | {s_t * 1e3:.0f} | {g_iou:.3f} | {g_t * 1e3:.0f} | {c_iou:.3f} | {c_t * 1e3:.0f} |")
+    out()
+    out(f"- worst IoU margin over the best anchor (rubber and copper): {worst_margin:+.3f}")
+    out(f"- MGAC time / physeg time: min {min(speedups):.0f}x, median {statistics.median(speedups):.0f}x")
+    out(f"- copper (r = 1e6) time / rubber (r = 2000) time: median {statistics.median(copper_ratio):.2f}, "
+        f"max {max(copper_ratio):.2f}")
+
+    # The paper's 122-node case on 512x512, features included, and a 2000-node model.
+    obj = data.ellipse((512, 512))
+    _, t122, res122 = run_physeg(obj, obj.init_near, max(args.repeat, 7), n_nodes=122)
+    big = data.blob((512, 512))
+    i2k, t2k, res2k = run_physeg(big, big.init_near, 3, n_nodes=2000)
+    out(f"- 122-node segmentation on 512x512 (ellipse, near init, features included): median "
+        f"{t122 * 1e3:.0f} ms ({res122.steps} steps)")
+    out(f"- 2000-node segmentation on 512x512 (blob, near init): median {t2k * 1e3:.0f} ms "
+        f"({res2k.steps} steps, IoU {i2k:.3f})")
+
+    if args.write:
+        doc = ROOT / "docs" / "benchmarks.md"
+        text = doc.read_text() if doc.exists() else "# Benchmarks\n"
+        start, end = "<!-- segmentation:start -->", "<!-- segmentation:end -->"
+        block = start + "\n" + "\n".join(lines) + "\n" + end
+        if start in text:
+            text = text[: text.index(start)] + block + text[text.index(end) + len(end):]
+        else:
+            text = text.rstrip() + "\n\n## Segmentation\n\n" + block + "\n"
+        doc.write_text(text)
+        print(f"wrote {doc}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
