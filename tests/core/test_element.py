@@ -7,6 +7,7 @@ from hypothesis import given, settings, strategies as st
 from hypothesis.extra.numpy import arrays
 
 from napari_physeg.core.element import (
+    SPARSE_TOLERANCE,
     coefficient_system,
     default_sigma,
     element_matrices,
@@ -108,9 +109,11 @@ def test_coefficient_system_equals_nodal_system():
     cs = coefficient_system(nodes, sigma, "rubber")
     G = cs.G.toarray()
     A = np.linalg.inv(G)
-    # M = A M~ A and K = A K~ A
-    assert np.allclose(A @ cs.M.toarray() @ A, M, rtol=1e-6, atol=1e-7 * np.abs(M).max())
-    assert np.allclose(A @ cs.K.toarray() @ A, K, rtol=1e-6, atol=1e-7 * np.abs(K).max())
+    # M = A M~ A and K = A K~ A, up to the entries the sparse form drops
+    # (below SPARSE_TOLERANCE of the diagonal, amplified by A's norm).
+    tol = 100 * SPARSE_TOLERANCE
+    assert np.abs(A @ cs.M.toarray() @ A - M).max() <= tol * np.abs(M).max()
+    assert np.abs(A @ cs.K.toarray() @ A - K).max() <= tol * np.abs(K).max()
     # sparse: each node interacts with a bounded neighbourhood
     assert cs.K.nnz < 0.8 * (2 * len(nodes)) ** 2
 

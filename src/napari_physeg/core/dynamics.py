@@ -126,6 +126,10 @@ class NewmarkIntegrator:
         """Make the current shape the rest shape (incremental reference)."""
         self.U = np.zeros_like(self.U)
 
+    def reset(self) -> None:
+        """Bring the body to rest in its current shape (U, V, A := 0)."""
+        self.U, self.V, self.A = (np.zeros_like(self.U) for _ in range(3))
+
 
 class ModalIntegrator:
     """Mode superposition for ``M U'' + C U' + K U = F`` with Rayleigh damping.
@@ -178,14 +182,21 @@ class ModalIntegrator:
     def U(self) -> np.ndarray:
         return self.phi @ self.q[:, 0]
 
-    def step(self, F: np.ndarray) -> np.ndarray:
-        """Advance one step under ``F`` held over the step; return ``U``."""
+    def _advance(self, F: np.ndarray) -> np.ndarray:
         static = (self.phi.T @ F) / self._omega2
         x = self.q.copy()
         x[:, 0] -= static
         x = np.einsum("mij,mj->mi", self._propagator, x)
         x[:, 0] += static
-        self.q = x
+        return x
+
+    def trial(self, F: np.ndarray) -> np.ndarray:
+        """The displacement :meth:`step` would reach under ``F``, without advancing."""
+        return self.phi @ self._advance(F)[:, 0]
+
+    def step(self, F: np.ndarray) -> np.ndarray:
+        """Advance one step under ``F`` held over the step; return ``U``."""
+        self.q = self._advance(F)
         U = self.U
         _check_state(U, self.divergence_limit)
         return U
@@ -194,3 +205,7 @@ class ModalIntegrator:
         """Make the current shape the rest shape (incremental reference)."""
         # Only the modal displacements reset; modal velocities carry on.
         self.q[:, 0] = 0.0
+
+    def reset(self) -> None:
+        """Bring the body to rest in its current shape."""
+        self.q[:] = 0.0

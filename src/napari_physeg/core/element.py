@@ -19,7 +19,7 @@ Two representations are provided:
 * nodal matrices ``M``, ``K`` (dense), used for modal analysis and tests;
 * the same system in Gaussian-coefficient coordinates ``c = A U`` (so
   ``U = G c``), where ``M~ = rho h pi sigma^2 Gamma`` and ``K~ = pi beta h B``
-  need no inverse at all and are sparse once entries below ``1e-12`` of the
+  need no inverse at all and are sparse once entries below ``1e-8`` of the
   diagonal are dropped. ``M U'' + C U' + K U = F`` is equivalent to
   ``M~ c'' + C~ c' + K~ c = G F``; this is what the segmentation integrates.
 """
@@ -48,12 +48,13 @@ __all__ = [
     "coefficient_system",
     "MAX_CONDITION",
     "natural_frequency_range",
+    "reference_frequency_range",
 ]
 
 #: Largest accepted condition number of G; above it M loses positive definiteness.
 MAX_CONDITION = 1e9
 #: Relative size below which the sparse coefficient matrices drop an entry.
-SPARSE_TOLERANCE = 1e-12
+SPARSE_TOLERANCE = 1e-8
 
 
 def default_sigma(nodes: np.ndarray, factor: float = 1.0) -> float:
@@ -231,7 +232,7 @@ def coefficient_system(nodes, sigma: float, material: str | Material = "rubber")
     """Sparse mass, stiffness and interpolation matrices in coefficient space.
 
     Pairs of nodes farther apart than the distance where ``sqrt(g)`` falls
-    below ``1e-12`` are not stored: for evenly spaced contour nodes each node
+    below ``1e-8`` are not stored: for evenly spaced contour nodes each node
     then interacts with about 20 others whatever the node count, which keeps
     assembling, factoring and solving linear in the number of nodes.
     """
@@ -283,3 +284,21 @@ def natural_frequency_range(M, K) -> tuple[float, float]:
         lo = eigsh(sp.csc_matrix(K), k=1, M=sp.csc_matrix(M), sigma=0.0, which="LM",
                    return_eigenvectors=False)[0]
     return float(np.sqrt(max(lo, 1e-300))), float(np.sqrt(hi))
+
+
+def reference_frequency_range(spacing: float, sigma: float, material: str | Material = "rubber",
+                              n_nodes: int = 64) -> tuple[float, float]:
+    """Natural frequency range of a ring of ``n_nodes`` nodes at ``spacing``.
+
+    The element's stiffness does not depend on scale and its mass grows with
+    ``sigma^2``, so the frequency band of a contour's local modes is set by
+    the material, the node spacing and ``sigma``, not by the contour's size.
+    A small reference ring gives that band for the price of a 128 x 128
+    eigenproblem, whatever the model's node count; it sets the Rayleigh
+    damping of segmentation models.
+    """
+    radius = spacing / (2.0 * np.sin(np.pi / n_nodes))
+    t = 2.0 * np.pi * np.arange(n_nodes) / n_nodes
+    ring = radius * np.column_stack([np.cos(t), np.sin(t)])
+    M, K = element_matrices(ring, sigma, material)
+    return natural_frequency_range(M, K)

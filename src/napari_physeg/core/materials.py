@@ -27,7 +27,7 @@ from typing import Literal
 __all__ = ["Material", "MATERIALS", "DEFAULT_THICKNESS", "get_material"]
 
 #: Membrane thickness (m) that relates the paper's force constants to pixels.
-DEFAULT_THICKNESS = 2e-4
+DEFAULT_THICKNESS = 5e-6
 
 
 @dataclass(frozen=True)

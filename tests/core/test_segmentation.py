@@ -1,0 +1,184 @@
+"""segment(): accuracy on objects with a known answer, physics, and bad input."""
+
+import warnings
+
+import numpy as np
+import pytest
+from skimage.draw import polygon2mask
+
+from napari_physeg import data
+from napari_physeg.core import DivergenceError, segment
+from napari_physeg.core.contour import segment_lengths
+
+
+def iou(contour, mask):
+    m = polygon2mask(mask.shape, contour)
+    return (m & mask).sum() / (m | mask).sum()
+
+
+OBJECTS = {
+    "ellipse": lambda: data.ellipse(noise=0.1),
+    "dark ellipse": lambda: data.ellipse(bright=False, noise=0.2, angle=0.5),
+    "blob": lambda: data.blob(noise=0.1),
+    "dark blob": lambda: data.blob(bright=False, noise=0.1, seed=3),
+    "hand": lambda: data.hand(noise=0.1),
+    "dark hand": lambda: data.hand(bright=False, noise=0.1),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(OBJECTS))
+def obj(request):
+    return OBJECTS[request.param]()
+
+
+@pytest.mark.parametrize("which", ["init_near", "init_far"])
+def test_rubber_reaches_the_border(obj, which):
+    res = segment(obj.image, getattr(obj, which))
+    assert res.converged, res.stop_reason
+    assert iou(res.contour, obj.mask) >= 0.95
+    assert np.all(np.isfinite(res.contour)) and res.contour.dtype == np.float64
+
+
+@pytest.mark.parametrize("which", ["init_near", "init_far"])
+def test_copper_with_large_r_converges_without_diverging(obj, which):
+    res = segment(obj.image, getattr(obj, which), material="copper", stiffness=1e6)
+    assert res.converged
+    assert iou(res.contour, obj.mask) >= 0.95
+
+
+def test_rubber_moves_faster_than_copper_at_equal_r():
+    obj = data.ellipse()
+    rubber = segment(obj.image, obj.init_far, material="rubber", stiffness=2000, max_steps=20)
+    copper = segment(obj.image, obj.init_far, material="copper", stiffness=2000, max_steps=20)
+    travel = lambda r: np.abs(r.history[-1].mean(0) - r.history[0].mean(0)).sum() + abs(
+        np.ptp(r.history[-1], 0) - np.ptp(r.history[0], 0)).sum()
+    assert travel(rubber) > 10 * travel(copper)
+
+
+def test_spacing_is_kept_as_the_contour_shrinks():
+    obj = data.blob()
+    res = segment(obj.image, obj.init_far, n_nodes=80)
+    first = segment_lengths(res.history[0]).mean()
+    seg = segment_lengths(res.contour)
+    assert res.n_nodes < 80  # nodes were removed as the contour shrank
+    assert seg.max() <= 1.6 * first + 1e-9 and seg.min() >= 0.4 * first - 1e-9
+
+
+def test_result_is_translation_equivariant():
+    obj = data.ellipse((200, 200), noise=0.0)
+    shifted = np.roll(obj.image, (13, -9), axis=(0, 1))
+    a = segment(obj.image, obj.init_near)
+    b = segment(shifted, obj.init_near + [13, -9])
+    assert len(a.contour) == len(b.contour)
+    assert np.abs(b.contour - (a.contour + [13, -9])).max() < 0.05
+
+
+def test_callback_sees_every_step_and_can_cancel():
+    obj = data.ellipse()
+    seen = []
+    res = segment(obj.image, obj.init_far, callback=lambda step, c: seen.append(step) or step < 7)
+    assert seen == list(range(1, 8))
+    assert res.stop_reason == "cancelled" and not res.converged and res.steps == 7
+
+
+def test_history_starts_at_the_resampled_init_and_ends_at_the_result():
+    obj = data.ellipse()
+    res = segment(obj.image, obj.init_near, n_nodes=50)
+    assert len(res.history[0]) == 50
+    assert np.array_equal(res.history[-1], res.contour)
+    assert set(res.timings) == {"features", "model", "evolution", "total"}
+
+
+@pytest.mark.parametrize("integrator", ["newmark", "modal"])
+def test_both_integrators_segment(integrator):
+    obj = data.ellipse(noise=0.1)
+    res = segment(obj.image, obj.init_near, integrator=integrator, n_nodes=60)
+    assert res.converged and iou(res.contour, obj.mask) >= 0.97
+
+
+@pytest.mark.parametrize("integrator", ["newmark", "modal"])
+def test_total_reference_keeps_elastic_memory(integrator):
+    """With the initial shape as rest shape the elastic force grows with the
+    distance travelled: a soft material still reaches the border, a stiff one
+    stops where its elastic force balances the image force."""
+    obj = data.ellipse()
+    soft = segment(obj.image, obj.init_near, material="soft tissue", reference="total",
+                   integrator=integrator, n_nodes=60)
+    stiff = segment(obj.image, obj.init_near, material="copper", stiffness=2e5, reference="total",
+                    integrator=integrator, n_nodes=60)
+    free = segment(obj.image, obj.init_near, material="copper", stiffness=2e5, n_nodes=60)
+    assert iou(soft.contour, obj.mask) >= 0.95
+    assert iou(stiff.contour, obj.mask) < iou(free.contour, obj.mask) - 0.05
+
+
+def test_image_dtypes_give_the_same_result():
+    obj = data.ellipse()
+    u8 = np.round(obj.image * 255).astype(np.uint8)
+    u16 = u8.astype(np.uint16) * 257
+    a = segment(u8, obj.init_near).contour
+    b = segment(u16, obj.init_near).contour
+    c = segment(u8.astype(np.float32) / 255, obj.init_near).contour
+    assert np.allclose(a, b, atol=1e-6) and np.allclose(a, c, atol=1e-3)
+
+
+# ----------------------------------------------------------------- bad input
+GOOD_IMAGE = data.ellipse((64, 64)).image
+GOOD_INIT = data.ellipse((64, 64)).init_near
+
+
+@pytest.mark.parametrize(
+    "image, init, message",
+    [
+        (GOOD_IMAGE, np.empty((0, 2)), "empty"),
+        (GOOD_IMAGE, [[10, 10], [20, 20]], "at least 3"),
+        (GOOD_IMAGE, [[10, 10], [10, 10], [10, 10]], "at least 3"),
+        (GOOD_IMAGE, [[10, 10], [20, 20], [30, 30]], "degenerate"),
+        (GOOD_IMAGE, GOOD_INIT + 500, "wholly outside"),
+        (GOOD_IMAGE, GOOD_INIT[:, :1], r"\(N, 2\)"),
+        (np.where(np.eye(64, dtype=bool), np.nan, GOOD_IMAGE), GOOD_INIT, "NaN"),
+        (np.dstack([GOOD_IMAGE] * 3), GOOD_INIT, "RGB"),
+        (np.stack([GOOD_IMAGE] * 5), GOOD_INIT, "2D"),
+        (np.full((64, 64), 7.0), GOOD_INIT, "constant"),
+        (GOOD_IMAGE.astype(complex), GOOD_INIT, "real"),
+    ],
+)
+def test_bad_input_gets_a_clear_error(image, init, message):
+    with pytest.raises(ValueError, match=message):
+        segment(image, init)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(material="unobtainium"), "rubber"),
+        (dict(stiffness=-1), "stiffness"),
+        (dict(forces=("edges", "magic")), "forces"),
+        (dict(weights={"edges": -1}), "weight"),
+        (dict(sigma_factor=3.0), "sigma"),
+        (dict(n_nodes=2), "n_nodes"),
+        (dict(reference="sideways"), "reference"),
+        (dict(polarity="grey"), "polarity"),
+    ],
+)
+def test_bad_parameters_get_a_clear_error(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        segment(GOOD_IMAGE, GOOD_INIT, **kwargs)
+
+
+def test_contour_partly_outside_is_clipped_with_a_warning():
+    obj = data.ellipse((128, 128))
+    init = obj.init_far * 1.3 - 20  # sticks out of the top-left corner
+    with pytest.warns(UserWarning, match="clipped"):
+        res = segment(obj.image, init)
+    assert res.contour.min() >= 0 and np.all(res.contour <= 127)
+    assert iou(res.contour, obj.mask) >= 0.9
+
+
+def test_absurd_stiffness_reports_divergence_instead_of_nan():
+    obj = data.ellipse((64, 64))
+    try:
+        res = segment(obj.image, obj.init_near, material="soft tissue", stiffness=1e30, max_steps=30)
+    except DivergenceError as err:
+        assert "stiffness" in str(err)
+    else:  # the trust region may keep it finite: then it must be finite
+        assert np.all(np.isfinite(res.contour))
