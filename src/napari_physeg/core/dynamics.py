@@ -103,6 +103,13 @@ class NewmarkIntegrator:
         self.A = np.zeros(n)
         self.divergence_limit = divergence_limit
 
+    def from_rest(self, F: np.ndarray) -> np.ndarray:
+        """Displacement after one step under ``F`` of the body starting at rest
+        in its rest shape (``U = V = A = 0``); the state is not changed."""
+        U = self._solve(F)
+        _check_state(U, self.divergence_limit)
+        return U
+
     def trial(self, F: np.ndarray) -> np.ndarray:
         """The displacement :meth:`step` would reach under ``F``, without advancing."""
         a0, a1, a2, a3, a4, a5 = self.constants[:6]
@@ -193,6 +200,14 @@ class ModalIntegrator:
     def trial(self, F: np.ndarray) -> np.ndarray:
         """The displacement :meth:`step` would reach under ``F``, without advancing."""
         return self.phi @ self._advance(F)[:, 0]
+
+    def from_rest(self, F: np.ndarray) -> np.ndarray:
+        """Displacement after one step under ``F`` from rest; the state is not changed."""
+        static = (self.phi.T @ F) / self._omega2
+        # From x = 0: x(dt) = x_s - exp(S dt) x_s, and only q (not q') is needed.
+        U = self.phi @ (static * (1.0 - self._propagator[:, 0, 0]))
+        _check_state(U, self.divergence_limit)
+        return U
 
     def step(self, F: np.ndarray) -> np.ndarray:
         """Advance one step under ``F`` held over the step; return ``U``."""

@@ -136,9 +136,16 @@ def objectness_image(intensity: np.ndarray, init: np.ndarray, polarity: int) -> 
     size = np.ptp(init, 0)
     lo = np.maximum(np.floor(init.min(0) - size), 0).astype(int)
     hi = np.minimum(np.ceil(init.max(0) + size), np.array(intensity.shape) - 1).astype(int)
-    span = np.percentile(intensity, 99) - np.percentile(intensity, 1)
+    # Statistics on a sub-grid of at most ~2**16 pixels: as good, much faster.
+    def thin(x):
+        stride = max(1, int(np.sqrt(x.size / 65536.0)))
+        return x[::stride, ::stride]
+
+    sample = thin(intensity)
+    lo1, hi99 = np.percentile(sample, [1, 99])
+    span = hi99 - lo1
     threshold = half_gap = 0.0
-    for region in (intensity[lo[0]: hi[0] + 1, lo[1]: hi[1] + 1], intensity):
+    for region in (thin(intensity[lo[0]: hi[0] + 1, lo[1]: hi[1] + 1]), sample):
         if np.ptp(region) <= 1e-12:
             continue
         split = threshold_otsu(region)
@@ -391,8 +398,7 @@ def segment(
             if reference == "incremental":
                 # The current shape is the rest shape and the body starts the
                 # step at rest: one solve of the dynamic equation over dt.
-                sim.reset()
-                U = system.G @ sim.step(system.G @ f)
+                U = system.G @ sim.from_rest(system.G @ f)
                 move = np.column_stack([U[:m], U[m:]])
                 cap, last_sign = _update_caps(move, normals, cap, last_sign, max_step_length, tol)
                 reach = np.linalg.norm(move, axis=1)

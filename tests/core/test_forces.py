@@ -1,0 +1,87 @@
+"""Image forces along normal lines: direction, balance on the border, symmetry."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from napari_physeg import data
+from napari_physeg.core.contour import outward_normals, resample
+from napari_physeg.core.features import compute_features
+from napari_physeg.core.forces import FORCE_NAMES, ForceField, normalize_weights
+from napari_physeg.core.segmentation import objectness_image
+
+
+def _field(obj, weights):
+    f = compute_features(obj.image, b=0.7)
+    objectness = objectness_image(obj.image, obj.init_near, 1 if obj.image[obj.mask].mean() > obj.image.mean() else -1)
+    return ForceField.from_features(f.edges, f.distance, objectness, weights)
+
+
+def _circle(c, r, n=80):
+    t = 2 * np.pi * np.arange(n) / n
+    return np.column_stack([c[0] + r * np.cos(t), c[1] + r * np.sin(t)])
+
+
+@pytest.fixture(scope="module")
+def disc():
+    # A bright disc of radius 40 centred at (64, 64), its border at r = 40.
+    return data.ellipse((128, 128), center=(64, 64), axes=(40, 40))
+
+
+@pytest.mark.parametrize("name", FORCE_NAMES)
+def test_each_force_pulls_toward_the_border_from_both_sides(disc, name):
+    field = _field(disc, {name: 1.0})
+    for radius, sign in ((30.0, +1), (50.0, -1)):  # inside: outward, outside: inward
+        nodes = _circle((64, 64), radius)
+        F = field(nodes)
+        radial = (F * outward_normals(nodes)).sum(1)
+        assert np.all(np.sign(radial) == sign), (name, radius)
+
+
+@pytest.mark.parametrize("name", FORCE_NAMES)
+def test_each_force_nearly_vanishes_on_the_border(disc, name):
+    field = _field(disc, {name: 1.0})
+    on = field(_circle((64, 64), 40.0))
+    off = field(_circle((64, 64), 44.0))
+    assert np.abs(on).mean() < 0.35 * np.abs(off).mean()
+
+
+def test_forces_are_bounded_by_the_weights(disc):
+    w = normalize_weights(FORCE_NAMES, {"edges": 0.5, "intensity": 0.2, "distance": 0.3})
+    F = _field(disc, w)(_circle((64, 64), 20.0))
+    assert np.linalg.norm(F, axis=1).max() <= sum(w.values()) + 1e-9
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    radius=st.floats(8, 60),
+    shift=st.tuples(st.integers(-10, 10), st.integers(-10, 10)),
+    weights=st.fixed_dictionaries({k: st.floats(0, 1) for k in FORCE_NAMES}).filter(
+        lambda w: sum(w.values()) > 0.01),
+)
+def test_forces_are_finite_mirror_symmetric_and_translation_equivariant(disc, radius, shift, weights):
+    field = _field(disc, weights)
+    nodes = _circle((64 + shift[0], 64 + shift[1]), radius, n=64)
+    F = field(nodes)
+    assert np.all(np.isfinite(F))
+    # Mirror the image left-right: the forces on mirrored nodes mirror too.
+    mirrored = ForceField(edges=field.edges[:, ::-1].copy(), distance=field.distance[:, ::-1].copy(),
+                          objectness=field.objectness[:, ::-1].copy(), weights=field.weights)
+    flip = nodes * [1, -1] + [0, 127]
+    Fm = mirrored(flip[::-1])[::-1]  # reversed to keep the orientation
+    assert np.allclose(Fm * [1, -1], F, atol=1e-4)
+    # Shifting the images and the nodes by whole pixels shifts nothing else.
+    dr, dc = 7, -5
+    moved = ForceField(edges=np.roll(field.edges, (dr, dc), (0, 1)), distance=np.roll(field.distance, (dr, dc), (0, 1)),
+                       objectness=np.roll(field.objectness, (dr, dc), (0, 1)), weights=field.weights)
+    inside = np.all((nodes > 45) & (nodes < 83), axis=1).all()
+    if inside:  # away from the wrapped border
+        assert np.allclose(moved(nodes + [dr, dc]), F, atol=1e-4)
+
+
+def test_normalize_weights_validates():
+    assert normalize_weights(("edges",)) == {"edges": 0.4}
+    with pytest.raises(ValueError, match="subset"):
+        normalize_weights(("edges", "gravity"))
+    with pytest.raises(ValueError, match="positive"):
+        normalize_weights(FORCE_NAMES, {"edges": 0, "intensity": 0, "distance": 0})
