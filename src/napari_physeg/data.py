@@ -34,6 +34,8 @@ import numpy as np
 from scipy import ndimage as ndi
 from scipy.interpolate import CubicSpline
 
+from .core.contour import polygon_mask, resample, signed_area
+
 __all__ = [
     "SyntheticObject",
     "ellipse",
@@ -100,15 +102,10 @@ class SyntheticObject:
 # --------------------------------------------------------------------------
 
 
-def _signed_area(contour: np.ndarray) -> float:
-    r, c = contour[:, 0], contour[:, 1]
-    return 0.5 * float(np.dot(r, np.roll(c, -1)) - np.dot(np.roll(r, -1), c))
-
-
 def _orient(contour: np.ndarray) -> np.ndarray:
     """Return ``contour`` positively oriented (shoelace with rows first > 0)."""
     contour = np.asarray(contour, dtype=np.float64)
-    if _signed_area(contour) < 0:
+    if signed_area(contour) < 0:
         contour = contour[::-1]
     return np.ascontiguousarray(contour)
 
@@ -123,40 +120,12 @@ def _open_closed(contour: np.ndarray) -> np.ndarray:
 
 def _resample_closed(contour: np.ndarray, n_nodes: int | None = None, *, spacing: float = 1.0,
                      start_at: int = 0) -> np.ndarray:
-    """Resample a closed polyline to ``n_nodes`` nodes evenly spaced in
-    arc length (or to about ``spacing`` between nodes), starting at node
-    ``start_at`` of the input."""
+    """:func:`~napari_physeg.core.contour.resample` starting at node ``start_at``."""
     contour = np.roll(np.asarray(contour, dtype=np.float64), -start_at, axis=0)
-    closed = np.vstack([contour, contour[:1]])
-    seg = np.hypot(*np.diff(closed, axis=0).T)
-    cum = np.concatenate([[0.0], np.cumsum(seg)])
-    total = cum[-1]
-    if n_nodes is None:
-        n_nodes = max(int(round(total / spacing)), 3)
-    t = np.arange(n_nodes) * (total / n_nodes)
-    return np.column_stack([np.interp(t, cum, closed[:, 0]), np.interp(t, cum, closed[:, 1])])
+    return resample(contour, n_nodes, spacing=None if n_nodes is not None else spacing)
 
 
-def _polygon_mask(contour: np.ndarray, shape) -> np.ndarray:
-    """Pixels whose centre lies inside the closed polygon (even-odd rule).
-
-    A vectorised scan-line fill: ``O(pixels + crossings)``, unlike
-    ``skimage.draw.polygon`` which is ``O(pixels * vertices)``.
-    """
-    h, w = int(shape[0]), int(shape[1])
-    p = np.asarray(contour, dtype=np.float64)
-    q = np.roll(p, -1, axis=0)
-    r0, c0, r1, c1 = p[:, 0], p[:, 1], q[:, 0], q[:, 1]
-    lo = np.clip(np.ceil(np.minimum(r0, r1)), 0, h).astype(np.int64)
-    hi = np.clip(np.ceil(np.maximum(r0, r1)), 0, h).astype(np.int64)
-    count = np.maximum(hi - lo, 0)
-    edge = np.repeat(np.arange(len(p)), count)
-    rows = lo[edge] + (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count))
-    t = (rows - r0[edge]) / (r1[edge] - r0[edge])
-    x = c0[edge] + t * (c1[edge] - c0[edge])
-    k = np.clip(np.floor(x).astype(np.int64) + 1, 0, w)
-    toggles = np.bincount(rows * (w + 1) + k, minlength=h * (w + 1)).reshape(h, w + 1)
-    return (np.cumsum(toggles[:, :w], axis=1) % 2).astype(bool)
+_polygon_mask = polygon_mask
 
 
 def _polygon_coverage(contour: np.ndarray, shape, factor: int = _SUPERSAMPLE) -> np.ndarray:

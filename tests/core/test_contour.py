@@ -73,3 +73,17 @@ def test_resample_gives_even_spacing_on_the_same_curve(n, start, spacing_nodes):
 def test_resample_by_spacing():
     out = resample(_circle(100), spacing=2.0)
     assert len(out) == round(perimeter(_circle(100)) / 2.0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(3, 40))
+def test_polygon_mask_matches_skimage(seed, n):
+    from skimage.draw import polygon2mask
+
+    from napari_physeg.core.contour import polygon_mask
+
+    rng = np.random.default_rng(seed)
+    t = np.sort(rng.uniform(0, 2 * np.pi, n))
+    r = rng.uniform(5, 20, n)
+    poly = np.column_stack([25 + r * np.cos(t), 24 + r * np.sin(t)])
+    assert np.array_equal(polygon_mask(poly, (50, 48)), polygon2mask((50, 48), poly))

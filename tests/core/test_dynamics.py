@@ -131,3 +131,19 @@ def test_bad_newmark_constants_rejected():
         NewmarkIntegrator(M, K, delta=0.5, alpha=0.1)
     with pytest.raises(ValueError, match="dt"):
         NewmarkIntegrator(M, K, dt=0)
+
+
+@pytest.mark.parametrize("kind", ["newmark", "modal"])
+def test_from_rest_equals_a_step_after_reset(kind):
+    (M, K), _ = _small_element()
+    w = np.sqrt(np.linalg.eigvalsh(np.linalg.solve(M, K)))
+    mu, gamma = rayleigh_coefficients(1.0, w.min(), w.max())
+    F = np.random.default_rng(5).normal(size=K.shape[0])
+    if kind == "newmark":
+        sim = NewmarkIntegrator(M, K, mu * M + gamma * K, dt=0.3 / w.min())
+    else:
+        sim = ModalIntegrator(M, K, mu=mu, gamma=gamma, dt=0.3 / w.min())
+    sim.step(F * 3)  # some state that from_rest must ignore
+    U = sim.from_rest(F)
+    sim.reset()
+    assert np.allclose(U, sim.step(F), rtol=1e-10, atol=1e-14)

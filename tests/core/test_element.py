@@ -151,3 +151,16 @@ def test_element_finite_and_symmetric_for_random_nodes(nodes, material):
         assert np.all(np.isfinite(X))
         assert np.array_equal(X, X.T)
     assert np.linalg.eigvalsh(K).min() > -1e-9 * np.abs(K).max()
+
+
+def test_reference_frequency_range_scales_with_spacing():
+    from napari_physeg.core.element import natural_frequency_range, reference_frequency_range
+
+    lo1, hi1 = reference_frequency_range(1.0, 1.0, "rubber")
+    lo3, hi3 = reference_frequency_range(3.0, 3.0, "rubber")
+    assert lo3 == pytest.approx(lo1 / 3) and hi3 == pytest.approx(hi1 / 3)
+    t = 2 * np.pi * np.arange(64) / 64
+    ring = 3.0 / (2 * np.sin(np.pi / 64)) * np.column_stack([np.cos(t), np.sin(t)])
+    direct = natural_frequency_range(*element_matrices(ring, 3.0, "rubber"))
+    assert np.allclose(direct, (lo3, hi3), rtol=1e-8)
+    assert reference_frequency_range(1.0, 1.0, "copper")[1] > 5 * hi1  # stiffer, higher

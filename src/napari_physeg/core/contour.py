@@ -132,7 +132,24 @@ def mean_nearest_neighbour_distance(nodes: np.ndarray) -> float:
 
 
 def polygon_mask(contour: np.ndarray, shape) -> np.ndarray:
-    """Boolean mask of the pixels whose centres lie inside the contour."""
-    from skimage.draw import polygon2mask
+    """Boolean mask of the pixels whose centres lie inside the contour (even-odd rule).
 
-    return polygon2mask(tuple(shape), np.asarray(contour))
+    The same pixels as ``skimage.draw.polygon2mask``.
+
+    A vectorised scan-line fill: ``O(pixels + crossings)``, unlike
+    ``skimage.draw.polygon`` which is ``O(pixels * vertices)``.
+    """
+    h, w = int(shape[0]), int(shape[1])
+    p = np.asarray(contour, dtype=np.float64)
+    q = np.roll(p, -1, axis=0)
+    r0, c0, r1, c1 = p[:, 0], p[:, 1], q[:, 0], q[:, 1]
+    lo = np.clip(np.ceil(np.minimum(r0, r1)), 0, h).astype(np.int64)
+    hi = np.clip(np.ceil(np.maximum(r0, r1)), 0, h).astype(np.int64)
+    count = np.maximum(hi - lo, 0)
+    edge = np.repeat(np.arange(len(p)), count)
+    rows = lo[edge] + (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count))
+    t = (rows - r0[edge]) / (r1[edge] - r0[edge])
+    x = c0[edge] + t * (c1[edge] - c0[edge])
+    k = np.clip(np.floor(x).astype(np.int64) + 1, 0, w)
+    toggles = np.bincount(rows * (w + 1) + k, minlength=h * (w + 1)).reshape(h, w + 1)
+    return (np.cumsum(toggles[:, :w], axis=1) % 2).astype(bool)

@@ -27,6 +27,7 @@ Two representations are provided:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import scipy.linalg as la
@@ -294,10 +295,18 @@ def reference_frequency_range(spacing: float, sigma: float, material: str | Mate
     ``sigma^2``, so the frequency band of a contour's local modes is set by
     the material, the node spacing and ``sigma``, not by the contour's size.
     A small reference ring gives that band for the price of a 128 x 128
-    eigenproblem, whatever the model's node count; it sets the Rayleigh
-    damping of segmentation models.
+    eigenproblem (solved once per material and ``sigma / spacing``, then
+    rescaled), whatever the model's node count; it sets the Rayleigh damping
+    of segmentation models.
     """
-    radius = spacing / (2.0 * np.sin(np.pi / n_nodes))
+    lo, hi = _unit_ring_frequencies(round(sigma / spacing, 9), get_material(material), int(n_nodes))
+    # All lengths scale with the spacing: K is unchanged, M grows as spacing^2.
+    return lo / spacing, hi / spacing
+
+
+@lru_cache(maxsize=64)
+def _unit_ring_frequencies(sigma: float, material: Material, n_nodes: int) -> tuple[float, float]:
+    radius = 1.0 / (2.0 * np.sin(np.pi / n_nodes))
     t = 2.0 * np.pi * np.arange(n_nodes) / n_nodes
     ring = radius * np.column_stack([np.cos(t), np.sin(t)])
     M, K = element_matrices(ring, sigma, material)

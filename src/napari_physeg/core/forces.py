@@ -120,10 +120,17 @@ class ForceField:
     def sample(self, points: np.ndarray) -> np.ndarray:
         """Bilinear samples of (edges, distance, objectness) at ``points`` (..., 2)."""
         pts = np.asarray(points, dtype=np.float32)
-        flat = pts.reshape(-1, 1, 2)
-        out = cv2.remap(self._stack, np.ascontiguousarray(flat[..., 1]), np.ascontiguousarray(flat[..., 0]),
+        flat = pts.reshape(-1, 2)
+        # cv2.remap wants a 2D map with sides below 2**15: fold the points.
+        n = len(flat)
+        width = min(max(n, 1), 4096)
+        rows = -(-n // width)
+        grid = np.zeros((rows * width, 2), dtype=np.float32)
+        grid[:n] = flat
+        grid = grid.reshape(rows, width, 2)
+        out = cv2.remap(self._stack, np.ascontiguousarray(grid[..., 1]), np.ascontiguousarray(grid[..., 0]),
                         interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        return out.reshape(pts.shape[:-1] + (3,))
+        return out.reshape(-1, 3)[:n].reshape(pts.shape[:-1] + (3,))
 
     @cached_property
     def _region_offsets(self) -> np.ndarray:

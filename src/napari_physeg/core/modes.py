@@ -1,0 +1,378 @@
+"""Modal analysis of a contour's physical model (paper section 3, eq. 11).
+
+The nodes of a contour are modelled with Sclaroff's isoparametric element
+(:mod:`.element`) and the generalized eigenproblem
+
+    K Phi = M Phi Omega                                         (eq. 11)
+
+is solved for the lowest modes. Row ``i`` of a mode holds the displacement
+``(u_i, v_i)`` of node ``i`` in that vibration mode; the low modes describe the
+shape coarsely and change little under noise, small non-rigid deformations and
+similarity transforms, which is what modal matching (:mod:`.matching`) uses.
+
+Conventions (``docs/physics.md`` section 4):
+
+* Each shape is first expressed in its own **canonical frame**: origin at the
+  arc-length-weighted centroid, axes along the principal axes of the
+  second moments (major axis first), unit root-mean-square radius. The sign of
+  the axis with the larger normalised third moment (skewness) is chosen so that
+  the skewness is positive, and the other axis completes a proper rotation (no
+  reflection, so the orientation of the contour is kept). Modal displacements
+  are expressed in this frame, so they rotate, translate and scale with the
+  object.
+* ``K`` has **no rigid-body zero modes** with Gaussian interpolants; the first
+  modes mix translation and rotation into the lowest deformations and are kept.
+* The number of modes is cut at a spectral gap, never through a
+  near-degenerate pair (whose members are arbitrary mixtures of each other).
+* Each selected mode is scaled to unit Euclidean norm over its ``2m`` entries
+  and given a deterministic sign (see :func:`modal_basis`); matching still has
+  to resolve the sign against the other shape.
+* Up to :data:`DENSE_LIMIT` nodes the dense nodal problem is solved with
+  :func:`scipy.linalg.eigh`; above it only the lowest modes are computed from
+  the sparse coefficient system (same eigenvalues) with ARPACK in shift-invert
+  mode and mapped back to nodal displacements with ``Phi = G phi``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as la
+import scipy.sparse as sp
+
+from .contour import as_contour
+from .element import coefficient_system, default_sigma, element_matrices
+from .materials import Material, get_material
+
+__all__ = [
+    "ModalBasis",
+    "modal_basis",
+    "canonical_frame",
+    "select_modes",
+    "DENSE_LIMIT",
+    "DEFAULT_N_MODES",
+    "MAX_AUTO_MODES",
+    "DEGENERACY_TOLERANCE",
+]
+
+#: Largest node count solved with the dense eigensolver.
+DENSE_LIMIT = 300
+#: Smallest number of modes chosen automatically.
+DEFAULT_N_MODES = 6
+#: Largest number of modes chosen automatically.
+MAX_AUTO_MODES = 12
+#: Two eigenvalues whose relative difference is below this are a near-degenerate pair.
+DEGENERACY_TOLERANCE = 0.05
+
+
+@dataclass(frozen=True, eq=False)
+class ModalBasis:
+    """The lowest vibration modes of a contour in its canonical frame.
+
+    Attributes
+    ----------
+    eigenvalues : ndarray, shape (n_modes,)
+        Squared natural frequencies ``omega^2`` of the selected modes, ascending
+        (in the canonical frame's units).
+    shapes : ndarray, shape (m, n_modes, 2)
+        Modal displacement ``(u, v)`` of each node in each mode, in the
+        canonical frame; ``shapes[:, k, :]`` has unit Euclidean norm.
+    nodes : ndarray, shape (m, 2)
+        The nodes in the canonical frame (centred, principal axes, unit RMS
+        radius).
+    centroid : ndarray, shape (2,)
+        Arc-length-weighted centroid of the input nodes, ``(row, col)``.
+    axes : ndarray, shape (2, 2)
+        Rows are the canonical axes as unit vectors in ``(row, col)``; a proper
+        rotation (determinant +1).
+    scale : float
+        RMS radius of the input nodes about the centroid; canonical nodes are
+        ``(nodes - centroid) @ axes.T / scale``.
+    sigma : float
+        Gaussian width of the element, in canonical units.
+    anisotropy : float
+        Ratio of the smaller to the larger principal second moment, in
+        ``(0, 1]``; near 1 the principal axes are ill defined.
+    skewness : ndarray, shape (2,)
+        Normalised third moments along the canonical axes (after the sign fix).
+    spectrum : ndarray
+        All eigenvalues that were computed (at least one beyond the selection),
+        used to place the cut at a spectral gap.
+    material : str
+        Name of the material of the element.
+    """
+
+    eigenvalues: np.ndarray
+    shapes: np.ndarray
+    nodes: np.ndarray
+    centroid: np.ndarray
+    axes: np.ndarray
+    scale: float
+    sigma: float
+    anisotropy: float
+    skewness: np.ndarray
+    spectrum: np.ndarray
+    material: str
+
+    @property
+    def n_nodes(self) -> int:
+        """Number of nodes ``m``."""
+        return self.shapes.shape[0]
+
+    @property
+    def n_modes(self) -> int:
+        """Number of selected modes."""
+        return self.shapes.shape[1]
+
+    def to_canonical(self, points) -> np.ndarray:
+        """Map ``(row, col)`` points into this basis's canonical frame."""
+        return (np.asarray(points, dtype=np.float64) - self.centroid) @ self.axes.T / self.scale
+
+    def from_canonical(self, points) -> np.ndarray:
+        """Map canonical-frame points back to ``(row, col)``."""
+        return np.asarray(points, dtype=np.float64) * self.scale @ self.axes + self.centroid
+
+
+def _node_weights(nodes: np.ndarray) -> np.ndarray:
+    """Arc length owned by each node (half of each adjacent edge), summing to 1."""
+    seg = np.linalg.norm(np.roll(nodes, -1, axis=0) - nodes, axis=1)
+    w = 0.5 * (seg + np.roll(seg, 1))
+    total = w.sum()
+    if not total > 0:
+        return np.full(len(nodes), 1.0 / len(nodes))
+    return w / total
+
+
+def canonical_frame(nodes):
+    """Centroid, principal axes and scale of a contour, with the axis signs fixed.
+
+    Moments are weighted by the arc length each node owns, so they describe
+    the curve rather than the node density.
+
+    Parameters
+    ----------
+    nodes : array_like, shape (m, 2)
+        Contour nodes ``(row, col)``.
+
+    Returns
+    -------
+    centroid : ndarray, shape (2,)
+    axes : ndarray, shape (2, 2)
+        Rows are unit axis vectors (major axis first), a proper rotation.
+    scale : float
+        RMS radius about the centroid.
+    anisotropy : float
+        Minor / major principal second moment.
+    skewness : ndarray, shape (2,)
+        Normalised third moments along the final axes.
+
+    Notes
+    -----
+    The axis whose normalised third moment is larger in magnitude is pointed
+    so that it is positive; the other axis then completes a rotation (a
+    reflection would reverse the contour's orientation). When both skewnesses
+    vanish (a centrally symmetric shape) the frame is defined only up to a
+    half turn, which negates every modal vector and is absorbed by the
+    per-mode sign correction of matching.
+    """
+    nodes = np.asarray(nodes, dtype=np.float64)
+    w = _node_weights(nodes)
+    centroid = w @ nodes
+    d = nodes - centroid
+    cov = (d * w[:, None]).T @ d
+    evals, evecs = np.linalg.eigh(cov)  # ascending
+    axes = evecs[:, ::-1].T.copy()  # rows: major, minor
+    evals = evals[::-1]
+    scale = float(np.sqrt(max(evals.sum(), 1e-300)))
+    anisotropy = float(max(evals[1], 0.0) / max(evals[0], 1e-300))
+    q = d @ axes.T
+    var = np.maximum((w[:, None] * q**2).sum(axis=0), 1e-300)
+    skew = (w[:, None] * q**3).sum(axis=0) / var**1.5
+    k = int(np.argmax(np.abs(skew)))
+    if skew[k] < 0:
+        axes[k] = -axes[k]
+    if np.linalg.det(axes) < 0:
+        axes[1 - k] = -axes[1 - k]
+    q = d @ axes.T
+    skew = (w[:, None] * q**3).sum(axis=0) / var**1.5
+    return centroid, axes, scale, anisotropy, skew
+
+
+def select_modes(eigenvalues, n_modes: int | None = None, *, minimum: int = DEFAULT_N_MODES,
+                 maximum: int = MAX_AUTO_MODES, tolerance: float = DEGENERACY_TOLERANCE) -> int:
+    """Number of modes to keep so that the cut falls at a spectral gap.
+
+    Parameters
+    ----------
+    eigenvalues : array_like
+        Ascending eigenvalues (at least one more than the largest count considered).
+    n_modes : int, optional
+        Requested count. It is raised, if needed, until the relative gap to the
+        next eigenvalue exceeds ``tolerance`` (a near-degenerate pair is kept
+        whole). ``None`` searches from ``minimum``.
+    minimum, maximum : int, optional
+        Range searched when ``n_modes`` is None; if no gap of ``tolerance`` is
+        found in it, the largest relative gap in the range is used.
+    tolerance : float, optional
+        Relative eigenvalue difference below which two modes count as a
+        near-degenerate pair.
+
+    Returns
+    -------
+    int
+        The number of modes.
+    """
+    lam = np.asarray(eigenvalues, dtype=np.float64)
+    avail = len(lam) - 1  # the cut needs the next eigenvalue
+    if avail < 1:
+        return len(lam)
+
+    def gap(n):  # relative gap between mode n-1 and mode n (0-based)
+        return (lam[n] - lam[n - 1]) / max(abs(lam[n]), 1e-300)
+
+    if n_modes is not None:
+        n = int(min(n_modes, avail))
+        while n < avail and gap(n) < tolerance:
+            n += 1
+        return n
+    lo, hi = min(minimum, avail), min(maximum, avail)
+    for n in range(lo, hi + 1):
+        if gap(n) >= tolerance:
+            return n
+    gaps = [gap(n) for n in range(lo, hi + 1)]
+    return lo + int(np.argmax(gaps))
+
+
+def _lowest_modes_dense(nodes, sigma, material, k):
+    M, K = element_matrices(nodes, sigma, material)
+    k = min(k, K.shape[0])
+    lam, phi = la.eigh(K, M, subset_by_index=[0, k - 1], check_finite=False)
+    return lam, phi
+
+
+def _lowest_modes_sparse(nodes, sigma, material, k):
+    from scipy.sparse.linalg import eigsh
+
+    system = coefficient_system(nodes, sigma, material)
+    Kc, Mc = system.K.tocsc(), system.M.tocsc()
+    # Shift slightly below zero: K is positive definite, so K - shift M is too.
+    diag_ratio = float(np.median(Kc.diagonal() / Mc.diagonal()))
+    shift = -1e-3 * diag_ratio
+    n = Kc.shape[0]
+    v0 = np.ones(n) / np.sqrt(n)
+    lam, c = eigsh(Kc, k=k, M=Mc, sigma=shift, which="LM", v0=v0, tol=1e-10)
+    order = np.argsort(lam)
+    lam, c = lam[order], c[:, order]
+    phi = system.G @ c
+    return lam, np.asarray(phi)
+
+
+def _canonical_sign(mode: np.ndarray, weights: np.ndarray) -> float:
+    """A sign that does not depend on node numbering: the weighted third moment
+    of the modal displacements made positive (largest entry as a fallback)."""
+    s = float(weights @ (mode[:, 0] ** 3 + mode[:, 1] ** 3))
+    scale = float(weights @ (np.abs(mode[:, 0]) ** 3 + np.abs(mode[:, 1]) ** 3))
+    if abs(s) > 1e-6 * max(scale, 1e-300):
+        return 1.0 if s > 0 else -1.0
+    flat = mode.ravel()
+    return 1.0 if flat[np.argmax(np.abs(flat))] >= 0 else -1.0
+
+
+def modal_basis(nodes, *, n_modes: int | None = None, sigma: float | None = None,
+                sigma_factor: float = 1.0, material: str | Material = "rubber",
+                name: str = "nodes") -> ModalBasis:
+    """The lowest vibration modes of a contour (eq. 11), in its canonical frame.
+
+    Parameters
+    ----------
+    nodes : array_like, shape (m, 2)
+        Contour nodes ``(row, col)``, closed implicitly, ``m >= 3``.
+    n_modes : int, optional
+        Number of modes. It is raised if needed so that no near-degenerate pair
+        is cut; ``None`` picks 6 to 12 modes, cut at the first spectral gap.
+    sigma : float, optional
+        Gaussian width of the element **in canonical units** (the shape scaled
+        to unit RMS radius). Default: ``sigma_factor`` times the mean
+        nearest-neighbour spacing of the canonical nodes.
+    sigma_factor : float, optional
+        See ``sigma``; 0.75-1.5 gives a well conditioned element.
+    material : str or Material, optional
+        Material of the element. Only Poisson's ratio changes the mode shapes;
+        the other constants scale the eigenvalues.
+    name : str, optional
+        The argument's name in error messages.
+
+    Returns
+    -------
+    ModalBasis
+
+    Raises
+    ------
+    ValueError
+        If ``nodes`` is not a valid contour (fewer than 3 nodes, NaN, all nodes
+        on a line, repeated nodes), ``n_modes`` is not a positive integer, or
+        ``sigma`` makes the element singular.
+
+    Notes
+    -----
+    Each mode is scaled to unit Euclidean norm and its sign is fixed by making
+    the arc-length-weighted sum of ``u^3 + v^3`` positive, which does not
+    depend on where the node numbering starts; it can still differ between
+    two shapes, which :func:`napari_physeg.core.matching.match` corrects.
+    """
+    nodes = _check_nodes(nodes, name)
+    if n_modes is not None:
+        if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)) or n_modes < 1:
+            raise ValueError(f"n_modes must be a positive integer or None, got {n_modes!r}")
+        n_modes = int(n_modes)
+    mat = get_material(material)
+    m = len(nodes)
+    centroid, axes, scale, anisotropy, skew = canonical_frame(nodes)
+    canon = (nodes - centroid) @ axes.T / scale
+    if sigma is None:
+        sigma = default_sigma(canon, sigma_factor)
+    elif not (np.isfinite(sigma) and sigma > 0):
+        raise ValueError(f"sigma must be a positive number, got {sigma!r}")
+    want = (n_modes if n_modes is not None else MAX_AUTO_MODES) + 4
+    k = min(want, 2 * m - 1 if m > DENSE_LIMIT else 2 * m)
+    if m > DENSE_LIMIT:
+        lam, phi = _lowest_modes_sparse(canon, sigma, mat, k)
+    else:
+        lam, phi = _lowest_modes_dense(canon, sigma, mat, k)
+    n = select_modes(lam, n_modes)
+    modes = np.stack([phi[:m, :n], phi[m:, :n]], axis=-1)  # (m, n, 2)
+    norms = np.sqrt((modes**2).sum(axis=(0, 2)))
+    modes = modes / np.maximum(norms, 1e-300)[None, :, None]
+    w = _node_weights(canon)
+    signs = np.array([_canonical_sign(modes[:, j], w) for j in range(n)])
+    modes = modes * signs[None, :, None]
+    return ModalBasis(
+        eigenvalues=np.ascontiguousarray(lam[:n]),
+        shapes=np.ascontiguousarray(modes),
+        nodes=canon,
+        centroid=centroid,
+        axes=axes,
+        scale=scale,
+        sigma=float(sigma),
+        anisotropy=anisotropy,
+        skewness=skew,
+        spectrum=np.ascontiguousarray(lam),
+        material=mat.name,
+    )
+
+
+def _check_nodes(nodes, name: str) -> np.ndarray:
+    """Validate contour nodes: (m, 2), finite, >= 3 distinct, no repeated node."""
+    arr = as_contour(nodes, name=name)
+    raw = np.asarray(nodes, dtype=np.float64)
+    if len(arr) != len(raw):
+        raise ValueError(
+            f"{name} has repeated consecutive nodes (or a repeated closing node): "
+            f"{len(raw) - len(arr)} duplicate(s); pass each node once"
+        )
+    # Any two identical nodes (not only consecutive ones) make G singular.
+    uniq = np.unique(arr, axis=0)
+    if len(uniq) != len(arr):
+        raise ValueError(f"{name} has {len(arr) - len(uniq)} identical node(s); every node must be distinct")
+    return arr
