@@ -288,7 +288,7 @@ def natural_frequency_range(M, K) -> tuple[float, float]:
 
 
 def reference_frequency_range(spacing: float, sigma: float, material: str | Material = "rubber",
-                              n_nodes: int = 64) -> tuple[float, float]:
+                              n_nodes: int = 64, spring: float = 0.0) -> tuple[float, float]:
     """Natural frequency range of a ring of ``n_nodes`` nodes at ``spacing``.
 
     The element's stiffness does not depend on scale and its mass grows with
@@ -297,17 +297,20 @@ def reference_frequency_range(spacing: float, sigma: float, material: str | Mate
     A small reference ring gives that band for the price of a 128 x 128
     eigenproblem (solved once per material and ``sigma / spacing``, then
     rescaled), whatever the model's node count; it sets the Rayleigh damping
-    of segmentation models.
+    of segmentation models. ``spring`` adds a stiffness (N/m) tying every
+    node to a fixed point, as the simulation's target forces do.
     """
-    lo, hi = _unit_ring_frequencies(round(sigma / spacing, 9), get_material(material), int(n_nodes))
+    lo, hi = _unit_ring_frequencies(round(sigma / spacing, 9), get_material(material), int(n_nodes),
+                                    float(spring))
     # All lengths scale with the spacing: K is unchanged, M grows as spacing^2.
     return lo / spacing, hi / spacing
 
 
 @lru_cache(maxsize=64)
-def _unit_ring_frequencies(sigma: float, material: Material, n_nodes: int) -> tuple[float, float]:
+def _unit_ring_frequencies(sigma: float, material: Material, n_nodes: int,
+                           spring: float) -> tuple[float, float]:
     radius = 1.0 / (2.0 * np.sin(np.pi / n_nodes))
     t = 2.0 * np.pi * np.arange(n_nodes) / n_nodes
     ring = radius * np.column_stack([np.cos(t), np.sin(t)])
     M, K = element_matrices(ring, sigma, material)
-    return natural_frequency_range(M, K)
+    return natural_frequency_range(M, K + spring * np.eye(len(K)))

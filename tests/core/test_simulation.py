@@ -1,0 +1,136 @@
+"""simulate(): eqs. 17-18 with implicit target springs."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from napari_physeg import data
+from napari_physeg.core.contour import resample
+from napari_physeg.core.simulation import node_targets, simulate
+
+
+def _truth_matching(a, b, truth, keep=None):
+    pairs = np.column_stack([np.arange(len(a)), truth])
+    if keep is not None:
+        pairs = pairs[keep]
+    affinity = np.linalg.norm(a[:, None] - b[None], axis=2) ** 2
+    return SimpleNamespace(pairs=pairs, affinity=affinity)
+
+
+def _outline_distance(shape, b):
+    return cKDTree(resample(b, 20 * len(b))).query(shape)[0]
+
+
+def _self_intersects(c):
+    """True if two non-adjacent edges of the closed polyline cross."""
+    p, q = c, np.roll(c, -1, axis=0)
+    n = len(c)
+    d1 = q - p
+
+    def orient(o, a, b):
+        return np.sign((a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (b[..., 0] - o[..., 0]))
+
+    i, j = np.triu_indices(n, 2)
+    keep = (j - i) % n != n - 1
+    i, j = i[keep], j[keep]
+    o1 = orient(p[i], q[i], p[j]) * orient(p[i], q[i], q[j])
+    o2 = orient(p[j], q[j], p[i]) * orient(p[j], q[j], q[i])
+    return bool(np.any((o1 < 0) & (o2 < 0)))
+
+
+@pytest.fixture(scope="module", params=[("open", "closed"), ("spread", "closed"), ("closed", "open")])
+def pair(request):
+    return data.hand_pair(67, 66, pose_a=request.param[0], pose_b=request.param[1])
+
+
+def test_first_frame_is_a_and_last_rests_on_b(pair):
+    a, b, truth = pair
+    sim = simulate(a, b, _truth_matching(a, b, truth), n_frames=6)
+    assert sim.frames.shape == (6, 67, 2) and sim.frames.dtype == np.float64
+    assert np.array_equal(sim.frames[0], a)
+    assert sim.converged
+    assert _outline_distance(sim.frames[-1], b).mean() <= 1.0
+    assert np.all(np.isfinite(sim.frames))
+    assert np.all(np.diff(sim.times) > 0)
+
+
+def test_frames_do_not_self_intersect(pair):
+    a, b, truth = pair
+    sim = simulate(a, b, _truth_matching(a, b, truth), n_frames=8)
+    assert not any(_self_intersects(f) for f in sim.frames)
+
+
+def test_frames_are_evenly_spaced_along_the_path(pair):
+    a, b, truth = pair
+    sim = simulate(a, b, _truth_matching(a, b, truth), n_frames=6)
+    steps = np.linalg.norm(np.diff(sim.frames, axis=0), axis=2).mean(1)
+    assert steps.max() < 2.5 * steps.min()
+
+
+def test_unmatched_nodes_reach_the_target_as_with_a_full_matching(pair):
+    """The paper's figs. 10 vs 11: eq. 18 for unmatched nodes gives the same final shape."""
+    a, b, truth = pair
+    keep = np.ones(len(a), bool)
+    keep[3::4] = False  # a quarter of the nodes without partner
+    full = simulate(a, b, _truth_matching(a, b, truth))
+    partial = simulate(a, b, _truth_matching(a, b, truth, keep))
+    assert np.abs(_outline_distance(partial.frames[-1], b).mean() - _outline_distance(full.frames[-1], b).mean()) <= 1.0
+    assert np.linalg.norm(partial.frames[-1] - full.frames[-1], axis=1).mean() <= 1.0
+
+
+def test_eq18_targets_lie_between_the_neighbours_partners():
+    a, b, truth = data.hand_pair(40, 40, pose_a="open", pose_b="open")
+    m = _truth_matching(a, b, truth, keep=np.arange(40) % 3 != 1)
+    t = node_targets(a, b, m.pairs, m.affinity)
+    assert np.all(np.isfinite(t))
+    for i in np.arange(40)[np.arange(40) % 3 == 1]:
+        # the weighted target of an unmatched node is near its own true partner
+        assert np.linalg.norm(t[i] - b[truth[i]]) < 0.5 * np.linalg.norm(b[truth[i - 1]] - b[truth[(i + 1) % 40]]) + 1e-6
+
+
+def test_opposite_orientations_are_handled():
+    a, b, truth = data.hand_pair(50, 50, pose_a="open", pose_b="closed")
+    rb = b[::-1].copy()
+    rtruth = (len(b) - 1 - truth) % len(b)
+    keep = np.arange(50) % 4 != 0
+    sim = simulate(a, rb, _truth_matching(a, rb, rtruth, keep))
+    assert _outline_distance(sim.frames[-1], rb).mean() <= 1.0
+
+
+@pytest.mark.parametrize("material", ["rubber", "copper"])
+@pytest.mark.parametrize("q", [3e2, 3e4, 3e8])
+def test_any_q_is_stable_and_comes_to_rest(q, material):
+    a, b, truth = data.hand_pair(67, 66)
+    sim = simulate(a, b, _truth_matching(a, b, truth), q=q, material=material)
+    assert np.all(np.isfinite(sim.frames)) and sim.converged
+    assert np.abs(sim.frames[-1] - sim.rest).max() < 0.01
+
+
+def test_stiff_material_stops_short_of_the_target():
+    """Total reference: the elastic force of the deformation from a balances the pull."""
+    a, b, truth = data.hand_pair(67, 66)
+    m = _truth_matching(a, b, truth)
+    rubber = _outline_distance(simulate(a, b, m, material="rubber").frames[-1], b).mean()
+    copper = _outline_distance(simulate(a, b, m, material="copper").frames[-1], b).mean()
+    stronger = _outline_distance(simulate(a, b, m, material="copper", q=3e7).frames[-1], b).mean()
+    assert rubber <= 1.0 < copper
+    assert stronger < copper
+
+
+def test_bad_input():
+    a, b, truth = data.hand_pair(30, 30)
+    m = _truth_matching(a, b, truth)
+    with pytest.raises(ValueError, match="other contours"):
+        simulate(a[:-2], b, m)
+    with pytest.raises(ValueError, match="at least 3"):
+        simulate(a[:2], b, m)
+    with pytest.raises(ValueError, match="NaN"):
+        simulate(np.where(np.arange(30)[:, None] == 3, np.nan, a), b, m)
+    with pytest.raises(ValueError, match="q"):
+        simulate(a, b, m, q=-1)
+    with pytest.raises(ValueError, match="n_frames"):
+        simulate(a, b, m, n_frames=1)
+    with pytest.raises(ValueError, match="no pairs"):
+        simulate(a, b, SimpleNamespace(pairs=np.zeros((0, 2), int), affinity=m.affinity))
