@@ -1,0 +1,66 @@
+"""napari sample data (File > Open Sample > napari-physeg).
+
+Each function returns a list of napari LayerData tuples ``(data, kwargs,
+layer_type)``; the arrays come from :mod:`napari_physeg.data`. Shapes layers
+hold float32 ``(row, col)`` polygons in the pixel coordinates of the 256 x 256
+hand images, so they overlay them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import data
+
+__all__ = ["hand_segmentation", "hand_poses", "hand_open_image", "hand_closed_image"]
+
+_CONTOUR_STYLE = {"shape_type": "polygon", "face_color": "transparent", "edge_width": 1.5}
+
+
+def _polygon_layer(contour, name: str, color: str) -> tuple:
+    return ([np.asarray(contour, dtype=np.float32)], {"name": name, "edge_color": color, **_CONTOUR_STYLE},
+            "shapes")
+
+
+def hand_segmentation() -> list[tuple]:
+    """A noisy 256 x 256 image of an open hand and an initial contour around it.
+
+    Open the segmentation widget and press Run to see the contour move onto the hand.
+    """
+    image, init = data.sample_segmentation()
+    # The core resamples the contour (a node every ~3 px); fewer vertices keep
+    # the Shapes layer light to draw and edit.
+    init = init[::3]
+    return [
+        (image.astype(np.float32), {"name": "hand", "colormap": "gray"}, "image"),
+        _polygon_layer(init, "initial contour", "yellow"),
+    ]
+
+
+def hand_poses() -> list[tuple]:
+    """Outlines of the hand in two poses, open and closed, for modal matching.
+
+    Both are placed on the same 256 x 256 image as the hand images (the samples
+    "Hand, open (image)" and "Hand, closed (image)"); 67 and 66 nodes, as in
+    the paper's experiment.
+    """
+    open_, closed, _ = data.hand_pair(pose_a="open", pose_b="closed")
+    return [
+        _polygon_layer(open_, "hand open outline", "cyan"),
+        _polygon_layer(closed, "hand closed outline", "magenta"),
+    ]
+
+
+def _hand_image(pose: str) -> list[tuple]:
+    obj = data.hand((256, 256), pose=pose, noise=0.05, seed=0)
+    return [(obj.image.astype(np.float32), {"name": f"hand {pose}", "colormap": "gray"}, "image")]
+
+
+def hand_open_image() -> list[tuple]:
+    """A 256 x 256 image of the open hand."""
+    return _hand_image("open")
+
+
+def hand_closed_image() -> list[tuple]:
+    """A 256 x 256 image of the closed hand."""
+    return _hand_image("closed")

@@ -1,0 +1,326 @@
+"""Conversions between napari layer data and the core's contours.
+
+The core works on closed contours: ``(N, 2)`` float64 ``(row, col)`` arrays in
+the pixel coordinates of a 2D image.  napari stores shapes as float32 arrays
+with one column per layer dimension, in the layer's own *data* coordinates,
+each layer with its own transform (scale, translate, rotate, shear, affine) to
+*world* coordinates.  This module converts between the two:
+
+* :func:`shape_to_polygon` turns any closed-able napari shape (polygon, lasso,
+  path, rectangle, ellipse) into the vertices of a polygon;
+* :func:`shapes_to_image_coords` maps the shapes of a Shapes layer into the
+  DATA coordinates of an image layer (through world coordinates, so the two
+  layers may have different transforms and dimensionality) and keeps those on
+  the current slice;
+* :func:`contours_to_shapes_data` and :func:`contours_to_labels` write results
+  back, in the image's data coordinates at the slice's leading coordinates, so
+  an output layer with the image's transform (:func:`image_transform_kwargs`)
+  overlays the image exactly.
+
+Everything here is numpy plus the public ``data_to_world`` / ``world_to_data``
+methods of napari layers; no Qt.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "CLOSED_SHAPE_TYPES",
+    "SlicedShapes",
+    "affine_matrix",
+    "apply_affine",
+    "contours_to_labels",
+    "contours_to_shapes_data",
+    "ellipse_polygon",
+    "image_transform_kwargs",
+    "polygon_perimeter",
+    "shape_to_polygon",
+    "shapes_to_image_coords",
+    "slice_index",
+]
+
+#: Shape types that can be used as an initial contour ("lasso" drawings are
+#: stored by napari as polygons or paths). Paths are closed by joining their ends.
+CLOSED_SHAPE_TYPES = ("polygon", "ellipse", "rectangle", "path")
+
+
+# --------------------------------------------------------------------------
+# Single shapes
+# --------------------------------------------------------------------------
+
+
+def ellipse_polygon(corners, n_points: int | None = None) -> np.ndarray:
+    """Polygon of the ellipse napari stores as the 4 corners of its bounding box.
+
+    Parameters
+    ----------
+    corners : (4, D) array_like
+        The corners, in order around the (possibly rotated) box, as napari's
+        Shapes layer stores an ellipse. Leading coordinates (all but the last
+        two) are constant and kept.
+    n_points : int, optional
+        Vertices of the polygon; default about one per unit of perimeter
+        (32 to 1000).
+
+    Returns
+    -------
+    (n_points, D) float64 array
+    """
+    c = np.asarray(corners, dtype=np.float64)
+    if c.shape[0] != 4:
+        raise ValueError(f"an ellipse is stored as 4 bounding-box corners, got {c.shape[0]} vertices")
+    centre = c.mean(axis=0)
+    a = 0.5 * (c[1] - c[0])  # half of one side: from the centre to the middle of the opposite side
+    b = 0.5 * (c[3] - c[0])
+    if n_points is None:
+        ra, rb = np.linalg.norm(a[-2:]), np.linalg.norm(b[-2:])
+        # Ramanujan's approximation of the perimeter
+        per = np.pi * (3 * (ra + rb) - np.sqrt(max((3 * ra + rb) * (ra + 3 * rb), 0.0)))
+        n_points = int(np.clip(np.ceil(per), 32, 1000))
+    t = np.linspace(0.0, 2.0 * np.pi, int(n_points), endpoint=False)
+    return centre + np.cos(t)[:, None] * a + np.sin(t)[:, None] * b
+
+
+def shape_to_polygon(vertices, shape_type: str) -> np.ndarray:
+    """Vertices of the closed polygon a napari shape stands for.
+
+    Parameters
+    ----------
+    vertices : (N, D) array_like
+        The shape's data, as in ``Shapes.data[i]``.
+    shape_type : str
+        ``Shapes.shape_type[i]``: "polygon", "path", "rectangle" or "ellipse"
+        ("line" is refused: it encloses nothing).
+
+    Returns
+    -------
+    (M, D) float64 array
+        Closed implicitly (first vertex not repeated).
+
+    Raises
+    ------
+    ValueError
+        For a line or a shape with fewer than 3 vertices.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    if shape_type == "ellipse":
+        return ellipse_polygon(v)
+    if shape_type not in CLOSED_SHAPE_TYPES:
+        raise ValueError(
+            f"a {shape_type!r} shape encloses no region; draw a polygon, lasso, ellipse, rectangle or path "
+            "around (or inside) the object instead"
+        )
+    if len(v) > 1 and np.array_equal(v[0], v[-1]):
+        v = v[:-1]
+    if len(v) < 3:
+        raise ValueError(f"a {shape_type} with {len(v)} vertices encloses no region; draw at least 3 vertices")
+    return v
+
+
+def polygon_perimeter(contour) -> float:
+    """Length of a closed polyline (last two coordinates)."""
+    c = np.asarray(contour, dtype=np.float64)[:, -2:]
+    return float(np.hypot(*(np.roll(c, -1, axis=0) - c).T).sum())
+
+
+# --------------------------------------------------------------------------
+# Transforms
+# --------------------------------------------------------------------------
+
+
+def affine_matrix(transform, ndim: int) -> np.ndarray:
+    """Homogeneous ``(ndim + 1, ndim + 1)`` matrix of an affine point map.
+
+    ``transform`` maps one ``ndim`` position to another (e.g. a layer's
+    ``data_to_world``); its matrix is read off by probing the origin and the
+    unit vectors, so any combination of scale, translate, rotate, shear and
+    affine is captured with public API only.
+    """
+    origin = np.asarray(transform(np.zeros(ndim)), dtype=np.float64)
+    m = np.eye(ndim + 1)
+    m[:ndim, ndim] = origin
+    for k in range(ndim):
+        e = np.zeros(ndim)
+        e[k] = 1.0
+        m[:ndim, k] = np.asarray(transform(e), dtype=np.float64) - origin
+    return m
+
+
+def apply_affine(matrix: np.ndarray, points) -> np.ndarray:
+    """Apply a homogeneous matrix to ``(N, D)`` points."""
+    p = np.asarray(points, dtype=np.float64)
+    d = matrix.shape[0] - 1
+    return p @ matrix[:d, :d].T + matrix[:d, d]
+
+
+def image_transform_kwargs(image_layer) -> dict:
+    """Layer keyword arguments that give an output layer the image's transform.
+
+    Output layers hold their data in the image's DATA coordinates, so with these
+    (scale, translate, rotate, shear, affine, units, axis labels) they overlay it.
+    """
+    kwargs = {
+        "scale": np.asarray(image_layer.scale, dtype=float).copy(),
+        "translate": np.asarray(image_layer.translate, dtype=float).copy(),
+        "rotate": np.asarray(image_layer.rotate, dtype=float).copy(),
+        "shear": np.asarray(image_layer.shear, dtype=float).copy(),
+        "affine": np.asarray(image_layer.affine.affine_matrix, dtype=float).copy(),
+    }
+    for name in ("units", "axis_labels"):
+        value = getattr(image_layer, name, None)
+        if value is not None:
+            kwargs[name] = tuple(value)
+    return kwargs
+
+
+def slice_index(image_layer, world_point, shape) -> tuple[int, ...]:
+    """Integer leading (non-spatial) data coordinates of the current slice.
+
+    ``world_point`` is the viewer's current position in world coordinates
+    (``viewer.dims.point``); the last two image axes are the spatial ones.
+    """
+    ndim = len(shape)
+    if ndim <= 2:
+        return ()
+    data_point = np.asarray(image_layer.world_to_data(np.asarray(world_point, dtype=float)), dtype=float)
+    lead = np.round(data_point[: ndim - 2]).astype(int)
+    return tuple(int(np.clip(i, 0, n - 1)) for i, n in zip(lead, shape[: ndim - 2]))
+
+
+@dataclass(frozen=True)
+class SlicedShapes:
+    """Shapes of a layer that lie on the current slice, in image data coordinates.
+
+    Attributes
+    ----------
+    contours : list of (N, 2) float64 arrays
+        ``(row, col)`` contours in the image's data coordinates.
+    indices : list of int
+        Index of each contour's shape in the Shapes layer.
+    off_slice : int
+        Shapes skipped because they lie on another slice.
+    """
+
+    contours: list
+    indices: list
+    off_slice: int
+
+
+def shapes_to_image_coords(shapes_layer, image_layer, world_point=None) -> SlicedShapes:
+    """Map the shapes of ``shapes_layer`` into ``image_layer``'s data coordinates.
+
+    Each shape is converted to a polygon (:func:`shape_to_polygon`), mapped
+    to world coordinates with the Shapes layer's transform (its axes are the
+    last ``shapes_layer.ndim`` world axes), completed with the current world
+    position for world axes it lacks, and mapped to the image's data
+    coordinates with the inverse of the image's transform.  Only shapes on the
+    current slice are kept: a shape with leading (non-spatial) coordinates
+    must lie within half a data step of the current position along them.
+
+    Parameters
+    ----------
+    shapes_layer, image_layer : napari layers (Shapes, Image)
+    world_point : sequence of float, optional
+        The viewer's current position (``viewer.dims.point``); zeros by default.
+
+    Returns
+    -------
+    SlicedShapes
+
+    Raises
+    ------
+    ValueError
+        If a shape on the current slice is a line or has fewer than 3 vertices.
+    """
+    ds, di = int(shapes_layer.ndim), int(image_layer.ndim)
+    n_world = max(ds, di, len(world_point) if world_point is not None else 0)
+    point = np.zeros(n_world)
+    if world_point is not None and len(world_point):
+        wp = np.asarray(world_point, dtype=float)
+        point[n_world - len(wp):] = wp
+    s_to_world = affine_matrix(shapes_layer.data_to_world, ds)
+    i_to_world = affine_matrix(image_layer.data_to_world, di)
+    world_to_i = np.linalg.inv(i_to_world)
+    s_point = np.asarray(shapes_layer.world_to_data(point), dtype=float) if ds > 2 else np.zeros(ds)
+
+    contours, indices, off = [], [], 0
+    for k, (verts, kind) in enumerate(zip(shapes_layer.data, shapes_layer.shape_type)):
+        verts = np.asarray(verts, dtype=np.float64)
+        if ds > 2 and np.any(np.abs(verts[:, : ds - 2] - s_point[: ds - 2]) >= 0.5):
+            off += 1
+            continue
+        try:
+            poly = shape_to_polygon(verts, kind)
+        except ValueError as err:
+            raise ValueError(f"shape {k} of {shapes_layer.name!r}: {err}") from None
+        world = np.broadcast_to(point, (len(poly), n_world)).copy()
+        world[:, n_world - ds:] = apply_affine(s_to_world, poly)
+        in_image = apply_affine(world_to_i, world[:, n_world - di:])
+        contours.append(np.ascontiguousarray(in_image[:, -2:], dtype=np.float64))
+        indices.append(k)
+    return SlicedShapes(contours=contours, indices=indices, off_slice=off)
+
+
+# --------------------------------------------------------------------------
+# Results -> layers
+# --------------------------------------------------------------------------
+
+
+def contours_to_shapes_data(contours, leading=(), *, closed: bool = False) -> list[np.ndarray]:
+    """Shapes-layer polygons (float32) from ``(N, 2)`` (row, col) contours.
+
+    ``leading`` are the slice's leading coordinates, prepended to every vertex
+    so that the polygons lie on that slice of an nD image. With ``closed``
+    the first vertex is repeated at the end, for drawing a contour as a
+    "path" shape.
+    """
+    lead = np.asarray(leading, dtype=np.float32)
+    out = []
+    for c in contours:
+        c = np.asarray(c, dtype=np.float32)
+        if closed and len(c):
+            c = np.vstack([c, c[:1]])
+        if lead.size:
+            c = np.column_stack([np.broadcast_to(lead, (len(c), lead.size)), c])
+        out.append(np.ascontiguousarray(c, dtype=np.float32))
+    return out
+
+
+def _label_dtype(n: int):
+    for dt in (np.uint8, np.uint16, np.uint32):
+        if n <= np.iinfo(dt).max:
+            return dt
+    return np.uint64
+
+
+def contours_to_labels(contours, shape, leading=()) -> np.ndarray:
+    """Rasterise contours into a label image: contour ``k`` gets label ``k + 1``.
+
+    Parameters
+    ----------
+    contours : sequence of (N, 2) arrays
+        ``(row, col)`` contours in pixel coordinates (pixel centres at integers).
+    shape : tuple of int
+        Shape of the label image (the image layer's shape); the last two axes are
+        the spatial ones.
+    leading : tuple of int, optional
+        Index of the slice to draw in, for an nD ``shape``; other slices stay 0.
+
+    Returns
+    -------
+    ndarray of the smallest unsigned integer type that holds the labels.
+    Later contours overwrite earlier ones where they overlap.
+    """
+    from skimage.draw import polygon as draw_polygon
+
+    shape = tuple(int(s) for s in shape)
+    labels = np.zeros(shape, dtype=_label_dtype(len(contours)))
+    plane = labels[tuple(leading)] if len(shape) > 2 else labels
+    for k, c in enumerate(contours, start=1):
+        c = np.asarray(c, dtype=np.float64)
+        rr, cc = draw_polygon(c[:, 0], c[:, 1], shape=shape[-2:])
+        plane[rr, cc] = k
+    return labels

@@ -1,0 +1,847 @@
+"""The segmentation widget: a thin napari front end to :func:`napari_physeg.core.segment`.
+
+Three parts, from the least to the most napari-specific:
+
+* :func:`segment_contours` - a plain generator that segments a list of
+  initial contours on a 2D image with the core, yielding
+  :class:`SegmentationProgress` (the evolving contour, for a live preview) and
+  returning a :class:`SegmentationOutcome`.  It knows nothing about napari or
+  Qt; :func:`run_to_completion` drives it synchronously in scripts and tests.
+* :func:`prepare_segmentation` - reads an Image and a Shapes layer at the
+  viewer's current slice into a :class:`SegmentationJob` (numpy arrays in the
+  image's data coordinates), raising :class:`InputError` with a message that
+  says how to fix bad input; :func:`result_layer_data` turns an outcome back
+  into napari layer data tuples in the image's data coordinates.
+* :class:`SegmentationWidget` - a magicgui ``Container`` with the parameters,
+  a Run and a Cancel button; Run starts :func:`segment_contours` in a
+  ``napari.qt.threading.thread_worker`` with a napari progress bar and a live
+  preview Shapes layer, so the GUI never freezes.
+
+All physics lives in :mod:`napari_physeg.core`.
+"""
+
+import queue
+import threading
+import time
+from dataclasses import dataclass, field
+
+import napari
+import numpy as np
+from magicgui.widgets import (
+    CheckBox,
+    ComboBox,
+    Container,
+    FloatSpinBox,
+    Label,
+    PushButton,
+    SpinBox,
+)
+from napari.layers import Image, Layer, Shapes
+from napari.qt.threading import thread_worker
+from napari.utils import progress
+from napari.utils.notifications import show_error, show_info, show_warning
+
+from ..core import MATERIALS, DivergenceError, Material, segment
+from ._layers import (
+    contours_to_labels,
+    contours_to_shapes_data,
+    image_transform_kwargs,
+    polygon_perimeter,
+    shapes_to_image_coords,
+    slice_index,
+)
+
+__all__ = [
+    "InputError",
+    "SegmentationJob",
+    "SegmentationOutcome",
+    "SegmentationProgress",
+    "SegmentationWidget",
+    "SUGGESTED_STIFFNESS",
+    "make_material",
+    "prepare_segmentation",
+    "result_layer_data",
+    "run_to_completion",
+    "segment_contours",
+    "segment_kwargs",
+]
+
+#: Stiffness constant r (N/m) suggested for each preset: the paper's 2e3 for
+#: rubber and 1e6 for copper; stiffer metals get a little more.
+SUGGESTED_STIFFNESS = {
+    "rubber": 2e3,
+    "soft tissue": 2e3,
+    "aluminium": 1e6,
+    "copper": 1e6,
+    "steel": 2e6,
+}
+CUSTOM = "custom"
+#: Choices of the RGB channel selector.
+RGB_CHOOSE = "(choose a channel)"
+RGB_CHANNELS = {"grey (luminance)": None, "red": 0, "green": 1, "blue": 2}
+#: Key in a layer's metadata that marks the temporary preview layer.
+PREVIEW_KEY = "napari_physeg_preview"
+
+
+class InputError(ValueError):
+    """Bad input to the widget; the message says what is wrong and how to fix it."""
+
+
+# --------------------------------------------------------------------------
+# The worker: a plain generator over the core
+# --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SegmentationProgress:
+    """What :func:`segment_contours` yields.
+
+    Attributes
+    ----------
+    index : int
+        Which contour (0-based) is being segmented.
+    total : int
+        How many contours the run segments.
+    step : int
+        Time steps taken so far on this contour.
+    max_steps : int
+        The step budget of this contour.
+    contour : (M, 2) float64 ndarray
+        Its current nodes ``(row, col)``, image data coordinates of the slice.
+    done : bool
+        True for the last update of this contour (``contour`` is its result).
+    """
+
+    index: int
+    total: int
+    step: int
+    max_steps: int
+    contour: np.ndarray
+    done: bool = False
+
+
+@dataclass(frozen=True)
+class SegmentationOutcome:
+    """What :func:`segment_contours` returns.
+
+    Attributes
+    ----------
+    results : list of SegmentationResult
+        One per contour segmented (fewer when cancelled or failed).
+    cancelled : bool
+        The run was stopped by the cancel event.
+    error : Exception or None
+        The error that stopped the run, if any.
+    error_index : int or None
+        The contour it happened on.
+    seconds : float
+        Wall time of the run.
+    """
+
+    results: list
+    cancelled: bool = False
+    error: Exception | None = None
+    error_index: int | None = None
+    seconds: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None and not self.cancelled
+
+
+def segment_contours(image, contours, kwargs_list, *, cancel: threading.Event | None = None,
+                     preview_interval: float = 0.05):
+    """Segment each initial contour on a 2D image; a generator for a worker thread.
+
+    The core's :func:`~napari_physeg.core.segment` runs in a helper thread; its
+    callback hands the evolving contour over a queue (at most one every
+    ``preview_interval`` seconds) and returns False (stop) once ``cancel`` is
+    set.  This generator yields those updates, so a ``thread_worker`` built on
+    it emits them with its ``yielded`` signal in the GUI thread.
+
+    Parameters
+    ----------
+    image : (H, W) ndarray
+        The 2D image.
+    contours : sequence of (N, 2) ndarray
+        Initial contours ``(row, col)`` in the image's pixel coordinates.
+    kwargs_list : sequence of dict
+        Keyword arguments of :func:`segment` for each contour (see
+        :func:`segment_kwargs`).
+    cancel : threading.Event, optional
+        Set it to stop: the current contour stops at its next step and no
+        further contour is started.
+    preview_interval : float, optional
+        Least time (s) between two yielded updates of one contour.
+
+    Yields
+    ------
+    SegmentationProgress
+
+    Returns
+    -------
+    SegmentationOutcome
+        As the generator's return value (``StopIteration.value``; a worker's
+        ``returned`` signal). Errors of the core (``ValueError``,
+        ``DivergenceError``) are caught and returned in it, not raised.
+    """
+    cancel = cancel if cancel is not None else threading.Event()
+    t0 = time.perf_counter()
+    total = len(contours)
+    results = []
+    for i, (init, kwargs) in enumerate(zip(contours, kwargs_list)):
+        if cancel.is_set():
+            return SegmentationOutcome(results, cancelled=True, seconds=time.perf_counter() - t0)
+        max_steps = int(kwargs.get("max_steps", 1000))
+        updates: queue.SimpleQueue = queue.SimpleQueue()
+        last = [-np.inf]
+
+        def callback(step, contour, _updates=updates, _last=last):
+            if cancel.is_set():
+                return False
+            now = time.perf_counter()
+            if now - _last[0] >= preview_interval:
+                _last[0] = now
+                _updates.put(("step", step, contour))
+            return None
+
+        def target(_init=init, _kwargs=kwargs, _updates=updates, _callback=callback):
+            try:
+                _updates.put(("done", segment(image, _init, callback=_callback, **_kwargs)))
+            except Exception as err:  # reported to the caller, never lost in this thread
+                _updates.put(("error", err))
+
+        helper = threading.Thread(target=target, name=f"napari-physeg segment {i}", daemon=True)
+        helper.start()
+        settled = False
+        try:
+            while True:
+                kind, *payload = updates.get()
+                if kind == "step":
+                    step, contour = payload
+                    yield SegmentationProgress(i, total, int(step), max_steps, contour)
+                elif kind == "done":
+                    result, settled = payload[0], True
+                    break
+                else:
+                    settled = True
+                    return SegmentationOutcome(results, error=payload[0], error_index=i,
+                                               seconds=time.perf_counter() - t0)
+        finally:
+            if not settled:  # closed early (the worker was aborted): stop the helper as well
+                cancel.set()
+            helper.join()
+        if result.stop_reason == "cancelled":
+            return SegmentationOutcome(results, cancelled=True, seconds=time.perf_counter() - t0)
+        results.append(result)
+        yield SegmentationProgress(i, total, max_steps, max_steps, result.contour, done=True)
+    return SegmentationOutcome(results, seconds=time.perf_counter() - t0)
+
+
+def run_to_completion(generator, on_progress=None) -> SegmentationOutcome:
+    """Drive :func:`segment_contours` synchronously (scripts, tests)."""
+    while True:
+        try:
+            update = next(generator)
+        except StopIteration as stop:
+            return stop.value
+        if on_progress is not None:
+            on_progress(update)
+
+
+# --------------------------------------------------------------------------
+# Layers <-> job
+# --------------------------------------------------------------------------
+
+
+def make_material(name: str, young_mpa: float = 100.0, poisson: float = 0.49,
+                  density: float = 1100.0) -> str | Material:
+    """The ``material`` argument of :func:`segment`: a preset name, or a custom
+    :class:`Material` (``young_mpa`` in MPa, ``density`` in kg/m^3)."""
+    if name != CUSTOM:
+        return name
+    return Material(CUSTOM, young=float(young_mpa) * 1e6, poisson=float(poisson), density=float(density))
+
+
+def segment_kwargs(contour, *, material="rubber", stiffness=2000.0, node_spacing=None, n_nodes=None,
+                   sigma_factor=1.0, weights=None, polarity="auto", max_steps=1000) -> dict:
+    """Keyword arguments of :func:`segment` for one initial contour.
+
+    ``node_spacing`` (px) is turned into a node count for this contour's
+    perimeter; ``n_nodes`` is used as is. Force weights of 0 leave that force
+    out.
+    """
+    if node_spacing is not None:
+        if not node_spacing > 0:
+            raise InputError(f"node spacing must be positive, got {node_spacing!r} px")
+        n_nodes = int(np.clip(round(polygon_perimeter(contour) / float(node_spacing)), 3, 5000))
+    weights = dict(weights) if weights is not None else {"edges": 0.4, "intensity": 0.3, "distance": 0.3}
+    forces = tuple(name for name, w in weights.items() if w > 0)
+    if not forces:
+        raise InputError("every force weight is 0: give at least one force (edges, intensity or distance) "
+                         "a positive weight, e.g. 0.4 / 0.3 / 0.3")
+    return {
+        "material": material,
+        "stiffness": float(stiffness),
+        "n_nodes": None if n_nodes is None else int(n_nodes),
+        "sigma_factor": float(sigma_factor),
+        "forces": forces,
+        "weights": {name: float(weights[name]) for name in forces},
+        "polarity": polarity,
+        "max_steps": int(max_steps),
+    }
+
+
+@dataclass
+class SegmentationJob:
+    """Everything a run needs, read from the layers in the GUI thread.
+
+    Attributes
+    ----------
+    image : (H, W) ndarray
+        The 2D slice to segment.
+    contours : list of (N, 2) float64 ndarray
+        Initial contours in its pixel coordinates (clipped to it).
+    shape_indices : list of int
+        Index of each contour's shape in the Shapes layer.
+    leading : tuple of int
+        Leading (non-spatial) data coordinates of the slice, ``()`` for 2D.
+    image_shape : tuple of int
+        Spatial shape of the whole image layer (without an RGB axis).
+    transform : dict
+        The image layer's transform, for the output layers.
+    image_name, shapes_name : str
+    warnings : list of str
+        Things the user should know (e.g. clipped nodes).
+    """
+
+    image: np.ndarray
+    contours: list
+    shape_indices: list
+    leading: tuple
+    image_shape: tuple
+    transform: dict
+    image_name: str
+    shapes_name: str
+    warnings: list = field(default_factory=list)
+
+
+def _plane_2d(image_layer, leading, channel: str | None) -> np.ndarray:
+    """The 2D plane of ``image_layer`` at ``leading``, as a real float array."""
+    data = image_layer.data[0] if image_layer.multiscale else image_layer.data
+    if image_layer.rgb:
+        if channel is None or channel == RGB_CHOOSE or channel not in RGB_CHANNELS:
+            raise InputError(
+                f"{image_layer.name!r} is an RGB image: choose which channel to segment in 'RGB channel' "
+                "(red, green, blue, or grey for the luminance), or split it into channels "
+                "(layer list: right click > Split RGB)"
+            )
+        plane = np.asarray(data[tuple(leading)])
+        k = RGB_CHANNELS[channel]
+        if k is None:
+            from skimage.color import rgb2gray
+
+            rgb = plane[..., :3]
+            if np.issubdtype(rgb.dtype, np.integer):
+                rgb = rgb.astype(np.float64) / np.iinfo(rgb.dtype).max
+            return rgb2gray(rgb.astype(np.float64))
+        return np.asarray(plane[..., k], dtype=np.float64)
+    plane = np.asarray(data[tuple(leading)])
+    if plane.dtype == bool:
+        plane = plane.astype(np.float32)
+    if not (np.issubdtype(plane.dtype, np.integer) or np.issubdtype(plane.dtype, np.floating)):
+        raise InputError(f"{image_layer.name!r} has pixels of type {plane.dtype}: the segmentation needs a "
+                         "real-valued grey-level image")
+    return plane
+
+
+def prepare_segmentation(image_layer, shapes_layer, *, world_point=None, channel: str | None = None,
+                         dims_order=None, ndisplay: int = 2) -> SegmentationJob:
+    """Read the current 2D slice of ``image_layer`` and the initial contours.
+
+    Parameters
+    ----------
+    image_layer : napari.layers.Image
+    shapes_layer : napari.layers.Shapes
+        Initial contours: polygons, lassos, ellipses, rectangles or paths (closed),
+        each segmented; only shapes on the current slice are used.
+    world_point : sequence of float, optional
+        The viewer's current position (``viewer.dims.point``).
+    channel : str, optional
+        For RGB images: a key of :data:`RGB_CHANNELS`.
+    dims_order : sequence of int, optional
+        ``viewer.dims.order``: the last two world axes must be the displayed ones.
+    ndisplay : int, optional
+        ``viewer.dims.ndisplay``.
+
+    Raises
+    ------
+    InputError
+        With a message that says how to fix the input.
+    """
+    if image_layer is None:
+        raise InputError("no image to segment: open an image (or File > Open Sample > napari-physeg > "
+                         "Hand (segmentation)) and select it in 'image'")
+    if not isinstance(image_layer, Image):
+        raise InputError(f"{getattr(image_layer, 'name', image_layer)!r} is not an Image layer; select an image")
+    if shapes_layer is None:
+        raise InputError("no initial contours: add a Shapes layer (layer list: 'New shapes layer' button), draw "
+                         "a polygon, ellipse or rectangle around (or inside) the object and select it in "
+                         "'initial contours'")
+    if len(shapes_layer.data) == 0:
+        raise InputError(f"the Shapes layer {shapes_layer.name!r} is empty: draw a polygon, lasso, ellipse or "
+                         "rectangle around (or inside) the object to segment, then press Run again")
+    ndim = int(image_layer.ndim)
+    if ndim < 2:
+        raise InputError(f"{image_layer.name!r} is {ndim}D: the segmentation needs a 2D image or a stack of them")
+    n_world = len(world_point) if world_point is not None else ndim
+    if ndim > 2:
+        if ndisplay != 2:
+            raise InputError("the viewer is in 3D view: switch to the 2D view (the square/cube button at the "
+                             "bottom left) to segment the current 2D slice")
+        if dims_order is not None and set(tuple(dims_order)[-2:]) != {n_world - 2, n_world - 1}:
+            raise InputError("the displayed plane is not the image's last two axes: reset the axis order "
+                             "(the 'transpose'/'roll dimensions' buttons) so that rows and columns are displayed")
+    data = image_layer.data[0] if image_layer.multiscale else image_layer.data
+    shape = tuple(int(s) for s in data.shape[: ndim])
+    leading = slice_index(image_layer, world_point if world_point is not None else np.zeros(ndim), shape)
+    plane = _plane_2d(image_layer, leading, channel)
+
+    try:
+        sliced = shapes_to_image_coords(shapes_layer, image_layer, world_point)
+    except ValueError as err:
+        raise InputError(str(err)) from None
+    if not sliced.contours:
+        where = f" (slice {leading})" if leading else ""
+        raise InputError(f"no shape of {shapes_layer.name!r} lies on the current slice{where}: draw an initial "
+                         f"contour on this slice, or move to a slice with one ({sliced.off_slice} shapes elsewhere)")
+    h, w = plane.shape
+    hi = np.array([h - 1.0, w - 1.0])
+    contours, warnings = [], []
+    for k, c in zip(sliced.indices, sliced.contours):
+        if not np.all(np.isfinite(c)):
+            raise InputError(f"shape {k} of {shapes_layer.name!r} has non-finite coordinates (NaN); redraw it")
+        lo_box, hi_box = c.min(0), c.max(0)
+        if np.any(hi_box < 0) or np.any(lo_box > hi):
+            raise InputError(
+                f"shape {k} of {shapes_layer.name!r} lies outside the image {image_layer.name!r} (rows "
+                f"{lo_box[0]:.0f}..{hi_box[0]:.0f}, cols {lo_box[1]:.0f}..{hi_box[1]:.0f}; the image has "
+                f"{h} x {w} pixels): draw it on the image, or give the two layers the same scale and translate"
+            )
+        outside = np.any((c < 0) | (c > hi), axis=1)
+        if outside.any():
+            warnings.append(f"{int(outside.sum())} of {len(c)} vertices of shape {k} lie outside the image and "
+                            "were moved onto its border")
+            c = np.clip(c, 0.0, hi)
+        contours.append(c)
+    return SegmentationJob(
+        image=plane,
+        contours=contours,
+        shape_indices=list(sliced.indices),
+        leading=tuple(leading),
+        image_shape=shape,
+        transform=image_transform_kwargs(image_layer),
+        image_name=image_layer.name,
+        shapes_name=shapes_layer.name,
+        warnings=warnings,
+    )
+
+
+def error_message(outcome: SegmentationOutcome, job: SegmentationJob | None = None) -> str:
+    """A user-facing message for a failed run, with what to do about it."""
+    err = outcome.error
+    which = ""
+    if outcome.error_index is not None:
+        k = job.shape_indices[outcome.error_index] if job is not None else outcome.error_index
+        which = f" of shape {k}"
+    if isinstance(err, DivergenceError):
+        return f"Segmentation{which} diverged: {err}"
+    if isinstance(err, ValueError):
+        return f"Segmentation{which} failed: {err}"
+    return (f"Segmentation{which} failed with {type(err).__name__}: {err}. Try other parameters "
+            "(e.g. the defaults: rubber, r = 2000) and report this if it persists")
+
+
+def result_layer_data(outcome: SegmentationOutcome, job: SegmentationJob, *, labels: bool = False,
+                      name: str | None = None) -> list:
+    """napari layer data tuples for the results of a run.
+
+    A Shapes layer of polygons (float32, in the image's DATA coordinates, on
+    the job's slice) with the image's transform, and optionally a Labels layer
+    of the image's shape with contour ``k`` filled with label ``k + 1``.
+    """
+    name = name or f"{job.shapes_name} segmented"
+    contours = [r.contour for r in outcome.results]
+    features = {
+        "shape": np.asarray(job.shape_indices[: len(contours)], dtype=int),
+        "steps": np.asarray([r.steps for r in outcome.results], dtype=int),
+        "converged": np.asarray([r.converged for r in outcome.results], dtype=bool),
+        "nodes": np.asarray([len(r.contour) for r in outcome.results], dtype=int),
+    }
+    shapes_meta = {
+        "name": name,
+        "shape_type": "polygon",
+        "edge_color": "cyan",
+        "face_color": "transparent",
+        "edge_width": 1.0,
+        "features": features,
+        "metadata": {"napari_physeg": {"image": job.image_name, "slice": job.leading}},
+        **job.transform,
+    }
+    out = [(contours_to_shapes_data(contours, job.leading), shapes_meta, "shapes")]
+    if labels:
+        mask = contours_to_labels(contours, job.image_shape, job.leading)
+        out.append((mask, {"name": f"{job.shapes_name} mask", **job.transform}, "labels"))
+    return out
+
+
+# --------------------------------------------------------------------------
+# The widget
+# --------------------------------------------------------------------------
+
+_TIPS = {
+    "image": "Image layer to segment. On a stack (e.g. T, Y, X) the current 2D slice is segmented.",
+    "channel": "Which channel of an RGB image to segment: red, green, blue, or grey (the luminance).",
+    "shapes": "Shapes layer with the initial contours: polygons, lassos, ellipses, rectangles or paths drawn "
+              "around (or inside) the objects. Each shape on the current slice is segmented.",
+    "material": "Virtual material of the contour. Soft materials (rubber, soft tissue) move fast and follow "
+                "details; stiff metals (aluminium, copper, steel) keep the contour smooth and need a larger "
+                "stiffness r. Picking a preset sets a suggested r.",
+    "young": "Young's modulus E of the custom material in MPa (rubber ~100, soft tissue ~0.1, "
+             "copper ~117000). Higher E: stiffer, smoother, slower contour.",
+    "poisson": "Poisson's ratio nu of the custom material, typically 0.25-0.49 (rubber 0.49, metals ~0.3). "
+               "Couples stretching along and across the contour.",
+    "density": "Mass density rho of the custom material in kg/m^3, typically 1000-9000 (rubber 1100, "
+               "copper 8960). More mass: more inertia.",
+    "stiffness": "Stiffness constant r (N/m) that scales the image forces: the force on a node is r times "
+                 "its feature force. Typical: 2000 for rubber, 1e6 for copper or steel. Too low: the contour "
+                 "barely moves; far too high: it may diverge.",
+    "nodes_by": "Set the contour's resolution by the distance between nodes or by their number.",
+    "spacing": "Distance between nodes in pixels, typically 2-5. Smaller follows finer detail but is slower. "
+               "The spacing is kept as the contour grows or shrinks.",
+    "count": "Number of nodes of the initial contour, typically 50-500.",
+    "sigma": "Width of the interaction between nodes relative to the node spacing, typically 0.75-1.5 "
+             "(max 2). Larger couples more nodes: a smoother, stiffer contour.",
+    "w_edges": "Weight of the edge force (Shen-Castan edges pull nodes onto the border), 0-1, typically 0.4. "
+               "0 turns the force off.",
+    "w_intensity": "Weight of the intensity (region) force (pushes nodes out of the object's intensity, "
+                   "in from the background), 0-1, typically 0.3. 0 turns it off.",
+    "w_distance": "Weight of the distance force (pulls nodes toward the nearest edge from afar), 0-1, "
+                  "typically 0.3. 0 turns it off.",
+    "polarity": "Whether the object is brighter or darker than its background; 'auto' compares the inside "
+                "of the initial contour with a band around it.",
+    "max_steps": "Upper bound on time steps per contour, typically 200-2000; a contour usually comes to "
+                 "rest in 50-300 steps.",
+    "labels": "Also add a Labels layer with each segmented contour filled (label k for shape k).",
+    "run": "Segment every shape of 'initial contours' on the current slice, in the background, with a live "
+           "preview.",
+    "cancel": "Stop the running segmentation; no layer is added.",
+}
+
+
+class SegmentationWidget(Container):
+    """Segment objects with a physical deformable contour.
+
+    Parameters
+    ----------
+    viewer : napari.viewer.Viewer
+        The viewer whose layers are used (napari passes it when the widget is
+        opened from the Plugins or Layers > Segment menu).
+
+    Notes
+    -----
+    Press Run (or call :meth:`run`): the current 2D slice of the image and the
+    initial contours on it are read, then :func:`segment_contours` runs in a
+    ``thread_worker``. A temporary "... preview" Shapes layer shows the
+    evolving contour, napari's activity dock a progress bar, and Cancel stops
+    the run. At the end a Shapes layer "<shapes> segmented" (and optionally a
+    Labels layer "<shapes> mask") is added with the image's transform and the
+    preview removed. Problems are reported as napari notifications.
+    """
+
+    def __init__(self, viewer: napari.viewer.Viewer):
+        super().__init__(labels=True)
+        self.viewer = viewer
+        self.worker = None
+        self.job: SegmentationJob | None = None
+        self.last_outcome: SegmentationOutcome | None = None
+        self.preview_layer: Shapes | None = None
+        self.preview_interval = 0.05
+        self._cancel = threading.Event()
+        self._pbar = None
+        self._progress_value = 0
+        self.n_updates = 0  # live-preview updates shown in the last run
+        self._running = False
+
+        presets = list(MATERIALS)
+        self._image = ComboBox(label="image", choices=self._image_choices, tooltip=_TIPS["image"])
+        self._channel = ComboBox(label="RGB channel", choices=[RGB_CHOOSE, *RGB_CHANNELS], value=RGB_CHOOSE,
+                                 tooltip=_TIPS["channel"], visible=False)
+        self._shapes = ComboBox(label="initial contours", choices=self._shapes_choices, tooltip=_TIPS["shapes"])
+        self._material = ComboBox(label="material", choices=[*presets, CUSTOM], value="rubber",
+                                  tooltip=_TIPS["material"])
+        rubber = MATERIALS["rubber"]
+        self._young = FloatSpinBox(label="E (MPa)", value=rubber.young / 1e6, min=0.01, max=1e6, step=10.0,
+                                   tooltip=_TIPS["young"], visible=False)
+        self._poisson = FloatSpinBox(label="Poisson ratio", value=rubber.poisson, min=-0.99, max=0.5, step=0.01,
+                                     tooltip=_TIPS["poisson"], visible=False)
+        self._density = FloatSpinBox(label="density (kg/m³)", value=rubber.density, min=1.0, max=30000.0,
+                                     step=100.0, tooltip=_TIPS["density"], visible=False)
+        self._stiffness = FloatSpinBox(label="stiffness r (N/m)", value=SUGGESTED_STIFFNESS["rubber"], min=1.0,
+                                       max=1e9, step=100.0, tooltip=_TIPS["stiffness"])
+        self._nodes_by = ComboBox(label="nodes by", choices=["spacing", "count"], value="spacing",
+                                  tooltip=_TIPS["nodes_by"])
+        self._spacing = FloatSpinBox(label="node spacing (px)", value=3.0, min=0.5, max=50.0, step=0.5,
+                                     tooltip=_TIPS["spacing"])
+        self._count = SpinBox(label="node count", value=100, min=3, max=5000, step=10, tooltip=_TIPS["count"],
+                              visible=False)
+        self._sigma = FloatSpinBox(label="σ factor", value=1.0, min=0.1, max=2.0, step=0.05,
+                                   tooltip=_TIPS["sigma"])
+        self._w_edges = FloatSpinBox(label="edge weight", value=0.4, min=0.0, max=1.0, step=0.05,
+                                     tooltip=_TIPS["w_edges"])
+        self._w_intensity = FloatSpinBox(label="intensity weight", value=0.3, min=0.0, max=1.0, step=0.05,
+                                         tooltip=_TIPS["w_intensity"])
+        self._w_distance = FloatSpinBox(label="distance weight", value=0.3, min=0.0, max=1.0, step=0.05,
+                                        tooltip=_TIPS["w_distance"])
+        self._polarity = ComboBox(label="object is", choices=["auto", "bright", "dark"], value="auto",
+                                  tooltip=_TIPS["polarity"])
+        self._max_steps = SpinBox(label="max steps", value=1000, min=1, max=100000, step=100,
+                                  tooltip=_TIPS["max_steps"])
+        self._labels = CheckBox(text="also add Labels mask", value=False, tooltip=_TIPS["labels"])
+        self._run_btn = PushButton(text="Run", tooltip=_TIPS["run"])
+        self._cancel_btn = PushButton(text="Cancel", tooltip=_TIPS["cancel"], enabled=False)
+        self._buttons = Container(widgets=[self._run_btn, self._cancel_btn], layout="horizontal", labels=False)
+        self._status = Label(value="")
+        self.extend([
+            self._image, self._channel, self._shapes, self._material, self._young, self._poisson,
+            self._density, self._stiffness, self._nodes_by, self._spacing, self._count, self._sigma,
+            self._w_edges, self._w_intensity, self._w_distance, self._polarity, self._max_steps,
+            self._labels, self._buttons, self._status,
+        ])
+
+        self._image.changed.connect(self._on_image_changed)
+        self._material.changed.connect(self._on_material_changed)
+        self._nodes_by.changed.connect(self._on_nodes_by_changed)
+        self._run_btn.changed.connect(self.run)
+        self._cancel_btn.changed.connect(self.cancel)
+        self.native.destroyed.connect(self._on_destroyed)
+        events = viewer.layers.events
+        for name in ("inserted", "removed", "reordered", "renamed"):
+            emitter = getattr(events, name, None)
+            if emitter is not None:
+                emitter.connect(self._on_layers_changed)
+        self._on_image_changed()
+
+    # ------------------------------------------------------------ choices
+    def _image_choices(self, _widget=None):
+        return [(layer.name, layer) for layer in self.viewer.layers if isinstance(layer, Image)]
+
+    def _shapes_choices(self, _widget=None):
+        return [(layer.name, layer) for layer in self.viewer.layers
+                if isinstance(layer, Shapes) and not layer.metadata.get(PREVIEW_KEY)]
+
+    def _on_layers_changed(self, event=None):
+        try:
+            self.reset_choices()
+        except RuntimeError:  # the Qt widget is gone (viewer closing)
+            return
+
+    def _on_image_changed(self, *_):
+        layer = self._image.value
+        self._channel.visible = bool(layer is not None and getattr(layer, "rgb", False))
+
+    def _on_material_changed(self, *_):
+        name = self._material.value
+        custom = name == CUSTOM
+        for w in (self._young, self._poisson, self._density):
+            w.visible = custom
+        if not custom:
+            m = MATERIALS[name]
+            self._young.value = min(max(m.young / 1e6, self._young.min), self._young.max)
+            self._poisson.value = m.poisson
+            self._density.value = m.density
+            self._stiffness.value = SUGGESTED_STIFFNESS.get(name, self._stiffness.value)
+
+    def _on_nodes_by_changed(self, *_):
+        by_spacing = self._nodes_by.value == "spacing"
+        self._spacing.visible = by_spacing
+        self._count.visible = not by_spacing
+
+    # ------------------------------------------------------------ state
+    @property
+    def is_running(self) -> bool:
+        """True while a segmentation runs in the background."""
+        return self._running
+
+    def parameters(self) -> dict:
+        """The current settings as keyword arguments of :func:`segment_kwargs`."""
+        by_spacing = self._nodes_by.value == "spacing"
+        return {
+            "material": make_material(self._material.value, self._young.value, self._poisson.value,
+                                      self._density.value),
+            "stiffness": self._stiffness.value,
+            "node_spacing": self._spacing.value if by_spacing else None,
+            "n_nodes": None if by_spacing else self._count.value,
+            "sigma_factor": self._sigma.value,
+            "weights": {"edges": self._w_edges.value, "intensity": self._w_intensity.value,
+                        "distance": self._w_distance.value},
+            "polarity": self._polarity.value,
+            "max_steps": self._max_steps.value,
+        }
+
+    def _fail(self, message: str):
+        self._status.value = "Error (see notification)"
+        show_error(message)
+
+    # ------------------------------------------------------------ run
+    def run(self, *_):
+        """Start segmenting the current slice in a background thread.
+
+        Returns the worker, or None when the input is bad (an error
+        notification then says why) or a run is already going on.
+        """
+        if self._running:
+            return None
+        dims = self.viewer.dims
+        try:
+            job = prepare_segmentation(
+                self._image.value, self._shapes.value, world_point=tuple(dims.point),
+                channel=self._channel.value, dims_order=tuple(dims.order), ndisplay=dims.ndisplay,
+            )
+            params = self.parameters()
+            kwargs_list = [segment_kwargs(c, **params) for c in job.contours]
+        except ValueError as err:  # InputError, or a bad custom material
+            self._fail(str(err))
+            return None
+        for message in job.warnings:
+            show_warning(message)
+
+        self.job = job
+        self.last_outcome = None
+        self._cancel = threading.Event()
+        self._running = True
+        self._run_btn.enabled = False
+        self._cancel_btn.enabled = True
+        self._status.value = f"Segmenting {len(job.contours)} shape(s)…"
+
+        # Closed paths, not polygons: napari triangulates the faces of polygons
+        # (slow without a compiled backend), paths only need their edges.
+        preview_meta = {
+            "name": f"{job.shapes_name} preview",
+            "shape_type": "path",
+            "edge_color": "yellow",
+            "face_color": "transparent",
+            "edge_width": 1.0,
+            "metadata": {PREVIEW_KEY: True},
+            **job.transform,
+        }
+        active = self.viewer.layers.selection.active
+        self.preview_layer = self.viewer.add_layer(
+            Layer.create(contours_to_shapes_data(job.contours, job.leading, closed=True), preview_meta, "shapes")
+        )
+        if active is not None:  # keep the user's selection (and layer controls) while previewing
+            self.viewer.layers.selection.active = active
+        max_steps = kwargs_list[0]["max_steps"]
+        self._pbar = progress(total=len(job.contours) * max_steps, desc=f"Segmenting {job.shapes_name!r}")
+        self._progress_value = 0
+        self.n_updates = 0
+
+        worker = thread_worker(segment_contours, start_thread=False)(
+            job.image, job.contours, kwargs_list, cancel=self._cancel, preview_interval=self.preview_interval
+        )
+        worker.yielded.connect(self._on_yielded)
+        worker.returned.connect(self._on_returned)
+        worker.errored.connect(self._on_errored)
+        worker.finished.connect(self._on_finished)
+        self.worker = worker
+        worker.start()
+        return worker
+
+    def cancel(self, *_):
+        """Stop the running segmentation (its callback returns False); no layer is added."""
+        if self._running:
+            self._cancel.set()
+            self._status.value = "Cancelling…"
+
+    # ------------------------------------------------------------ worker signals (GUI thread)
+    def _gui_alive(self) -> bool:
+        """False once Qt has deleted this widget (e.g. the viewer was closed during a run)."""
+        try:
+            self.native.isHidden()
+        except RuntimeError:
+            return False
+        return True
+
+    def _on_destroyed(self, *_):
+        self._cancel.set()
+        if self.worker is not None:
+            self.worker.quit()
+
+    def _on_yielded(self, update: SegmentationProgress):
+        if not self._gui_alive():
+            self._on_destroyed()
+            return
+        # Updating napari's progress bar or a layer may process pending Qt
+        # events, so this slot can be re-entered with the next update: record
+        # the state first, and drop updates older than one already shown.
+        value = update.index * update.max_steps + min(update.step, update.max_steps)
+        if value <= self._progress_value and not update.done:
+            return
+        delta = max(value - self._progress_value, 0)
+        self._progress_value = max(value, self._progress_value)
+        self.n_updates += 1
+        if not update.done:
+            self._status.value = f"Shape {update.index + 1}/{update.total}: step {update.step}"
+        layer = self.preview_layer
+        if layer is not None and layer in self.viewer.layers and self.job is not None:
+            polys = list(layer.data)
+            if update.index < len(polys):
+                polys[update.index] = contours_to_shapes_data([update.contour], self.job.leading, closed=True)[0]
+                layer.data = polys
+        if self._pbar is not None and delta:
+            self._pbar.update(delta)
+
+    def _on_returned(self, outcome: SegmentationOutcome):
+        self.last_outcome = outcome
+        job = self.job
+        if not self._gui_alive():
+            return
+        if outcome.error is not None:
+            self._fail(error_message(outcome, job))
+            return
+        if outcome.cancelled:
+            self._status.value = "Cancelled: no layer added"
+            show_info("Segmentation cancelled: no layer added")
+            return
+        try:
+            for data, meta, kind in result_layer_data(outcome, job, labels=self._labels.value):
+                self.viewer.add_layer(Layer.create(data, meta, kind))
+        except Exception as err:  # never leave the user with a silent failure
+            self._fail(f"Could not add the result layers: {type(err).__name__}: {err}")
+            return
+        late = [job.shape_indices[i] for i, r in enumerate(outcome.results) if not r.converged]
+        if late:
+            show_warning(f"shape(s) {late} did not come to rest within max steps "
+                         f"({outcome.results[0].steps}); raise 'max steps' or the stiffness r")
+        self._status.value = f"Segmented {len(outcome.results)} shape(s) in {outcome.seconds:.2f} s"
+
+    def _on_errored(self, err: Exception):
+        # segment_contours catches the core's errors itself; this is a last resort.
+        self.last_outcome = SegmentationOutcome([], error=err)
+        self._fail(error_message(self.last_outcome, None))
+
+    def _on_finished(self):
+        self._cancel.set()  # stops the helper thread too if the worker was aborted
+        self.worker = None
+        self._running = False
+        preview, self.preview_layer = self.preview_layer, None
+        pbar, self._pbar = self._pbar, None
+        if pbar is not None:
+            pbar.close()
+        try:
+            if preview is not None and preview in self.viewer.layers:
+                self.viewer.layers.remove(preview)
+            self._run_btn.enabled = True
+            self._cancel_btn.enabled = False
+        except RuntimeError:  # the viewer or this widget was closed during the run
+            pass
