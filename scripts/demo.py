@@ -92,7 +92,7 @@ def open_napari() -> None:
 
     viewer = napari.Viewer()
     try:
-        viewer.open_sample("napari-physeg", "hand")
+        viewer.open_sample("napari-physeg", "hand_segmentation")
         viewer.window.add_plugin_dock_widget("napari-physeg")
     except Exception as err:  # the plugin's widgets may not all exist yet
         print(f"    (could not load every widget: {err})")
