@@ -1,11 +1,26 @@
 """The physics core of napari-physeg: numpy, scipy, scikit-image and OpenCV only.
 
-Scripts, notebooks, batch jobs and the napari widgets all go through
-:func:`segment` (and, later, ``match`` and ``simulate``).
+Scripts, notebooks, batch jobs and the napari widgets all go through three
+calls: :func:`segment` (a rough contour onto an object's border),
+:func:`match` (node correspondences by modal analysis) and :func:`simulate`
+(the deformation of one contour into another).
 """
 
 from .dynamics import DivergenceError
+from .matching import Matching, match
 from .materials import MATERIALS, Material, get_material
 from .segmentation import SegmentationResult, segment
+from .simulation import SimulationResult, simulate
 
-__all__ = ["segment", "SegmentationResult", "Material", "MATERIALS", "get_material", "DivergenceError"]
+__all__ = [
+    "segment",
+    "SegmentationResult",
+    "match",
+    "Matching",
+    "simulate",
+    "SimulationResult",
+    "Material",
+    "MATERIALS",
+    "get_material",
+    "DivergenceError",
+]
