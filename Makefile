@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 export QT_API ?= pyqt5
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo figures test bench clean
 
 setup:
 	@bash scripts/setup.sh
@@ -13,11 +13,16 @@ setup:
 demo: setup
 	$(PY) scripts/demo.py
 
+# Refresh the README's pictures from a demo run.
+figures: demo
+	cp demo_output/segmentation.png demo_output/matching_simulation.png demo_output/simulation.gif docs/images/
+
 test: setup
 	$(PY) -m pytest -p no:cacheprovider tests
 
 bench: setup
 	$(PY) benchmarks/segmentation.py
+	$(PY) benchmarks/matching.py
 
 clean:
 	rm -rf $(VENV) demo_output .pytest_cache
