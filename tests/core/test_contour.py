@@ -87,3 +87,25 @@ def test_polygon_mask_matches_skimage(seed, n):
     r = rng.uniform(5, 20, n)
     poly = np.column_stack([25 + r * np.cos(t), 24 + r * np.sin(t)])
     assert np.array_equal(polygon_mask(poly, (50, 48)), polygon2mask((50, 48), poly))
+
+
+def test_remove_loops_cuts_a_pinched_loop_and_a_twist():
+    from napari_physeg.core.contour import _crossing_pairs, remove_loops
+
+    # A square whose top edge makes a small figure-eight loop.
+    t = np.linspace(0, 1, 60, endpoint=False)
+    square = np.vstack([
+        np.column_stack([np.zeros(15), np.linspace(0, 30, 15, endpoint=False)]),
+        np.column_stack([np.linspace(0, 30, 15, endpoint=False), np.full(15, 30.0)]),
+        np.column_stack([np.full(15, 30.0), np.linspace(30, 0, 15, endpoint=False)]),
+        np.column_stack([np.linspace(30, 0, 15, endpoint=False), np.zeros(15)]),
+    ])
+    loop = np.column_stack([-3 + 3 * np.cos(2 * np.pi * t[:12] / 0.2), 15 + 3 * np.sin(2 * np.pi * t[:12] / 0.2)])
+    twisted = np.vstack([square[:7], square[7] + [-1, 0], loop, square[8:]])
+    assert len(_crossing_pairs(twisted)) > 0
+    clean = remove_loops(twisted)
+    assert len(_crossing_pairs(clean)) == 0
+    assert len(clean) > 0.8 * len(square)
+    # a simple contour is left alone
+    circle = _circle(50)
+    assert np.array_equal(remove_loops(circle), circle)

@@ -18,6 +18,7 @@ __all__ = [
     "outward_normals",
     "mean_nearest_neighbour_distance",
     "polygon_mask",
+    "remove_loops",
 ]
 
 
@@ -153,3 +154,52 @@ def polygon_mask(contour: np.ndarray, shape) -> np.ndarray:
     k = np.clip(np.floor(x).astype(np.int64) + 1, 0, w)
     toggles = np.bincount(rows * (w + 1) + k, minlength=h * (w + 1)).reshape(h, w + 1)
     return (np.cumsum(toggles[:, :w], axis=1) % 2).astype(bool)
+
+
+def _crossing_pairs(contour: np.ndarray) -> np.ndarray:
+    """Pairs ``(i, j)``, ``i < j``, of non-adjacent edges that cross."""
+    from scipy.spatial import cKDTree
+
+    n = len(contour)
+    p, q = contour, np.roll(contour, -1, axis=0)
+    seg = np.linalg.norm(q - p, axis=1)
+    # Two edges can only cross if their midpoints are closer than their lengths.
+    pairs = cKDTree(0.5 * (p + q)).query_pairs(seg.max() + 1e-9, output_type="ndarray")
+    if not len(pairs):
+        return pairs
+    i, j = pairs.min(1), pairs.max(1)
+    keep = (j - i > 1) & ~((i == 0) & (j == n - 1))
+    i, j = i[keep], j[keep]
+
+    def side(o, a, b):
+        return (a[:, 0] - o[:, 0]) * (b[:, 1] - o[:, 1]) - (a[:, 1] - o[:, 1]) * (b[:, 0] - o[:, 0])
+
+    crosses = (side(p[i], q[i], p[j]) * side(p[i], q[i], q[j]) < 0) & (
+        side(p[j], q[j], p[i]) * side(p[j], q[j], q[i]) < 0)
+    return np.column_stack([i[crosses], j[crosses]])
+
+
+def remove_loops(contour: np.ndarray, max_loops: int = 100) -> np.ndarray:
+    """Cut the loops a closed contour makes where it crosses itself.
+
+    At each crossing of edges ``i`` and ``j`` the contour splits in two closed
+    pieces; the one with the fewer nodes (a loop pinched off in a narrow gap,
+    or a twist) is removed and the crossing point joins the rest.
+    """
+    contour = np.asarray(contour, dtype=np.float64)
+    for _ in range(max_loops):
+        pairs = _crossing_pairs(contour)
+        if not len(pairs) or len(contour) < 6:
+            break
+        i, j = pairs[np.argmin(np.minimum(pairs[:, 1] - pairs[:, 0], len(contour) - (pairs[:, 1] - pairs[:, 0])))]
+        p, r = contour[i], contour[(i + 1) % len(contour)] - contour[i]
+        s_, t_ = contour[j], contour[(j + 1) % len(contour)] - contour[j]
+        denom = r[0] * t_[1] - r[1] * t_[0]
+        u = ((s_[0] - p[0]) * t_[1] - (s_[1] - p[1]) * t_[0]) / denom
+        x = p + u * r
+        inner = j - i  # nodes i+1..j form one piece, the rest the other
+        if inner <= len(contour) - inner:
+            contour = np.vstack([contour[: i + 1], x, contour[j + 1:]])
+        else:
+            contour = np.vstack([x, contour[i + 1: j + 1]])
+    return contour

@@ -17,7 +17,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from skimage.filters import threshold_otsu
 
-from .contour import as_contour, outward_normals, perimeter, resample, segment_lengths
+from .contour import as_contour, outward_normals, perimeter, remove_loops, resample, segment_lengths
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
 from .features import compute_features, normalized_intensity
@@ -424,7 +424,7 @@ def segment(
             seg = segment_lengths(nodes)
             if seg.max() > REMESH_STRETCH * spacing or seg.min() < spacing / REMESH_STRETCH:
                 old = nodes
-                nodes = resample(nodes, spacing=spacing)
+                nodes = resample(remove_loops(nodes), spacing=spacing)
                 nearest = cKDTree(old).query(nodes)[1]
                 cap, last_sign = cap[nearest], last_sign[nearest]
                 system, sim = build(nodes)
