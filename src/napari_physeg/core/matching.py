@@ -1,0 +1,747 @@
+"""Modal matching of the nodes of two contours (paper section 3).
+
+Pipeline of :func:`match`:
+
+1. **Modal features.** Each contour is modelled with Sclaroff's element and
+   its lowest modes are computed in its own canonical frame (centroid,
+   principal axes, unit RMS radius; :mod:`.modes`). Node ``i``'s feature is its
+   ``(u, v)`` displacement in each selected mode, times ``sqrt(m)`` so that
+   shapes with different node counts are comparable (each mode has unit norm,
+   so the mean squared per-node entry is ``1/m``). By default the element is
+   built on 64 nodes evenly spaced along each contour (``model_nodes``) and the
+   modal displacements are interpolated to the contour's nodes.
+2. **Sign correction** (mandatory): an eigenvector is defined only up to its
+   sign, independently in the two shapes. For each mode the sign of ``b``'s
+   feature is chosen that minimises the symmetric nearest-neighbour distance
+   between the two shapes' clouds of ``(u, v)`` rows. When a shape's principal
+   axes are ill defined (second moments within 20 %), the frame of ``b`` is
+   also searched in steps of 45 degrees.
+3. **Affinity** (eq. 12): ``Z_ij = sum_k |u_a,ik - u_b,jk|^2 + |v_a,ik - v_b,jk|^2``
+   (0 is a perfect match), returned as :attr:`Matching.affinity`.
+4. **Matching cost** ``C = Z / n_modes + curvature_weight * Kc``: low modes
+   vary slowly along the contour, so ``Z`` alone is coarse; ``Kc`` compares a
+   multi-scale curvature signature (invariant to similarity transforms).
+5. **Search**: ``local`` (Shapiro & Brady mutual minima), ``global`` (assignment
+   with fictitious nodes, Bastos & Tavares 2006) or ``order`` (cyclic
+   order-preserving dynamic programming, Oliveira & Tavares 2008).
+6. **Refinement** (``order`` and ``global`` by default): the drift of the
+   pairs along the contour is smoothed and the search runs again with a
+   penalty for leaving the smoothed path, which removes node-to-node jitter.
+
+The measured effect of each stage is in ``docs/benchmarks.md`` (section
+"Matching"). Coordinates are ``(row, col)``; contours are closed implicitly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.spatial import cKDTree
+
+from .materials import Material
+from .modes import MAX_AUTO_MODES, ModalBasis, _check_nodes, _modal_raw, select_modes, truncate
+
+__all__ = [
+    "Matching",
+    "match",
+    "modal_affinity",
+    "curvature_signature",
+    "METHODS",
+]
+
+#: Search methods of :func:`match`.
+METHODS = ("local", "global", "order")
+
+#: Curvature signature scales, as fractions of the perimeter (the finest is
+#: raised to one node spacing of the coarser contour in :func:`match`).
+_CURVATURE_SCALES = (0.0025, 0.005, 0.01, 0.025, 0.06)
+#: Smoothing width (fraction of the perimeter) of the refinement pass.
+_REFINE_WIDTH = 0.02
+#: Weight of the refinement's drift penalty per squared node, relative to the order penalty.
+_DRIFT_WEIGHT = 0.1
+#: Half-width of the free start of ``order``, as a fraction of b's node count.
+_START_WINDOW = 0.02
+#: Anisotropy (minor / major second moment) above which the frame of b is searched.
+_ISOTROPIC = 0.8
+
+
+@dataclass(frozen=True, eq=False)
+class Matching:
+    """Correspondence between the nodes of two contours.
+
+    Attributes
+    ----------
+    pairs : ndarray of int, shape (K, 2)
+        Row ``k`` matches node ``pairs[k, 0]`` of ``a`` with node ``pairs[k, 1]``
+        of ``b``, sorted by the node of ``a``. A node of ``a`` appears at most
+        once; a node of ``b`` may appear more than once when ``a`` has more
+        nodes (``global`` and ``order``).
+    affinity : ndarray of float, shape (Na, Nb)
+        Sign-corrected modal affinity ``Z`` (eq. 12); 0 is a perfect match.
+    unmatched : ndarray of int
+        Nodes of ``a`` without a partner (ascending).
+    cost : ndarray of float, shape (K,)
+        Matching cost of each pair in the final search: ``cost_matrix`` at
+        ``pairs``.
+    method : str
+        ``"local"``, ``"global"`` or ``"order"``.
+    cost_matrix : ndarray of float, shape (Na, Nb)
+        The matrix the final search minimised: ``affinity / n_modes`` plus the
+        curvature term, plus the drift penalty after a refinement.
+    unmatched_b : ndarray of int
+        Nodes of ``b`` that no node of ``a`` is matched to (ascending).
+    n_modes : int
+        Number of modes in the affinity.
+    signs : ndarray of float, shape (n_modes,)
+        Sign applied to each mode of ``b`` by the sign correction.
+    frame_rotation : float
+        Extra rotation (radians) applied to ``b``'s modal vectors when its
+        principal axes are ill defined (0 otherwise).
+    refined : bool
+        Whether the refinement pass ran.
+    total_cost : float
+        Objective of the final search (for ``order`` including the repeat,
+        skip and gap penalties).
+    basis_a, basis_b : ModalBasis
+        The modal bases (``b``'s before the sign correction).
+    """
+
+    pairs: np.ndarray
+    affinity: np.ndarray
+    unmatched: np.ndarray
+    cost: np.ndarray
+    method: str
+    cost_matrix: np.ndarray = field(repr=False)
+    unmatched_b: np.ndarray
+    n_modes: int
+    signs: np.ndarray
+    frame_rotation: float
+    refined: bool
+    total_cost: float
+    basis_a: ModalBasis = field(repr=False)
+    basis_b: ModalBasis = field(repr=False)
+
+    @property
+    def partner(self) -> np.ndarray:
+        """``partner[i]``: node of ``b`` matched to node ``i`` of ``a``, or -1."""
+        out = np.full(self.affinity.shape[0], -1, dtype=np.intp)
+        out[self.pairs[:, 0]] = self.pairs[:, 1]
+        return out
+
+    def __repr__(self) -> str:
+        na, nb = self.affinity.shape
+        return (f"Matching(method={self.method!r}, {len(self.pairs)} pairs, {na} x {nb} nodes, "
+                f"{len(self.unmatched)} unmatched in a, {len(self.unmatched_b)} unmatched in b, "
+                f"n_modes={self.n_modes}, refined={self.refined})")
+
+
+# --------------------------------------------------------------------------
+# Contour helpers
+# --------------------------------------------------------------------------
+
+
+def _ccw_permutation(nodes: np.ndarray) -> np.ndarray:
+    """Index map that makes the contour positively oriented, node 0 kept first."""
+    m = len(nodes)
+    r, c = nodes[:, 0], nodes[:, 1]
+    area = 0.5 * float(np.dot(r, np.roll(c, -1)) - np.dot(np.roll(r, -1), c))
+    if area >= 0:
+        return np.arange(m)
+    return (-np.arange(m)) % m
+
+
+def _arc_positions(nodes: np.ndarray):
+    """Normalised arc-length position of every node (node 0 at 0) and the perimeter."""
+    seg = np.linalg.norm(np.roll(nodes, -1, axis=0) - nodes, axis=1)
+    total = float(seg.sum())
+    t = np.concatenate([[0.0], np.cumsum(seg)[:-1]]) / total
+    return t, total
+
+
+def curvature_signature(nodes, scales=_CURVATURE_SCALES, *, saturation: float = 8.0) -> np.ndarray:
+    """Multi-scale, bounded, scale-invariant curvature at every node.
+
+    The contour is resampled evenly in arc length, its coordinates are
+    differentiated with Gaussian derivative filters in the Fourier domain at
+    each scale (a fraction of the perimeter ``L``), and the curvature ``k`` is
+    normalised to ``k L / (2 pi)`` (1 on a circle) and compressed with
+    ``(2 / pi) arctan(. / saturation)``.
+
+    Parameters
+    ----------
+    nodes : array_like, shape (m, 2)
+        Contour nodes ``(row, col)``, positively oriented (convex parts then
+        have positive curvature).
+    scales : sequence of float, optional
+        Gaussian widths as fractions of the perimeter.
+    saturation : float, optional
+        Normalised curvature at which the compression reaches half its range.
+
+    Returns
+    -------
+    ndarray, shape (m, len(scales))
+        Values in (-1, 1).
+    """
+    nodes = np.asarray(nodes, dtype=np.float64)
+    t, total = _arc_positions(nodes)
+    n = 1024
+    while n < 4 * len(nodes):
+        n *= 2
+    closed_t = np.concatenate([t, [1.0]])
+    s = np.arange(n) / n
+    z = (np.interp(s, closed_t, np.concatenate([nodes[:, 0], nodes[:1, 0]]))
+         + 1j * np.interp(s, closed_t, np.concatenate([nodes[:, 1], nodes[:1, 1]])))
+    Zf = np.fft.fft(z)
+    omega = 2.0 * np.pi * np.fft.fftfreq(n, d=1.0 / n)  # per unit of normalised arc length
+    out = np.empty((len(nodes), len(scales)))
+    for k, width in enumerate(scales):
+        g = np.exp(-0.5 * (omega * width) ** 2)
+        z1 = np.fft.ifft(Zf * (1j * omega) * g)
+        z2 = np.fft.ifft(Zf * (1j * omega) ** 2 * g)
+        speed = np.maximum(np.abs(z1), 1e-300)
+        kappa = np.imag(np.conj(z1) * z2) / speed**3  # 1 / pixel (parametrisation invariant)
+        kappa_n = kappa * total / (2.0 * np.pi)  # 1 on a circle
+        at_nodes = np.interp(t * n, np.arange(n + 1), np.concatenate([kappa_n, kappa_n[:1]]))
+        out[:, k] = (2.0 / np.pi) * np.arctan(at_nodes / saturation)
+    return out
+
+
+# --------------------------------------------------------------------------
+# Affinity
+# --------------------------------------------------------------------------
+
+
+def _features(basis: ModalBasis, k: int) -> np.ndarray:
+    return basis.shapes[:, :k, :] * np.sqrt(basis.n_nodes)
+
+
+def _cloud_distance(A: np.ndarray, B: np.ndarray, ta: cKDTree, tb: cKDTree) -> float:
+    return float(tb.query(A)[0].mean() + ta.query(B)[0].mean())
+
+
+def _sign_correction(fa: np.ndarray, fb: np.ndarray):
+    """Per-mode sign of ``fb`` minimising the symmetric nearest-neighbour
+    distance between the two clouds of ``(u, v)`` rows; returns the signs and
+    the summed distance."""
+    k = fa.shape[1]
+    signs = np.ones(k)
+    score = 0.0
+    for j in range(k):
+        A, B = fa[:, j, :], fb[:, j, :]
+        ta, tb = cKDTree(A), cKDTree(B)
+        plus = _cloud_distance(A, B, ta, tb)
+        minus = float(tb.query(-A)[0].mean() + ta.query(-B)[0].mean())
+        signs[j] = 1.0 if plus <= minus else -1.0
+        score += min(plus, minus)
+    return signs, score
+
+
+def _rotate(f: np.ndarray, theta: float) -> np.ndarray:
+    c, s = np.cos(theta), np.sin(theta)
+    return f @ np.array([[c, s], [-s, c]])
+
+
+def _correct(fa: np.ndarray, fb: np.ndarray, search_frame: bool):
+    """Sign correction, with a search over rotations of ``b``'s frame by
+    multiples of 45 degrees when ``search_frame`` (a half turn is a sign)."""
+    angles = [0.0, np.pi / 4, np.pi / 2, 3 * np.pi / 4] if search_frame else [0.0]
+    best = None
+    for theta in angles:
+        fr = _rotate(fb, theta) if theta else fb
+        signs, score = _sign_correction(fa, fr)
+        if best is None or score < best[2] - 1e-12:
+            best = (theta, signs, score)
+    theta, signs, _ = best
+    fr = _rotate(fb, theta) if theta else fb
+    return fr * signs[None, :, None], signs, theta
+
+
+def _pairwise_sq(fa: np.ndarray, fb: np.ndarray) -> np.ndarray:
+    """Squared Euclidean distances between the rows of two (n, d) arrays."""
+    aa = np.einsum("ij,ij->i", fa, fa)
+    bb = np.einsum("ij,ij->i", fb, fb)
+    d = aa[:, None] + bb[None, :] - 2.0 * fa @ fb.T
+    return np.maximum(d, 0.0)
+
+
+def modal_affinity(basis_a: ModalBasis, basis_b: ModalBasis, n_modes: int | None = None,
+                   *, sign_correction: bool = True):
+    """Sign-corrected modal affinity (eq. 12) between two modal bases.
+
+    Parameters
+    ----------
+    basis_a, basis_b : ModalBasis
+        Modal bases of the two shapes (see :func:`~.modes.modal_basis`).
+    n_modes : int, optional
+        Number of modes used; default the smaller of the two bases' counts.
+    sign_correction : bool, optional
+        Choose each mode's sign in ``b`` against ``a`` (default). Turning it
+        off is only useful to measure what it buys.
+
+    Returns
+    -------
+    Z : ndarray, shape (Na, Nb)
+        ``Z_ij = sum_k |u_a,ik - u_b,jk|^2 + |v_a,ik - v_b,jk|^2`` over the
+        selected modes, with modal vectors scaled by ``sqrt(m)`` so that shapes
+        with different node counts are comparable. Non-negative; 0 is a
+        perfect match.
+    signs : ndarray, shape (n_modes,)
+        The signs applied to ``b``'s modes.
+
+    Raises
+    ------
+    ValueError
+        If ``n_modes`` exceeds the modes available.
+    """
+    kmax = min(basis_a.n_modes, basis_b.n_modes)
+    k = kmax if n_modes is None else int(n_modes)
+    if not 1 <= k <= kmax:
+        raise ValueError(f"n_modes must be between 1 and {kmax}, got {n_modes!r}")
+    fa, fb = _features(basis_a, k), _features(basis_b, k)
+    if sign_correction:
+        signs = _sign_correction(fa, fb)[0]
+    else:
+        signs = np.ones(k)
+    fb = fb * signs[None, :, None]
+    return _pairwise_sq(fa.reshape(len(fa), -1), fb.reshape(len(fb), -1)), signs
+
+
+# --------------------------------------------------------------------------
+# Searches
+# --------------------------------------------------------------------------
+
+
+def _local(C: np.ndarray) -> np.ndarray:
+    """Shapiro & Brady: ``i <-> j`` when ``C_ij`` is the minimum of its row and column."""
+    rows = np.argmin(C, axis=1)
+    cols = np.argmin(C, axis=0)
+    i = np.arange(C.shape[0])
+    keep = cols[rows] == i
+    return np.where(keep, rows, -1)
+
+
+def _fill_by_neighbours(part: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """Bastos & Tavares: a node of ``a`` without a partner gets the node of
+    lowest cost among the nodes of ``b`` between the partners of its nearest
+    matched neighbours (both inclusive, cyclically)."""
+    na, nb = C.shape
+    matched = np.flatnonzero(part >= 0)
+    if len(matched) == 0:
+        return np.argmin(C, axis=1)
+    out = part.copy()
+    for i in np.flatnonzero(part < 0):
+        pos = np.searchsorted(matched, i)
+        prev = matched[pos - 1] if pos > 0 else matched[-1]
+        nxt = matched[pos] if pos < len(matched) else matched[0]
+        lo, hi = part[prev], part[nxt]
+        span = (hi - lo) % nb
+        if span > nb // 2:  # partners out of order: take the shorter arc the other way
+            lo, span = hi, (lo - hi) % nb
+        cand = (lo + np.arange(span + 1)) % nb
+        out[i] = cand[np.argmin(C[i, cand])]
+    return out
+
+
+def _global(C: np.ndarray, fill: bool = True) -> np.ndarray:
+    """Assignment on ``C`` with fictitious nodes padding the smaller shape."""
+    na, nb = C.shape
+    n = max(na, nb)
+    big = np.zeros((n, n))  # fictitious rows / columns cost nothing
+    big[:na, :nb] = C
+    r, c = linear_sum_assignment(big)
+    part = np.full(na, -1, dtype=np.intp)
+    real = (r < na) & (c < nb)
+    part[r[real]] = c[real]
+    if fill and na > nb:
+        part = _fill_by_neighbours(part, C)
+    return part
+
+
+def _order_dp(C: np.ndarray, nb: int, window: int, repeat: float, skip: float, gap: float):
+    """Order-preserving alignment of all nodes of ``a`` along ``b``.
+
+    ``C`` has ``nb + 2 * window`` columns: ``b``'s nodes from ``window`` before
+    the candidate start node to ``window`` after it, once around. Node 0 of
+    ``a`` is matched to one of the first ``2 * window + 1`` columns (a free
+    start); every later node of ``a`` is matched to the partner of the
+    previous one (``repeat``), to a later column (``skip`` for each node of
+    ``b`` passed over) or left unmatched (``gap``). The path may not use a
+    node of ``b`` twice around: its last column is less than ``nb`` after its
+    first, and the nodes left over between the end and the start count as
+    skipped.
+
+    Returns
+    -------
+    part : ndarray of int, shape (na,)
+        Column of each node's partner, or -1.
+    total : float
+    """
+    na, width = C.shape
+    inf = np.inf
+    ks = np.arange(width)
+    ramp = skip * ks
+    from_adv = np.zeros((na, width), dtype=np.int32)  # predecessor column when advancing
+    choice = np.zeros((na, width), dtype=np.int8)  # 0 advance, 1 repeat, 2 gap
+    F = np.full(width, inf)
+    F[: 2 * window + 1] = C[0, : 2 * window + 1]
+    start = ks.copy()
+    adv = np.empty(width)
+    for i in range(1, na):
+        vals = F - ramp
+        pm = np.minimum.accumulate(vals)
+        arg = np.maximum.accumulate(np.where(vals <= pm, ks, 0))
+        adv[0] = inf
+        adv[1:] = pm[:-1] + ramp[1:] - skip
+        rep = F + repeat
+        use_rep = rep < adv
+        D = np.where(use_rep, rep, adv) + C[i]
+        G = F + gap
+        use_gap = G < D
+        F = np.where(use_gap, G, D)
+        from_adv[i, 1:] = arg[:-1]
+        ch = np.where(use_gap, 2, np.where(use_rep, 1, 0)).astype(np.int8)
+        choice[i] = ch
+        adv_start = np.empty(width, dtype=start.dtype)
+        adv_start[0] = start[0]
+        adv_start[1:] = start[arg[:-1]]
+        start = np.where(ch == 0, adv_start, start)
+    span = ks - start
+    end = np.where(span <= nb - 1, F + skip * (nb - 1 - span), inf)
+    j = int(np.argmin(end))
+    total = float(end[j])
+    part = np.full(na, -1, dtype=np.intp)
+    for i in range(na - 1, 0, -1):
+        ch = choice[i, j]
+        if ch == 2:
+            continue
+        part[i] = j
+        if ch == 0:
+            j = int(from_adv[i, j])
+    part[0] = j
+    return part, total
+
+
+def _diagonal_scores(C: np.ndarray) -> np.ndarray:
+    """Cost of the uniform-rate cyclic alignment starting at each node of ``b``."""
+    na, nb = C.shape
+    step = np.rint(np.arange(na) * nb / na).astype(np.intp)
+    cols = (np.arange(nb)[:, None] + step[None, :]) % nb
+    return C[np.arange(na)[None, :], cols].sum(axis=1)
+
+
+def _start_candidates(scores: np.ndarray, n: int, separation: int = 1) -> list[int]:
+    """Up to ``n`` lowest cyclic local minima of ``scores`` at least
+    ``separation`` nodes apart."""
+    nb = len(scores)
+    left, right = np.roll(scores, 1), np.roll(scores, -1)
+    minima = np.flatnonzero((scores <= left) & (scores <= right))
+    chosen: list[int] = []
+    for s in minima[np.argsort(scores[minima], kind="stable")]:
+        if all(min(abs(int(s) - c), nb - abs(int(s) - c)) >= separation for c in chosen):
+            chosen.append(int(s))
+        if len(chosen) == n:
+            break
+    return chosen
+
+
+def _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window):
+    """Run the DP around each candidate start node of ``b`` (free within
+    ``window`` nodes); return the best (part, total)."""
+    na, nb = C.shape
+    window = int(min(window, max((nb - 1) // 2, 0)))
+    best = (None, np.inf)
+    for s in starts:
+        cols = (s - window + np.arange(nb + 2 * window)) % nb
+        Cs = C[:, cols]
+        if arc_weight > 0:
+            tb = (t_b[cols] - t_b[s]) % 1.0
+            tb[:window] -= 1.0
+            tb[window + nb:] += 1.0
+            d = t_a[:, None] - tb[None, :]
+            Cs = Cs + arc_weight * d * d
+        part, total = _order_dp(Cs, nb, window, penalty, penalty, gap)
+        if total < best[1]:
+            best = (np.where(part >= 0, cols[np.maximum(part, 0)], -1), total)
+    return best
+
+
+def _search(method, C, t_a, t_b, *, arc_weight, n_starts, gap, penalty, start=None):
+    """One pass of the chosen search on cost ``C``; returns (partners, total)."""
+    na, nb = C.shape
+    if method == "local":
+        part = _local(C)
+    elif method == "global":
+        part = _global(C)
+    else:
+        window = max(2, int(np.ceil(_START_WINDOW * nb)))
+        if start is None:
+            starts = _start_candidates(_diagonal_scores(C), n_starts, 2 * window + 1)
+        else:
+            starts = [start]
+        return _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window)
+    ok = part >= 0
+    return part, float(C[ok, part[ok]].sum())
+
+
+# --------------------------------------------------------------------------
+# Refinement
+# --------------------------------------------------------------------------
+
+
+def _smooth_along(values: np.ndarray, t_src: np.ndarray, t_dst: np.ndarray, width: float) -> np.ndarray:
+    """Gaussian (``width`` x perimeter) average along the normalised arc length,
+    cyclic, of ``values`` known at ``t_src``, evaluated at ``t_dst``."""
+    d = np.abs(t_dst[:, None] - t_src[None, :])
+    d = np.minimum(d, 1.0 - d)
+    W = np.exp(-0.5 * (d / width) ** 2)
+    W /= np.maximum(W.sum(axis=1, keepdims=True), 1e-300)
+    return W @ values
+
+
+def _drift_cost(part: np.ndarray, t_a: np.ndarray, t_b: np.ndarray, width: float, weight: float) -> np.ndarray:
+    """Penalty for leaving the smoothed path of a previous matching.
+
+    The drift ``t_b[partner(i)] - t_a[i]`` of the pairs (normalised arc
+    length, unwrapped around the contour) is smoothed along ``a`` with a
+    Gaussian of ``width`` times the perimeter; the result is ``weight`` times
+    the squared distance, in nodes of ``b``, from the smoothed partner
+    position. Slow drifts (a finger that turned, a stretched stretch) are
+    kept; node-to-node jitter is removed.
+    """
+    na, nb = len(t_a), len(t_b)
+    idx = np.flatnonzero(part >= 0)
+    if len(idx) < 3:
+        return np.zeros((na, nb))
+    tb = t_b[part[idx]]
+    step = (np.diff(tb) + 0.5) % 1.0 - 0.5
+    drift = tb[0] + np.concatenate([[0.0], np.cumsum(step)]) - t_a[idx]
+    drift = (drift - drift[0] + 0.5) % 1.0 - 0.5 + drift[0]
+    target = t_a + _smooth_along(drift, t_a[idx], t_a, width)
+    d = (t_b[None, :] - target[:, None] + 0.5) % 1.0 - 0.5
+    return weight * (d * nb) ** 2
+
+
+# --------------------------------------------------------------------------
+# Public entry point
+# --------------------------------------------------------------------------
+
+
+def _check_method(method) -> str:
+    if not isinstance(method, str) or method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(repr(m) for m in METHODS)}, got {method!r}")
+    return method
+
+
+def _check_weight(value, name: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a non-negative number, got {value!r}") from None
+    if not (np.isfinite(v) and v >= 0):
+        raise ValueError(f"{name} must be a non-negative number, got {value!r}")
+    return v
+
+
+def _check_count(value, name: str, minimum: int, allow_none: bool) -> int | None:
+    if value is None and allow_none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        tail = " or None" if allow_none else ""
+        raise ValueError(f"{name} must be an integer >= {minimum}{tail}, got {value!r}")
+    return int(value)
+
+
+def _joint_bases(A, B, n_modes, model_nodes, sigma_factor, material):
+    """Modal bases of both shapes, truncated to a mode count that cuts neither
+    spectrum through a near-degenerate pair (when such a count exists)."""
+    n_compute = max(n_modes or 0, MAX_AUTO_MODES) + 4
+    ra = _modal_raw(A, n_compute=n_compute, sigma_factor=sigma_factor, material=material,
+                    model_nodes=model_nodes, name="a")
+    rb = _modal_raw(B, n_compute=n_compute, sigma_factor=sigma_factor, material=material,
+                    model_nodes=model_nodes, name="b")
+    avail = min(ra.n_modes, rb.n_modes) - 1
+    k = select_modes(ra.spectrum, n_modes)
+    for _ in range(4):
+        k2 = select_modes(ra.spectrum, select_modes(rb.spectrum, k))
+        if k2 == k:
+            break
+        k = k2
+    k = max(1, min(k, avail))
+    return truncate(ra, k), truncate(rb, k), k
+
+
+def match(a, b, *, method: str = "order", n_modes: int | None = None, model_nodes: int | None = 64,
+          sigma_factor: float = 1.0, material: str | Material = "rubber", curvature_weight: float = 8.0,
+          arclength_weight: float = 0.0, refine: bool | None = None, sign_correction: bool = True,
+          order_penalty: float = 5.0, n_starts: int = 4, gap_cost: float | None = None) -> Matching:
+    """Match the nodes of contour ``a`` to those of contour ``b`` by modal analysis.
+
+    Parameters
+    ----------
+    a, b : array_like, shape (Na, 2) and (Nb, 2)
+        Closed contours ``(row, col)``, each with at least 3 distinct nodes,
+        no NaN, no repeated node. Orientation, start node, position, rotation,
+        scale and node count may differ.
+    method : {"order", "global", "local"}, optional
+        ``order`` (default): cyclic order-preserving dynamic programming
+        (Oliveira & Tavares 2008); never crosses matches and matches every
+        node of ``a`` (unless ``gap_cost`` is set). ``global``: optimal
+        assignment with fictitious nodes for unequal counts, then the nodes of
+        ``a`` left to a fictitious partner are matched by neighbourhood and
+        affinity (Bastos & Tavares 2006). ``local``: mutual row/column minima
+        (Shapiro & Brady 1992), fewer pairs.
+    n_modes : int, optional
+        Number of modes in the affinity; raised (by at most 3) so that no
+        near-degenerate pair is cut. Default: 6 to 12, cut at a spectral gap
+        of both shapes.
+    model_nodes : int or None, optional
+        Number of evenly spaced nodes the element of each shape is built on
+        (default 64, close to the paper's 67); the modal displacements are
+        interpolated to the contour's nodes. ``None`` builds the element on
+        the contour's own nodes (sparse shift-invert eigensolver above 300
+        nodes). With the Gaussian width tied to the node spacing, the low
+        modes of a model with hundreds of nodes crowd into a nearly flat
+        spectrum and change with noise and node count, so matching such
+        models is much less reliable (see ``docs/benchmarks.md``).
+    sigma_factor : float, optional
+        Gaussian width of the element in units of the mean model-node spacing.
+    material : str or Material, optional
+        Element material (only Poisson's ratio changes the mode shapes).
+    curvature_weight : float, optional
+        Weight of the curvature term of the matching cost (0: modal affinity
+        only).
+    arclength_weight : float, optional
+        Weight of a normalised arc-length term for ``order``:
+        ``arclength_weight * dt^2``, ``dt`` the difference of the nodes'
+        arc-length positions counted from the start pair (default 0: it made
+        no measurable difference on the benchmark once the order penalties
+        were in place).
+    refine : bool, optional
+        Run the refinement pass (default: True for ``order`` and ``global``,
+        False for ``local``, which then returns plain mutual minima).
+    sign_correction : bool, optional
+        Per-mode sign correction of ``b``'s modes against ``a``'s (default
+        True; without it the modal affinity is close to random). For
+        measurements only.
+    order_penalty : float, optional
+        Cost of each repeated or skipped node of ``b`` in ``order``, in units
+        of the median over ``a``'s nodes of their best matching cost (default
+        5). It keeps the correspondence locally uniform where the features are
+        flat, such as along the straight side of a finger; 0.5 lets the path
+        follow the features' noise.
+    n_starts : int, optional
+        Number of start regions tried by ``order``: the lowest local minima
+        of the cost of uniform-rate alignments, each searched with a free
+        start of +-2 % of ``b``'s nodes.
+    gap_cost : float, optional
+        Cost of leaving a node of ``a`` unmatched in ``order``, in units of
+        the matching cost (default: never).
+
+    Returns
+    -------
+    Matching
+
+    Raises
+    ------
+    ValueError
+        For an unknown ``method``, a contour with fewer than 3 nodes, NaN or
+        infinite coordinates, identical nodes or all nodes on a line, or an
+        invalid option; raised before any heavy work.
+
+    Notes
+    -----
+    The matching cost is ``C = Z / n_modes + curvature_weight * Kc``, with
+    ``Z`` the sign-corrected modal affinity (eq. 12, :attr:`Matching.affinity`)
+    and ``Kc`` the mean squared difference of the nodes' curvature signatures
+    (:func:`curvature_signature`). All terms are invariant to translation,
+    rotation and scale of either contour. ``order`` charges
+    ``order_penalty x median_i(min_j C_ij)`` for each repeated or skipped
+    node of ``b``.
+
+    The refinement unwraps the arc-length drift of the pairs, smooths it along
+    ``a`` (Gaussian, 2 % of the perimeter) and searches again with
+    ``C + 0.1 x penalty x (distance to the smoothed path in nodes of b)^2``.
+
+    Examples
+    --------
+    >>> from napari_physeg.data import hand_pair
+    >>> a, b, truth = hand_pair(67, 66)
+    >>> m = match(a, b)
+    >>> m.pairs.shape
+    (67, 2)
+    """
+    method = _check_method(method)
+    a = _check_nodes(a, "a")
+    b = _check_nodes(b, "b")
+    curvature_weight = _check_weight(curvature_weight, "curvature_weight")
+    arclength_weight = _check_weight(arclength_weight, "arclength_weight")
+    n_modes = _check_count(n_modes, "n_modes", 1, True)
+    model_nodes = _check_count(model_nodes, "model_nodes", 8, True)
+    n_starts = _check_count(n_starts, "n_starts", 1, False)
+    gap = np.inf if gap_cost is None else _check_weight(gap_cost, "gap_cost")
+    order_penalty = _check_weight(order_penalty, "order_penalty")
+    if _check_weight(sigma_factor, "sigma_factor") == 0:
+        raise ValueError(f"sigma_factor must be a positive number, got {sigma_factor!r}")
+    if refine is None:
+        refine = method != "local"
+
+    # Orient both contours alike (positively); indices are mapped back at the end.
+    pa, pb = _ccw_permutation(a), _ccw_permutation(b)
+    A, B = a[pa], b[pb]
+    na, nb = len(A), len(B)
+    t_a, _ = _arc_positions(A)
+    t_b, _ = _arc_positions(B)
+
+    # Modal features with a cut common to both spectra, sign-corrected.
+    basis_a, basis_b, k = _joint_bases(A, B, n_modes, model_nodes, sigma_factor, material)
+    fa, fb = _features(basis_a, k), _features(basis_b, k)
+    if sign_correction:
+        search_frame = max(basis_a.anisotropy, basis_b.anisotropy) > _ISOTROPIC
+        fb, signs, theta = _correct(fa, fb, search_frame)
+    else:
+        signs, theta = np.ones(k), 0.0
+    Z = _pairwise_sq(fa.reshape(na, -1), fb.reshape(nb, -1))
+    C = Z / k
+    if curvature_weight > 0:
+        scales = tuple(sorted({max(sc, 1.0 / min(na, nb)) for sc in _CURVATURE_SCALES}))
+        ka = curvature_signature(A, scales)
+        kb = curvature_signature(B, scales)
+        C = C + curvature_weight * _pairwise_sq(ka, kb) / ka.shape[1]
+
+    penalty = order_penalty * float(np.median(C.min(axis=1))) + 1e-6 * float(np.median(C))
+    opts = dict(arc_weight=arclength_weight, n_starts=n_starts, gap=gap, penalty=penalty)
+    part, total = _search(method, C, t_a, t_b, **opts)
+    final = C
+    if refine:
+        final = C + _drift_cost(part, t_a, t_b, _REFINE_WIDTH, _DRIFT_WEIGHT * penalty)
+        start = int(part[0]) if part[0] >= 0 else None
+        part, total = _search(method, final, t_a, t_b, start=start, **opts)
+
+    # Back to the caller's node numbering.
+    ia = np.flatnonzero(part >= 0)
+    pairs = np.column_stack([pa[ia], pb[part[ia]]]).astype(np.intp)
+    cost = final[ia, part[ia]]
+    order = np.argsort(pairs[:, 0], kind="stable")
+    pairs, cost = pairs[order], cost[order]
+    affinity = np.empty((na, nb))
+    affinity[np.ix_(pa, pb)] = Z
+    cost_matrix = np.empty((na, nb))
+    cost_matrix[np.ix_(pa, pb)] = final
+    return Matching(
+        pairs=pairs,
+        affinity=affinity,
+        unmatched=np.setdiff1d(np.arange(na), pairs[:, 0]).astype(np.intp),
+        cost=cost,
+        method=method,
+        cost_matrix=cost_matrix,
+        unmatched_b=np.setdiff1d(np.arange(nb), pairs[:, 1]).astype(np.intp),
+        n_modes=int(k),
+        signs=signs,
+        frame_rotation=float(theta),
+        refined=bool(refine),
+        total_cost=float(total),
+        basis_a=basis_a,
+        basis_b=basis_b,
+    )
