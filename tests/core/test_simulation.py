@@ -134,3 +134,24 @@ def test_bad_input():
         simulate(a, b, m, n_frames=1)
     with pytest.raises(ValueError, match="no pairs"):
         simulate(a, b, SimpleNamespace(pairs=np.zeros((0, 2), int), affinity=m.affinity))
+
+
+@pytest.mark.parametrize("poses", [("open", "closed"), ("open", "spread")])
+def test_local_matching_simulates_like_a_full_matching(poses):
+    """The paper's figs. 10-11 with real matchings: local search leaves nodes
+    unmatched, eq. 18 carries them, and the final shape is as close to b."""
+    from napari_physeg.core import match
+
+    a, b, _ = data.hand_pair(67, 66, pose_a=poses[0], pose_b=poses[1])
+    local, full = match(a, b, method="local"), match(a, b, method="global")
+    assert len(local.unmatched) > 0 and len(full.unmatched) == 0
+    end_local = simulate(a, b, local).frames[-1]
+    end_full = simulate(a, b, full).frames[-1]
+    assert _outline_distance(end_full, b).mean() <= 1.0
+    assert abs(_outline_distance(end_local, b).mean() - _outline_distance(end_full, b).mean()) <= 1.0
+
+
+def test_matching_is_computed_when_omitted():
+    a, b, _ = data.hand_pair(40, 38)
+    sim = simulate(a, b)
+    assert sim.converged and _outline_distance(sim.frames[-1], b).mean() <= 1.0
