@@ -174,9 +174,9 @@ ABLATION = [
     ("order: default without sign correction", "order", dict(sign_correction=False)),
     ("order: default, element on the contour's own nodes (sparse eigsh > 300 nodes)", "order",
      dict(model_nodes=None)),
-    ("global: modal Z only (64 model nodes), no refinement", "global", dict(curvature_weight=0.0, refine=False)),
-    ("global: + curvature term, no refinement", "global", dict(refine=False)),
-    ("global: + refinement = **default**", "global", dict()),
+    ("global: modal Z only (64 model nodes)", "global", dict(curvature_weight=0.0)),
+    ("global: + curvature term = **default**", "global", dict()),
+    ("global: + refinement (smoothed drift)", "global", dict(refine=True)),
 ]
 
 

@@ -136,11 +136,29 @@ class ModalBasis:
         return self.shapes.shape[1]
 
     def to_canonical(self, points) -> np.ndarray:
-        """Map ``(row, col)`` points into this basis's canonical frame."""
+        """Map ``(row, col)`` points into this basis's canonical frame.
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 2)
+
+        Returns
+        -------
+        ndarray, shape (n, 2)
+        """
         return (np.asarray(points, dtype=np.float64) - self.centroid) @ self.axes.T / self.scale
 
     def from_canonical(self, points) -> np.ndarray:
-        """Map canonical-frame points back to ``(row, col)``."""
+        """Map canonical-frame points back to ``(row, col)``.
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 2)
+
+        Returns
+        -------
+        ndarray, shape (n, 2)
+        """
         return np.asarray(points, dtype=np.float64) * self.scale @ self.axes + self.centroid
 
 
@@ -358,7 +376,23 @@ def _modal_raw(nodes, *, n_compute: int = MAX_AUTO_MODES + 4, sigma: float | Non
 
 
 def truncate(basis: ModalBasis, n_modes: int) -> ModalBasis:
-    """The same basis restricted to its first ``n_modes`` modes."""
+    """The same basis restricted to its first ``n_modes`` modes.
+
+    Parameters
+    ----------
+    basis : ModalBasis
+    n_modes : int
+        Between 1 and ``basis.n_modes``.
+
+    Returns
+    -------
+    ModalBasis
+
+    Raises
+    ------
+    ValueError
+        If ``n_modes`` is out of range.
+    """
     n_modes = int(n_modes)
     if not 1 <= n_modes <= basis.n_modes:
         raise ValueError(f"n_modes must be between 1 and {basis.n_modes}, got {n_modes}")
