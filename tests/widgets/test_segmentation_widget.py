@@ -466,7 +466,8 @@ def test_manifest_is_valid():
     pm = npe2.PluginManifest.from_distribution("napari-physeg")
     pm.validate_imports()
     contrib = pm.contributions
-    assert [w.display_name for w in contrib.widgets] == ["Segmentation (physical contour)"]
+    assert {w.display_name for w in contrib.widgets} == {
+        "Segmentation (physical contour)", "Matching (modal)", "Simulation (deformation)"}
     keys = {s.key: s.display_name for s in contrib.sample_data}
     assert keys["hand_segmentation"] == "Hand (segmentation)"
     assert keys["hand_poses"] == "Hand poses (matching)"

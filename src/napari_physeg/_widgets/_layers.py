@@ -34,9 +34,12 @@ __all__ = [
     "apply_affine",
     "contours_to_labels",
     "contours_to_shapes_data",
+    "drop_repeated_nodes",
     "ellipse_polygon",
     "image_transform_kwargs",
     "polygon_perimeter",
+    "prepend_axes_transform",
+    "shape_in_layer_coords",
     "shape_to_polygon",
     "shapes_to_image_coords",
     "slice_index",
@@ -120,6 +123,21 @@ def shape_to_polygon(vertices, shape_type: str) -> np.ndarray:
     return v
 
 
+def drop_repeated_nodes(contour) -> np.ndarray:
+    """Drop consecutive repeated vertices (and a closing vertex equal to the first).
+
+    Hand-drawn napari polygons often hold a vertex twice (a double click to
+    finish); the core wants every node once.
+    """
+    c = np.asarray(contour, dtype=np.float64)
+    if len(c) < 2:
+        return c
+    keep = np.any(c != np.roll(c, -1, axis=0), axis=1)
+    if not keep.any():
+        keep[0] = True
+    return np.ascontiguousarray(c[keep])
+
+
 def polygon_perimeter(contour) -> float:
     """Length of a closed polyline (last two coordinates)."""
     c = np.asarray(contour, dtype=np.float64)[:, -2:]
@@ -174,6 +192,38 @@ def image_transform_kwargs(image_layer) -> dict:
         if value is not None:
             kwargs[name] = tuple(value)
     return kwargs
+
+
+def prepend_axes_transform(kwargs: dict, labels=("frame",)) -> dict:
+    """Transform keyword arguments (:func:`image_transform_kwargs`) with new leading axes.
+
+    The new axes (e.g. a time axis) get scale 1, translate 0, no rotation or
+    shear, the given axis labels and pixel units; the old axes keep their
+    transform, so data ``(t, *old)`` maps to world ``(t, *world(old))``.
+    """
+    n = len(labels)
+    out = dict(kwargs)
+    d = len(np.atleast_1d(kwargs["scale"]))
+    out["scale"] = np.concatenate([np.ones(n), np.asarray(kwargs["scale"], dtype=float)])
+    out["translate"] = np.concatenate([np.zeros(n), np.asarray(kwargs["translate"], dtype=float)])
+    rot = np.eye(d + n)
+    rot[n:, n:] = np.asarray(kwargs["rotate"], dtype=float).reshape(d, d)
+    out["rotate"] = rot
+    shear = np.asarray(kwargs["shear"], dtype=float)
+    if shear.ndim == 2:  # a full matrix
+        full = np.eye(d + n)
+        full[n:, n:] = shear
+        out["shear"] = full
+    else:  # upper-triangular values, row by row: the new rows come first and are 0
+        out["shear"] = np.concatenate([np.zeros(n * d + n * (n - 1) // 2), shear])
+    aff = np.eye(d + n + 1)
+    aff[n:, n:] = np.asarray(kwargs["affine"], dtype=float)
+    out["affine"] = aff
+    if "units" in kwargs:
+        out["units"] = ("pixel",) * n + tuple(kwargs["units"])
+    if "axis_labels" in kwargs:
+        out["axis_labels"] = tuple(labels) + tuple(kwargs["axis_labels"])
+    return out
 
 
 def slice_index(image_layer, world_point, shape) -> tuple[int, ...]:
@@ -262,6 +312,62 @@ def shapes_to_image_coords(shapes_layer, image_layer, world_point=None) -> Slice
         contours.append(np.ascontiguousarray(in_image[:, -2:], dtype=np.float64))
         indices.append(k)
     return SlicedShapes(contours=contours, indices=indices, off_slice=off)
+
+
+def shape_in_layer_coords(shapes_layer, index: int, reference_layer=None, world_point=None):
+    """One shape of a Shapes layer as a closed contour in another layer's data coordinates.
+
+    Unlike :func:`shapes_to_image_coords` the shape is chosen by index, on any
+    slice, and the other shapes of the layer are not looked at. Used to bring
+    two contours (possibly of layers with different transforms) into one
+    frame, the ``reference_layer``'s data coordinates.
+
+    Parameters
+    ----------
+    shapes_layer : napari.layers.Shapes
+    index : int
+        Which shape.
+    reference_layer : napari layer, optional
+        Whose data coordinates to use; default ``shapes_layer`` itself.
+    world_point : sequence of float, optional
+        The viewer's current position (``viewer.dims.point``), for world axes
+        the Shapes layer lacks.
+
+    Returns
+    -------
+    contour : (N, 2) float64 ndarray
+        ``(row, col)``: the last two data coordinates of the reference layer,
+        consecutive repeated vertices dropped.
+    leading : tuple of float
+        The reference layer's leading (non-spatial) data coordinates of the
+        shape (its first vertex), ``()`` for a 2D reference layer.
+
+    Raises
+    ------
+    ValueError
+        For a line, or a shape with fewer than 3 vertices.
+    """
+    reference_layer = shapes_layer if reference_layer is None else reference_layer
+    verts = np.asarray(shapes_layer.data[index], dtype=np.float64)
+    try:
+        poly = shape_to_polygon(verts, shapes_layer.shape_type[index])
+    except ValueError as err:
+        raise ValueError(f"shape {index} of {shapes_layer.name!r}: {err}") from None
+    if reference_layer is shapes_layer:
+        in_ref = poly
+    else:
+        ds, dr = int(shapes_layer.ndim), int(reference_layer.ndim)
+        n_world = max(ds, dr, len(world_point) if world_point is not None else 0)
+        point = np.zeros(n_world)
+        if world_point is not None and len(world_point):
+            wp = np.asarray(world_point, dtype=float)
+            point[n_world - len(wp):] = wp
+        world = np.broadcast_to(point, (len(poly), n_world)).copy()
+        world[:, n_world - ds:] = apply_affine(affine_matrix(shapes_layer.data_to_world, ds), poly)
+        to_ref = np.linalg.inv(affine_matrix(reference_layer.data_to_world, dr))
+        in_ref = apply_affine(to_ref, world[:, n_world - dr:])
+    leading = tuple(float(np.round(x, 6)) for x in in_ref[0, :-2])
+    return drop_repeated_nodes(in_ref[:, -2:]), leading
 
 
 # --------------------------------------------------------------------------

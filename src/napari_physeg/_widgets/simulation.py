@@ -1,0 +1,605 @@
+"""The simulation widget: a thin napari front end to :func:`napari_physeg.core.simulate`.
+
+Three parts, from the least to the most napari-specific:
+
+* :func:`simulate_contours` - a plain generator that (matches the two
+  contours with method "order" if no matching is given, then) simulates the
+  deformation of ``a`` into ``b`` with the core, yielding
+  :class:`SimulationProgress` from the core's callback and returning a
+  :class:`SimulationOutcome`. It knows nothing about napari or Qt;
+  :func:`run_to_completion` drives it synchronously in scripts and tests.
+* :func:`simulation_layer_data` - turns an outcome into napari layer data: a
+  Shapes layer with a LEADING TIME AXIS (one polygon per frame, vertices
+  ``(t, *leading, row, col)``) so napari's dims slider plays the deformation,
+  and optionally a Tracks layer of the node trajectories.
+* :class:`SimulationWidget` - a magicgui ``Container``; Run starts
+  :func:`simulate_contours` in a ``napari.qt.threading.thread_worker`` with a
+  napari progress bar and a Cancel button.
+
+The two contours are read with :func:`~napari_physeg._widgets.matching.read_contour_pair`
+(in the initial contour's layer coordinates); a matching made by the matching
+widget is reused from its layer's ``metadata["matching"]`` when it was
+computed for these contours.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from dataclasses import dataclass
+
+import napari
+import numpy as np
+from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, Label, PushButton, SpinBox
+from napari.layers import Layer
+from napari.qt.threading import thread_worker
+from napari.utils import progress
+from napari.utils.notifications import show_error, show_info, show_warning
+
+from ..core import MATERIALS, DivergenceError, match, simulate
+from ._layers import contours_to_shapes_data, prepend_axes_transform
+from .matching import (
+    MATCHING_KEY,
+    SIMULATION_KEY,
+    ContourPair,
+    contour_layer_choices,
+    is_matching_layer,
+    matching_fits,
+    pick_default_b,
+    read_contour_pair,
+)
+
+__all__ = [
+    "COMPUTE_MATCHING",
+    "SimulationOutcome",
+    "SimulationProgress",
+    "SimulationWidget",
+    "choose_matching",
+    "run_to_completion",
+    "simulate_contours",
+    "simulation_layer_data",
+]
+
+#: Choice of the matching selector that computes a matching (method "order").
+COMPUTE_MATCHING = "(none: compute, method 'order')"
+#: Method used when no (fitting) matching is given.
+DEFAULT_METHOD = "order"
+
+
+# --------------------------------------------------------------------------
+# The worker: a plain generator over the core
+# --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SimulationProgress:
+    """What :func:`simulate_contours` yields.
+
+    Attributes
+    ----------
+    stage : str
+        ``"matching"`` (computing a matching first) or ``"simulating"``.
+    step : int
+        Time steps taken so far.
+    max_steps : int
+        The step budget.
+    shape : (Na, 2) ndarray or None
+        The current shape (None while matching).
+    """
+
+    stage: str
+    step: int
+    max_steps: int
+    shape: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class SimulationOutcome:
+    """What :func:`simulate_contours` returns.
+
+    Attributes
+    ----------
+    result : SimulationResult or None
+        The core's result (None when cancelled or failed).
+    matching : Matching or None
+        The matching used.
+    matching_computed : bool
+        True when it was computed here (method "order"), not given.
+    cancelled : bool
+        The run was stopped by the cancel event.
+    error : Exception or None
+        The error that stopped the run.
+    seconds : float
+        Wall time.
+    """
+
+    result: object = None
+    matching: object = None
+    matching_computed: bool = False
+    cancelled: bool = False
+    error: Exception | None = None
+    seconds: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None and not self.cancelled and self.result is not None
+
+
+def simulate_contours(a, b, matching=None, kwargs: dict | None = None, *, cancel: threading.Event | None = None,
+                      preview_interval: float = 0.02, method: str = DEFAULT_METHOD):
+    """Simulate the deformation of contour ``a`` into ``b``; a generator for a worker thread.
+
+    The core runs in a helper thread; :func:`~napari_physeg.core.simulate`'s
+    callback hands the step over a queue (at most one every
+    ``preview_interval`` seconds) and returns False (stop) once ``cancel`` is
+    set. This generator yields those updates.
+
+    Parameters
+    ----------
+    a, b : (N, 2) ndarray
+        Initial and target contours ``(row, col)`` in one coordinate frame.
+    matching : Matching, optional
+        Correspondences (from :func:`~napari_physeg.core.match` on these very
+        contours); computed with ``method`` when None.
+    kwargs : dict, optional
+        Keyword arguments of :func:`simulate` (``q``, ``material``,
+        ``n_frames``, ``max_steps``, ...).
+    cancel : threading.Event, optional
+        Set it to stop the run.
+    preview_interval : float, optional
+        Least time (s) between two yielded updates.
+    method : str, optional
+        Matching method when ``matching`` is None.
+
+    Yields
+    ------
+    SimulationProgress
+
+    Returns
+    -------
+    SimulationOutcome
+        Errors of the core (``ValueError``, ``DivergenceError``) are returned
+        in it, not raised.
+    """
+    cancel = cancel if cancel is not None else threading.Event()
+    kwargs = dict(kwargs or {})
+    max_steps = int(kwargs.get("max_steps", 2000))
+    t0 = time.perf_counter()
+    updates: queue.SimpleQueue = queue.SimpleQueue()
+    last = [-np.inf]
+    computed = matching is None
+
+    def callback(step, shape):
+        if cancel.is_set():
+            return False
+        now = time.perf_counter()
+        if now - last[0] >= preview_interval:
+            last[0] = now
+            updates.put(("step", step, shape))
+        return None
+
+    def target():
+        try:
+            m = matching
+            if m is None:
+                updates.put(("matching",))
+                m = match(a, b, method=method)
+                updates.put(("matched", m))
+                if cancel.is_set():
+                    updates.put(("cancelled",))
+                    return
+            updates.put(("done", m, simulate(a, b, m, callback=callback, **kwargs)))
+        except Exception as err:  # reported to the caller, never lost in this thread
+            updates.put(("error", err))
+
+    helper = threading.Thread(target=target, name="napari-physeg simulate", daemon=True)
+    helper.start()
+    settled = False
+    used = matching
+    try:
+        while True:
+            kind, *payload = updates.get()
+            if kind == "step":
+                step, shape = payload
+                yield SimulationProgress("simulating", int(step), max_steps, shape)
+            elif kind == "matching":
+                yield SimulationProgress("matching", 0, max_steps)
+            elif kind == "matched":
+                used = payload[0]
+            elif kind == "cancelled":
+                settled = True
+                return SimulationOutcome(matching=used, matching_computed=computed, cancelled=True,
+                                         seconds=time.perf_counter() - t0)
+            elif kind == "done":
+                settled = True
+                used, result = payload
+                if cancel.is_set():
+                    return SimulationOutcome(matching=used, matching_computed=computed, cancelled=True,
+                                             seconds=time.perf_counter() - t0)
+                return SimulationOutcome(result=result, matching=used, matching_computed=computed,
+                                         seconds=time.perf_counter() - t0)
+            else:
+                settled = True
+                return SimulationOutcome(matching=used, matching_computed=computed, error=payload[0],
+                                         seconds=time.perf_counter() - t0)
+    finally:
+        if not settled:  # closed early (the worker was aborted): stop the helper as well
+            cancel.set()
+        helper.join()
+
+
+def run_to_completion(generator, on_progress=None) -> SimulationOutcome:
+    """Drive :func:`simulate_contours` synchronously (scripts, tests)."""
+    while True:
+        try:
+            update = next(generator)
+        except StopIteration as stop:
+            return stop.value
+        if on_progress is not None:
+            on_progress(update)
+
+
+def choose_matching(layer, pair: ContourPair):
+    """The Matching stored in ``layer`` if it was computed for ``pair``'s contours.
+
+    Returns ``(matching or None, reason)``: ``reason`` says why a stored
+    matching cannot be used (empty when it can, or when no layer is given).
+    """
+    if layer is None or not is_matching_layer(layer):
+        return None, ""
+    if matching_fits(layer.metadata, pair.a, pair.b):
+        return layer.metadata[MATCHING_KEY], ""
+    meta = layer.metadata
+    src = f"{meta.get('a_layer', '?')} #{meta.get('a_index', '?')} → {meta.get('b_layer', '?')} " \
+          f"#{meta.get('b_index', '?')}"
+    return None, (f"the matching in {layer.name!r} was computed for other contours ({src}); a new matching is "
+                  f"computed with method {DEFAULT_METHOD!r}. To reuse one, match these two contours with the "
+                  "matching widget first")
+
+
+def error_message(err: Exception) -> str:
+    """A user-facing message for a failed simulation, with what to do about it."""
+    if isinstance(err, DivergenceError):
+        return f"Simulation diverged: {err}. Lower q or use the rubber preset"
+    if isinstance(err, ValueError):
+        return f"Simulation failed: {err}"
+    return (f"Simulation failed with {type(err).__name__}: {err}. Try the defaults (rubber, q = 30000 N/m) "
+            "and report this if it persists")
+
+
+# --------------------------------------------------------------------------
+# Outcome -> layers
+# --------------------------------------------------------------------------
+
+
+def simulation_layer_data(outcome: SimulationOutcome, pair: ContourPair, *, tracks: bool = False,
+                          name: str | None = None) -> list:
+    """napari layer data tuples of a finished simulation.
+
+    * A Shapes layer "<a> → <b> simulation": one polygon per frame, vertices
+      ``(t, *leading, row, col)`` (float32) with ``t`` the frame number, so
+      that the dims slider of the new leading axis ("frame") plays the
+      deformation; the transform is the initial contour's layer's, with an
+      identity time axis in front. ``features`` hold ``frame`` and ``time``
+      (simulated seconds); ``metadata["simulation"]`` the SimulationResult.
+    * With ``tracks``, a Tracks layer "<a> → <b> tracks": one track per node
+      (``track_id`` = node, time = frame). napari's tracks have at most 3
+      spatial axes, so contours with more than one leading axis get none.
+    """
+    res = outcome.result
+    frames = np.asarray(res.frames, dtype=np.float64)
+    n_frames = len(frames)
+    base = name or f"{pair.a_label} → {pair.b_label}"
+    transform = prepend_axes_transform(pair.transform, labels=("frame",))
+    polys = [contours_to_shapes_data([f], (float(t), *pair.leading))[0] for t, f in enumerate(frames)]
+    meta = {
+        "name": f"{base} simulation",
+        "shape_type": "polygon",
+        "edge_color": "orange",
+        "face_color": "transparent",
+        "edge_width": 1.5,
+        "opacity": 1.0,
+        "features": {"frame": np.arange(n_frames), "time": np.asarray(res.times, dtype=float)},
+        "metadata": {
+            SIMULATION_KEY: res,
+            "a_layer": pair.a_layer, "a_index": pair.a_index,
+            "b_layer": pair.b_layer, "b_index": pair.b_index,
+            "matching_method": getattr(outcome.matching, "method", None),
+            "matching_computed": outcome.matching_computed,
+        },
+        **transform,
+    }
+    out = [(polys, meta, "shapes")]
+    if tracks and len(pair.leading) <= 1:
+        na = frames.shape[1]
+        node = np.repeat(np.arange(na), n_frames)
+        t = np.tile(np.arange(n_frames), na)
+        lead = np.broadcast_to(np.asarray(pair.leading, dtype=float), (na * n_frames, len(pair.leading)))
+        xy = frames.transpose(1, 0, 2).reshape(-1, 2)
+        data = np.column_stack([node, t, lead, xy]).astype(np.float64)
+        track_meta = {
+            "name": f"{base} tracks",
+            "tail_length": n_frames,
+            "head_length": 0,
+            "tail_width": 1.5,
+            "features": {"node": node},
+            "metadata": {SIMULATION_KEY: res},
+            **transform,
+        }
+        out.append((data, track_meta, "tracks"))
+    return out
+
+
+# --------------------------------------------------------------------------
+# The widget
+# --------------------------------------------------------------------------
+
+_TIPS = {
+    "layer_a": "Shapes layer holding the initial contour a (the elastic body that deforms). The result is "
+               "drawn in this layer's coordinates.",
+    "index_a": "Which shape of the initial layer is contour a (0 = the first shape drawn).",
+    "layer_b": "Shapes layer holding the target contour b. May be the same layer as a, with another index.",
+    "index_b": "Which shape of the target layer is contour b.",
+    "matching": "Node correspondences to use: a layer made by the matching widget (its metadata holds the "
+                "matching). If it was computed for other contours, or none is chosen, a matching is computed "
+                "with method 'order'.",
+    "q": "The paper's global stiffness constant q (N/m) of the forces pulling each node of a toward its "
+         "partner on b (eq. 17); the paper uses 30000 N/m. Larger q: a stronger pull, the contour ends closer "
+         "to b (stiff materials such as copper need ~1e6-1e8 to reach it). Smaller q: the material's elasticity "
+         "wins, the contour stops part way, smoother. Any q > 0 is stable.",
+    "material": "Virtual material of the initial contour. Soft (rubber, soft tissue) deforms onto b at "
+                "q = 30000 N/m; stiff metals (aluminium, copper, steel) resist and stop short of b unless q is "
+                "much larger.",
+    "n_frames": "Frames in the output, the first (a) and last (at rest) included, at even intervals of the "
+                "path travelled. They become the steps of the 'frame' slider.",
+    "max_steps": "Upper bound on time steps; a simulation usually comes to rest in 30-100 steps.",
+    "tracks": "Also add a Tracks layer with the trajectory of every node (track = node, time = frame).",
+    "run": "Simulate the deformation of a into b in the background and add a Shapes layer with one polygon per "
+           "frame on a new leading 'frame' axis.",
+    "cancel": "Stop the running simulation; no layer is added.",
+}
+
+
+class SimulationWidget(Container):
+    """Simulate the deformation of one contour into another (paper section 4.2).
+
+    Parameters
+    ----------
+    viewer : napari.viewer.Viewer
+        The viewer whose layers are used.
+
+    Notes
+    -----
+    Press Run (or call :meth:`run`): the two contours are read (in the initial
+    contour's layer coordinates), the chosen matching is checked against them,
+    and :func:`simulate_contours` runs in a ``thread_worker`` with a napari
+    progress bar fed by the core's callback; Cancel stops it. The result is a
+    Shapes layer "<a> → <b> simulation" with a leading frame axis (and
+    optionally a Tracks layer). Problems are reported as notifications.
+    """
+
+    def __init__(self, viewer: napari.viewer.Viewer):
+        super().__init__(labels=True)
+        self.viewer = viewer
+        self.worker = None
+        self.pair: ContourPair | None = None
+        self.last_outcome: SimulationOutcome | None = None
+        self.output_layers: list = []
+        self.preview_interval = 0.02
+        self._cancel = threading.Event()
+        self._pbar = None
+        self._progress_value = 0
+        self._max_steps_run = 0
+        self.n_updates = 0
+        self._running = False
+
+        self._layer_a = ComboBox(label="initial a (layer)", choices=self._shapes_choices, tooltip=_TIPS["layer_a"])
+        self._index_a = SpinBox(label="shape of a", value=0, min=0, max=100000, tooltip=_TIPS["index_a"])
+        self._layer_b = ComboBox(label="target b (layer)", choices=self._shapes_choices, tooltip=_TIPS["layer_b"])
+        self._index_b = SpinBox(label="shape of b", value=0, min=0, max=100000, tooltip=_TIPS["index_b"])
+        self._matching = ComboBox(label="matching", choices=self._matching_choices, value=COMPUTE_MATCHING,
+                                  tooltip=_TIPS["matching"])
+        self._q = FloatSpinBox(label="q (N/m)", value=30000.0, min=1.0, max=1e10, step=1000.0, tooltip=_TIPS["q"])
+        self._material = ComboBox(label="material", choices=list(MATERIALS), value="rubber",
+                                  tooltip=_TIPS["material"])
+        self._n_frames = SpinBox(label="frames", value=6, min=2, max=1000, tooltip=_TIPS["n_frames"])
+        self._max_steps = SpinBox(label="max steps", value=2000, min=1, max=100000, step=100,
+                                  tooltip=_TIPS["max_steps"])
+        self._tracks = CheckBox(text="also add node Tracks layer", value=False, tooltip=_TIPS["tracks"])
+        self._run_btn = PushButton(text="Run", tooltip=_TIPS["run"])
+        self._cancel_btn = PushButton(text="Cancel", tooltip=_TIPS["cancel"], enabled=False)
+        self._buttons = Container(widgets=[self._run_btn, self._cancel_btn], layout="horizontal", labels=False)
+        self._status = Label(value="")
+        self.extend([self._layer_a, self._index_a, self._layer_b, self._index_b, self._matching, self._q,
+                     self._material, self._n_frames, self._max_steps, self._tracks, self._buttons, self._status])
+
+        self._run_btn.changed.connect(self.run)
+        self._cancel_btn.changed.connect(self.cancel)
+        self.native.destroyed.connect(self._on_destroyed)
+        events = viewer.layers.events
+        for name in ("inserted", "removed", "reordered", "renamed"):
+            emitter = getattr(events, name, None)
+            if emitter is not None:
+                emitter.connect(self._on_layers_changed)
+        self._status.native.setWordWrap(True)  # long reports must not widen the dock
+        self._pick_defaults()
+        self._select_newest_matching()
+
+    # ------------------------------------------------------------ choices
+    def _shapes_choices(self, _widget=None):
+        return contour_layer_choices(self.viewer)
+
+    def _matching_choices(self, _widget=None):
+        layers = [(layer.name, layer) for layer in self.viewer.layers if is_matching_layer(layer)]
+        return [(COMPUTE_MATCHING, COMPUTE_MATCHING), *layers]
+
+    def _pick_defaults(self, *_):
+        pick_default_b(self._layer_a, self._index_a, self._layer_b, self._index_b, self._shapes_choices())
+
+    def _select_newest_matching(self):
+        layers = [layer for layer in self.viewer.layers if is_matching_layer(layer)]
+        if layers:
+            self._matching.value = layers[-1]
+
+    def _on_layers_changed(self, event=None):
+        try:
+            self.reset_choices()
+            self._pick_defaults()
+            # A matching just made (by the matching widget) is the one to use next.
+            value = getattr(event, "value", None) if getattr(event, "type", "") == "inserted" else None
+            if value is not None and is_matching_layer(value):
+                self._matching.value = value
+        except RuntimeError:  # the Qt widget is gone (viewer closing)
+            return
+
+    # ------------------------------------------------------------ state
+    @property
+    def is_running(self) -> bool:
+        """True while a simulation runs in the background."""
+        return self._running
+
+    def parameters(self) -> dict:
+        """The current settings as keyword arguments of :func:`~napari_physeg.core.simulate`."""
+        return {"q": float(self._q.value), "material": self._material.value, "n_frames": int(self._n_frames.value),
+                "max_steps": int(self._max_steps.value)}
+
+    def _fail(self, message: str):
+        self._status.value = "Error (see notification)"
+        show_error(message)
+
+    # ------------------------------------------------------------ run
+    def run(self, *_):
+        """Start the simulation in a background thread.
+
+        Returns the worker, or None when the input is bad (an error
+        notification then says why) or a run is already going on.
+        """
+        if self._running:
+            return None
+        try:
+            pair = read_contour_pair(self._layer_a.value, self._index_a.value, self._layer_b.value,
+                                     self._index_b.value, world_point=tuple(self.viewer.dims.point),
+                                     roles=("a (initial)", "b (target)"))
+        except ValueError as err:
+            self._fail(str(err))
+            return None
+        chosen = self._matching.value
+        layer = None if chosen == COMPUTE_MATCHING else chosen
+        matching, reason = choose_matching(layer, pair)
+        if reason:
+            show_warning(reason)
+
+        self.pair = pair
+        self.last_outcome = None
+        self.output_layers = []
+        self._cancel = threading.Event()
+        self._running = True
+        self._run_btn.enabled = False
+        self._cancel_btn.enabled = True
+        self._status.value = ("Simulating…" if matching is not None
+                              else f"Matching ({DEFAULT_METHOD}), then simulating…")
+        params = self.parameters()
+        self._max_steps_run = params["max_steps"]
+        self._pbar = progress(total=self._max_steps_run, desc=f"Simulating {pair.a_label!r} → {pair.b_label!r}")
+        self._progress_value = 0
+        self.n_updates = 0
+        worker = thread_worker(simulate_contours, start_thread=False)(
+            pair.a, pair.b, matching, params, cancel=self._cancel, preview_interval=self.preview_interval
+        )
+        worker.yielded.connect(self._on_yielded)
+        worker.returned.connect(self._on_returned)
+        worker.errored.connect(self._on_errored)
+        worker.finished.connect(self._on_finished)
+        self.worker = worker
+        worker.start()
+        return worker
+
+    def cancel(self, *_):
+        """Stop the running simulation (the core's callback returns False); no layer is added."""
+        if self._running:
+            self._cancel.set()
+            self._status.value = "Cancelling…"
+
+    # ------------------------------------------------------------ worker signals (GUI thread)
+    def _gui_alive(self) -> bool:
+        try:
+            self.native.isHidden()
+        except RuntimeError:
+            return False
+        return True
+
+    def _on_destroyed(self, *_):
+        self._cancel.set()
+        if self.worker is not None:
+            self.worker.quit()
+
+    def _advance(self, value: int):
+        delta = value - self._progress_value
+        if delta > 0:
+            self._progress_value = value
+            if self._pbar is not None:
+                self._pbar.update(delta)
+
+    def _on_yielded(self, update: SimulationProgress):
+        if not self._gui_alive():
+            self._on_destroyed()
+            return
+        self.n_updates += 1
+        if update.stage == "matching":
+            self._status.value = f"Matching ({DEFAULT_METHOD})…"
+            return
+        if not self._cancel.is_set():
+            self._status.value = f"Step {update.step}"
+        self._advance(min(update.step, update.max_steps))
+
+    def _on_returned(self, outcome: SimulationOutcome):
+        self.last_outcome = outcome
+        pair = self.pair
+        if not self._gui_alive():
+            return
+        if outcome.error is not None:
+            self._fail(error_message(outcome.error))
+            return
+        if outcome.cancelled:
+            self._status.value = "Cancelled: no layer added"
+            show_info("Simulation cancelled: no layer added")
+            return
+        self._advance(self._max_steps_run)  # it came to rest before the step budget
+        res = outcome.result
+        if self._tracks.value and len(pair.leading) > 1:
+            show_warning("no Tracks layer: napari's tracks have at most 3 spatial axes and the contours have "
+                         f"{len(pair.leading) + 2}")
+        try:
+            for data, meta, kind in simulation_layer_data(outcome, pair, tracks=self._tracks.value):
+                self.output_layers.append(self.viewer.add_layer(Layer.create(data, meta, kind)))
+        except Exception as err:  # never leave the user with a silent failure
+            self._fail(f"Could not add the simulation layers: {type(err).__name__}: {err}")
+            return
+        gap = float(np.linalg.norm(res.frames[-1] - res.targets, axis=1).mean())
+        how = "came to rest" if res.converged else "did NOT come to rest"
+        via = f"matching computed ({DEFAULT_METHOD})" if outcome.matching_computed else "matching reused"
+        self._status.value = (f"{len(res.frames)} frames, {res.steps} steps, {how}; last frame {gap:.2f} px from "
+                              f"the targets on b ({via}, {outcome.seconds:.2f} s)")
+        show_info(f"Simulation {pair.a_label!r} → {pair.b_label!r}: {self._status.value}. Move the 'frame' "
+                  "slider to play it")
+        if not res.converged:
+            show_warning(f"the simulation did not come to rest within max steps ({res.steps}); raise 'max steps'")
+
+    def _on_errored(self, err: Exception):
+        # simulate_contours catches the core's errors itself; this is a last resort.
+        self.last_outcome = SimulationOutcome(error=err)
+        self._fail(error_message(err))
+
+    def _on_finished(self):
+        self._cancel.set()  # stops the helper thread too if the worker was aborted
+        self.worker = None
+        self._running = False
+        pbar, self._pbar = self._pbar, None
+        if pbar is not None:
+            pbar.close()
+        try:
+            self._run_btn.enabled = True
+            self._cancel_btn.enabled = False
+        except RuntimeError:  # the viewer or this widget was closed during the run
+            pass

@@ -1,0 +1,373 @@
+"""The simulation widget end to end: two contours (and a matching layer) in, a
+worker with progress and cancel, a Shapes layer with a leading time axis (and
+a Tracks layer) out; plus a headless script driving segment -> match ->
+simulate through the three widgets."""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+napari = pytest.importorskip("napari")
+
+from napari.layers import Shapes, Tracks  # noqa: E402
+
+from napari_physeg import data  # noqa: E402
+from napari_physeg._widgets import matching as mat  # noqa: E402
+from napari_physeg._widgets import simulation as sim  # noqa: E402
+from napari_physeg._widgets.matching import MatchingWidget  # noqa: E402
+from napari_physeg._widgets.segmentation import SegmentationWidget  # noqa: E402
+from napari_physeg._widgets.simulation import (  # noqa: E402
+    COMPUTE_MATCHING,
+    SimulationWidget,
+    run_to_completion,
+    simulate_contours,
+)
+from napari_physeg.core import match  # noqa: E402
+
+pytestmark = [
+    pytest.mark.gui,
+    pytest.mark.filterwarnings("ignore:System theme detection requires a Qt6 backend:UserWarning"),
+]
+
+
+class RecordingProgress(napari.utils.progress):
+    instances = []
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.updates = []
+        self.was_closed = False
+        RecordingProgress.instances.append(self)
+
+    def update(self, n=1):
+        self.updates.append(n)
+        return super().update(n)
+
+    def close(self):
+        self.was_closed = True
+        return super().close()
+
+
+@pytest.fixture
+def notes(monkeypatch):
+    """Messages the simulation (and matching) widgets pass to napari's notifications."""
+    seen = {"error": [], "info": [], "warning": []}
+    for module in (sim, mat):
+        for kind in ("error", "info"):
+            monkeypatch.setattr(module, f"show_{kind}", lambda message, k=kind: seen[k].append(str(message)))
+    monkeypatch.setattr(sim, "show_warning", lambda message: seen["warning"].append(str(message)))
+    return seen
+
+
+@pytest.fixture
+def viewer_widgets(make_napari_viewer):
+    viewer = make_napari_viewer()
+    matching = MatchingWidget(viewer)
+    simulation = SimulationWidget(viewer)
+    viewer.window.add_dock_widget(matching, name="matching")
+    viewer.window.add_dock_widget(simulation, name="simulation")
+    return viewer, matching, simulation
+
+
+@pytest.fixture
+def wait_done(qtbot):
+    def wait(widget, timeout=20_000):
+        qtbot.waitUntil(lambda: not widget.is_running, timeout=timeout)
+
+    return wait
+
+
+def outline_distance(points, contour):
+    """Distance of each point to the closed polyline ``contour`` (finely resampled)."""
+    c = np.asarray(contour, float)
+    nxt = np.roll(c, -1, axis=0)
+    t = np.linspace(0, 1, 20, endpoint=False)
+    dense = (c[:, None] + t[None, :, None] * (nxt - c)[:, None]).reshape(-1, 2)
+    return cKDTree(dense).query(np.asarray(points, float))[0]
+
+
+def sim_layers(viewer, kind=Shapes):
+    return [layer for layer in viewer.layers if isinstance(layer, kind) and "simulation" in layer.metadata]
+
+
+def helper_threads():
+    return [t for t in threading.enumerate() if t.name.startswith("napari-physeg simulate")]
+
+
+# --------------------------------------------------------------------------
+# End to end on the sample data
+# --------------------------------------------------------------------------
+
+
+def test_hand_poses_time_axis_reuses_the_matching(viewer_widgets, wait_done, notes, monkeypatch):
+    viewer, mwidget, widget = viewer_widgets
+    RecordingProgress.instances.clear()
+    monkeypatch.setattr(sim, "progress", RecordingProgress)
+    viewer.open_sample("napari-physeg", "hand_poses")
+    la, lb = viewer.layers["hand open outline"], viewer.layers["hand closed outline"]
+    assert widget._layer_a.value is la and widget._layer_b.value is lb
+    assert widget._matching.value == COMPUTE_MATCHING
+    mwidget.run()
+    wait_done(mwidget)
+    mlayer = mwidget.output_layer
+    assert widget._matching.value is mlayer  # the new matching is picked up
+    assert mlayer not in widget._layer_a.choices  # outputs are no contour input
+    widget._tracks.value = True
+    n_before = len(viewer.layers)
+
+    worker = widget.run()
+    assert worker is not None and widget.is_running and widget._cancel_btn.enabled
+    wait_done(widget)
+
+    assert notes["error"] == [] and notes["warning"] == []
+    outcome = widget.last_outcome
+    assert outcome.ok and not outcome.matching_computed
+    assert outcome.matching is mlayer.metadata["matching"]  # reused, not recomputed
+    assert len(viewer.layers) == n_before + 2
+    (out,) = sim_layers(viewer)
+    assert out.name == "hand open outline → hand closed outline simulation"
+    n_frames = widget._n_frames.value
+    assert out.ndim == 3 and len(out.data) == n_frames and set(out.shape_type) == {"polygon"}
+    for t, poly in enumerate(out.data):  # one polygon per frame, on its own time step
+        assert poly.dtype == np.float32 and np.all(poly[:, 0] == t)
+    a, b = np.asarray(la.data[0], float), np.asarray(lb.data[0], float)
+    np.testing.assert_allclose(out.data[0][:, 1:], a, atol=1e-4)  # first frame = a
+    assert outline_distance(out.data[-1][:, 1:], b).mean() < 1.0  # last frame on b
+    assert outline_distance(out.data[0][:, 1:], b).max() > 10.0  # a is far from b somewhere
+    # napari's dims slider plays it
+    assert viewer.dims.ndim == 3 and viewer.dims.axis_labels[0] == "frame"
+    assert viewer.dims.range[0].start == 0 and viewer.dims.range[0].stop == n_frames - 1
+    np.testing.assert_allclose(out.scale, [1, 1, 1])
+    assert list(out.features["frame"]) == list(range(n_frames))
+    # node trajectories
+    (tracks,) = sim_layers(viewer, Tracks)
+    assert tracks.name == "hand open outline → hand closed outline tracks"
+    assert tracks.data.shape == (67 * n_frames, 4)
+    node0 = tracks.data[tracks.data[:, 0] == 0]
+    np.testing.assert_allclose(node0[:, 1], np.arange(n_frames))
+    np.testing.assert_allclose(node0[:, 2:], np.stack([p[0, 1:] for p in out.data]), atol=1e-4)
+    # progress from the core's callback; the bar is filled and closed
+    (pbar,) = RecordingProgress.instances
+    assert sum(pbar.updates) == pbar.total == widget._max_steps.value and len(pbar.updates) >= 2
+    assert pbar.was_closed and widget.n_updates >= 1
+    assert "came to rest" in widget._status.value and "matching reused" in widget._status.value
+    assert any("frame' slider" in n for n in notes["info"])
+    assert widget._run_btn.enabled and not widget._cancel_btn.enabled
+
+
+def test_matching_computed_when_absent_or_for_other_contours(viewer_widgets, wait_done, notes):
+    viewer, mwidget, widget = viewer_widgets
+    viewer.open_sample("napari-physeg", "hand_poses")
+    # no matching: computed with method "order"
+    widget.run()
+    wait_done(widget)
+    assert widget.last_outcome.ok and widget.last_outcome.matching_computed
+    assert widget.last_outcome.matching.method == "order"
+    assert "matching computed (order)" in widget._status.value
+    assert notes["warning"] == []
+
+    # a matching of the other direction (b -> a) does not fit a -> b
+    mwidget._layer_a.value, mwidget._layer_b.value = mwidget._layer_b.value, mwidget._layer_a.value
+    mwidget._method.value = "local"
+    mwidget.run()
+    wait_done(mwidget)
+    assert widget._matching.value is mwidget.output_layer
+    widget.run()
+    wait_done(widget)
+    assert len(notes["warning"]) == 1 and "computed for other contours" in notes["warning"][0]
+    assert widget.last_outcome.matching_computed and widget.last_outcome.matching.method == "order"
+    assert len(sim_layers(viewer)) == 2 and notes["error"] == []
+
+
+def test_nd_input_keeps_leading_coordinates_and_transform(viewer_widgets, wait_done, notes):
+    viewer, _, widget = viewer_widgets
+    a, b, _ = data.hand_pair(pose_a="spread", pose_b="closed")
+    on = lambda t, c: np.column_stack([np.full(len(c), float(t)), c])  # noqa: E731
+    scale = np.array([1.0, 0.5, 2.0])
+    viewer.add_shapes([on(1, a), on(1, b)], shape_type="polygon", name="stack", scale=scale)
+    widget.reset_choices()
+    assert (widget._index_a.value, widget._index_b.value) == (0, 1)
+    widget._n_frames.value = 4
+    widget._tracks.value = True
+    widget.run()
+    wait_done(widget)
+    assert notes["error"] == []
+    (out,) = sim_layers(viewer)
+    assert out.name == "stack #0 → stack #1 simulation"
+    assert out.ndim == 4 and len(out.data) == 4
+    for t, poly in enumerate(out.data):  # (t, leading, row, col)
+        assert np.all(poly[:, 0] == t) and np.all(poly[:, 1] == 1)
+    np.testing.assert_allclose(out.scale, [1.0, *scale])
+    np.testing.assert_allclose(out.data[0][:, 2:], a, atol=1e-4)
+    assert outline_distance(out.data[-1][:, 2:], b).mean() < 1.0
+    (tracks,) = sim_layers(viewer, Tracks)
+    assert tracks.data.shape == (67 * 4, 5) and np.all(tracks.data[:, 2] == 1)
+
+
+# --------------------------------------------------------------------------
+# Cancel, errors
+# --------------------------------------------------------------------------
+
+
+def test_cancel_stops_the_simulation(viewer_widgets, wait_done, notes, monkeypatch):
+    viewer, _, widget = viewer_widgets
+    viewer.open_sample("napari-physeg", "hand_poses")
+    steps = []
+    real_simulate = sim.simulate
+
+    def slow_simulate(a, b, matching, *, callback, **kwargs):
+        def slow_callback(step, shape):
+            steps.append(step)
+            time.sleep(0.01)
+            return callback(step, shape)
+
+        return real_simulate(a, b, matching, callback=slow_callback, **kwargs)
+
+    monkeypatch.setattr(sim, "simulate", slow_simulate)
+    cancelled_at = []
+    original = SimulationWidget._on_yielded
+
+    def cancel_once(self, update):
+        original(self, update)
+        if update.stage == "simulating" and not cancelled_at:
+            cancelled_at.append(update.step)
+            self.cancel()
+
+    monkeypatch.setattr(SimulationWidget, "_on_yielded", cancel_once)
+    n_before = len(viewer.layers)
+    widget.run()
+    wait_done(widget, timeout=10_000)
+    assert widget.last_outcome.cancelled and not widget.last_outcome.ok
+    assert notes["error"] == [] and any("cancelled" in n for n in notes["info"])
+    assert len(viewer.layers) == n_before and not sim_layers(viewer)
+    # the core stopped soon after the cancel, before coming to rest (~48 steps)
+    assert cancelled_at and max(steps) < cancelled_at[0] + 10 and max(steps) < 40
+    assert not helper_threads()
+    assert widget._run_btn.enabled and not widget._cancel_btn.enabled
+    assert "ancel" in widget._status.value
+
+
+def test_bad_input_and_core_errors_add_no_layer(viewer_widgets, wait_done, notes, monkeypatch):
+    viewer, _, widget = viewer_widgets
+    errors = notes["error"]
+    assert widget.run() is None
+    assert "no Shapes layer" in errors[-1]
+    a, b, _ = data.hand_pair()
+    viewer.add_shapes([a], shape_type="polygon", name="a")
+    viewer.add_shapes([np.array([[10.0, 10.0], [100.0, 100.0]])], shape_type="line", name="line")
+    widget.reset_choices()
+    widget._layer_a.value = viewer.layers["a"]
+    widget._layer_b.value = viewer.layers["line"]
+    assert widget.run() is None
+    assert "b (target)" in errors[-1] and "encloses no region" in errors[-1]
+    widget._layer_b.value = viewer.layers["a"]
+    assert widget.run() is None
+    assert "same shape" in errors[-1]
+    assert len(errors) == 3 and len(viewer.layers) == 2
+
+    viewer.add_shapes([b], shape_type="polygon", name="b")
+    widget.reset_choices()
+    widget._layer_b.value = viewer.layers["b"]
+
+    def diverging(*args, **kwargs):
+        raise sim.DivergenceError("the simulation diverged at step 3")
+
+    monkeypatch.setattr(sim, "simulate", diverging)
+    assert widget.run() is not None
+    wait_done(widget)
+    assert len(errors) == 4 and "diverged" in errors[-1] and "Lower q" in errors[-1]
+    assert not sim_layers(viewer) and len(viewer.layers) == 3
+
+
+def test_parameters_and_tooltips(viewer_widgets):
+    _, _, widget = viewer_widgets
+    for w in (widget._layer_a, widget._index_a, widget._layer_b, widget._index_b, widget._matching, widget._q,
+              widget._material, widget._n_frames, widget._max_steps, widget._tracks):
+        assert w.tooltip and len(w.tooltip) > 30, w.label
+    assert "30000" in widget._q.tooltip and "Larger q" in widget._q.tooltip and "Smaller q" in widget._q.tooltip
+    assert widget.parameters() == {"q": 30000.0, "material": "rubber", "n_frames": 6, "max_steps": 2000}
+
+
+def test_generator_without_qt():
+    a, b, _ = data.hand_pair()
+    updates = []
+    outcome = run_to_completion(simulate_contours(a, b, None, {"n_frames": 5}, preview_interval=0.0),
+                                updates.append)
+    assert outcome.ok and outcome.matching_computed and outcome.result.frames.shape == (5, 67, 2)
+    assert updates[0].stage == "matching" and updates[-1].stage == "simulating"
+    m = match(a, b)
+    outcome = run_to_completion(simulate_contours(a, b, m, {"material": "copper", "q": 1e6}))
+    assert outcome.ok and outcome.matching is m and not outcome.matching_computed
+    gen = simulate_contours(a, b, m, {"max_steps": 100000, "tol": 0.0}, preview_interval=0.0)
+    next(gen)
+    gen.close()  # what happens when napari aborts the worker: the helper stops too
+    assert not helper_threads()
+
+
+# --------------------------------------------------------------------------
+# A headless script: segment -> match -> simulate through the widgets
+# --------------------------------------------------------------------------
+
+
+def test_headless_segment_match_simulate(qtbot, mock_app_model):
+    # mock_app_model: napari registers its plugins' menu actions in a fresh app
+    # model, not in the one another bare Viewer of this session may have filled.
+    viewer = napari.Viewer(show=False)
+    try:
+        viewer.open_sample("napari-physeg", "hand_segmentation")
+        viewer.open_sample("napari-physeg", "hand_poses")
+        segw, matchw, simw = SegmentationWidget(viewer), MatchingWidget(viewer), SimulationWidget(viewer)
+        segw._shapes.value = viewer.layers["initial contour"]
+        segw.run()
+        qtbot.waitUntil(lambda: not segw.is_running, timeout=30_000)
+        assert segw.last_outcome.ok
+        segmented = viewer.layers["initial contour segmented"]
+        hand = data.hand()
+        ok_nodes = outline_distance(segmented.data[0], hand.outline)
+        assert np.median(ok_nodes) < 2.0  # on the open hand's outline
+
+        matchw.reset_choices()
+        matchw._layer_a.value = segmented
+        matchw._layer_b.value = viewer.layers["hand closed outline"]
+        matchw.run()
+        qtbot.waitUntil(lambda: not matchw.is_running, timeout=20_000)
+        mlayer = matchw.output_layer
+        assert mlayer is not None and len(mlayer.data) == len(segmented.data[0])
+
+        simw.reset_choices()
+        simw._layer_a.value = segmented
+        simw._layer_b.value = viewer.layers["hand closed outline"]
+        assert simw._matching.value is mlayer
+        simw.run()
+        qtbot.waitUntil(lambda: not simw.is_running, timeout=30_000)
+        outcome = simw.last_outcome
+        assert outcome.ok and outcome.matching is mlayer.metadata["matching"]
+        (out,) = sim_layers(viewer)
+        assert out.name == "initial contour segmented → hand closed outline simulation"
+        assert out.ndim == 3 and len(out.data) == simw._n_frames.value
+        closed = viewer.layers["hand closed outline"].data[0]
+        assert outline_distance(out.data[-1][:, 1:], closed).mean() < 1.5
+    finally:
+        viewer.close()
+
+
+def test_time_axis_is_prepended_to_any_layer_transform():
+    """Data (t, row, col) of the output maps to world (t, world(row, col)) of the input layer."""
+    from napari_physeg._widgets._layers import image_transform_kwargs, prepend_axes_transform
+
+    for ndim in (2, 3):
+        kwargs = {"scale": np.linspace(0.5, 2.0, ndim), "translate": np.arange(ndim) * 3.0 - 2.0,
+                  "shear": np.full(ndim * (ndim - 1) // 2, 0.2)}
+        if ndim == 2:
+            kwargs["rotate"] = 25.0
+        src = Shapes([np.column_stack([np.ones((3, ndim - 2)), [[0, 0], [0, 9.0], [7, 3]]])], shape_type="polygon",
+                     **kwargs)
+        out = Shapes([np.zeros((3, ndim + 1))], shape_type="polygon",
+                     **prepend_axes_transform(image_transform_kwargs(src)))
+        rng = np.random.default_rng(ndim)
+        for p in rng.uniform(-10, 10, size=(5, ndim)):
+            np.testing.assert_allclose(out.data_to_world(np.r_[4.0, p]), np.r_[4.0, src.data_to_world(p)], atol=1e-9)
+        assert out.axis_labels[0] == "frame"
