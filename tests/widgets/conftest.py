@@ -45,30 +45,92 @@ def _needs_gui(_why_no_gui_once):
 
 @pytest.fixture
 def errors(monkeypatch):
-    """Messages passed to napari's ``show_error`` by the segmentation widget."""
-    from napari_physeg._widgets import segmentation
+    """Messages the widgets pass to napari's ``show_error`` (all through their shared base class)."""
+    from napari_physeg._widgets import _worker
 
     seen = []
-    monkeypatch.setattr(segmentation, "show_error", lambda message: seen.append(str(message)))
+    monkeypatch.setattr(_worker, "show_error", lambda message: seen.append(str(message)))
     return seen
 
 
 @pytest.fixture
-def viewer_widget(make_napari_viewer):
-    """A viewer with the segmentation widget docked in it."""
-    from napari_physeg._widgets.segmentation import SegmentationWidget
+def notes(monkeypatch, errors):
+    """Messages the matching and simulation widgets pass to napari's notifications, by severity."""
+    from napari_physeg._widgets import matching, simulation
 
-    viewer = make_napari_viewer()
-    widget = SegmentationWidget(viewer)
-    viewer.window.add_dock_widget(widget, name="segmentation")
-    return viewer, widget
+    seen = {"error": errors, "info": [], "warning": []}
+    for module in (matching, simulation):
+        monkeypatch.setattr(module, "show_info", lambda message: seen["info"].append(str(message)))
+    monkeypatch.setattr(simulation, "show_warning", lambda message: seen["warning"].append(str(message)))
+    return seen
 
 
 @pytest.fixture
-def wait_done(qtbot):
-    """Wait for a widget's background run to finish (GUI events keep flowing)."""
+def napari_notifications():
+    """Notifications that reach napari's notification manager (nothing patched)."""
+    from napari.utils.notifications import notification_manager
 
-    def wait(widget, timeout=30_000):
+    received = []
+    notification_manager.notification_ready.connect(received.append)
+    yield received
+    notification_manager.notification_ready.disconnect(received.append)
+
+
+@pytest.fixture
+def dock(make_napari_viewer):
+    """``dock(WidgetClass, ...)`` -> ``(viewer, widget, ...)``: a new viewer with the widgets docked in it."""
+
+    def make(*classes):
+        viewer = make_napari_viewer()
+        widgets = [cls(viewer) for cls in classes]
+        for widget in widgets:
+            viewer.window.add_dock_widget(widget, name=type(widget).__name__.removesuffix("Widget").lower())
+        return (viewer, *widgets)
+
+    return make
+
+
+@pytest.fixture
+def wait_done(qtbot, request):
+    """Wait for a widget's background run to finish (GUI events keep flowing).
+
+    The default timeout is the test module's ``RUN_TIMEOUT_MS``, else 30 s.
+    """
+    default = getattr(request.module, "RUN_TIMEOUT_MS", 30_000)
+
+    def wait(widget, timeout=default):
         qtbot.waitUntil(lambda: not widget.is_running, timeout=timeout)
 
     return wait
+
+
+@pytest.fixture
+def record_progress(monkeypatch):
+    """``record_progress(module)`` -> list of the napari progress bars that widget module opens from then on.
+
+    Each bar keeps its ``updates`` and whether it ``was_closed``.
+    """
+    import napari
+
+    def record(module):
+        bars = []
+
+        class RecordingProgress(napari.utils.progress):
+            def __init__(self, *args, **kwargs):
+                super().__init__(*args, **kwargs)
+                self.updates = []
+                self.was_closed = False
+                bars.append(self)
+
+            def update(self, n=1):
+                self.updates.append(n)
+                return super().update(n)
+
+            def close(self):
+                self.was_closed = True
+                return super().close()
+
+        monkeypatch.setattr(module, "progress", RecordingProgress)
+        return bars
+
+    return record

@@ -27,42 +27,13 @@ pytestmark = [
 ]
 
 
-class RecordingProgress(napari.utils.progress):
-    instances = []
-
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
-        self.was_closed = False
-        RecordingProgress.instances.append(self)
-
-    def close(self):
-        self.was_closed = True
-        return super().close()
+#: Default timeout of the ``wait_done`` fixture (conftest.py).
+RUN_TIMEOUT_MS = 20_000
 
 
 @pytest.fixture
-def notes(monkeypatch):
-    """Messages the matching widget passes to napari's notifications, by severity."""
-    seen = {"error": [], "info": []}
-    monkeypatch.setattr(mat, "show_error", lambda message: seen["error"].append(str(message)))
-    monkeypatch.setattr(mat, "show_info", lambda message: seen["info"].append(str(message)))
-    return seen
-
-
-@pytest.fixture
-def viewer_widget(make_napari_viewer):
-    viewer = make_napari_viewer()
-    widget = MatchingWidget(viewer)
-    viewer.window.add_dock_widget(widget, name="matching")
-    return viewer, widget
-
-
-@pytest.fixture
-def wait_done(qtbot):
-    def wait(widget, timeout=20_000):
-        qtbot.waitUntil(lambda: not widget.is_running, timeout=timeout)
-
-    return wait
+def viewer_widget(dock):
+    return dock(MatchingWidget)
 
 
 @pytest.fixture(scope="module")
@@ -80,10 +51,9 @@ def matching_layers(viewer):
 # --------------------------------------------------------------------------
 
 
-def test_hand_poses_lines_coloured_by_cost(viewer_widget, wait_done, notes, monkeypatch, poses):
+def test_hand_poses_lines_coloured_by_cost(viewer_widget, wait_done, notes, record_progress, poses):
     viewer, widget = viewer_widget
-    RecordingProgress.instances.clear()
-    monkeypatch.setattr(mat, "progress", RecordingProgress)
+    bars = record_progress(mat)
     viewer.open_sample("napari-physeg", "hand_poses")
     la, lb = viewer.layers["hand open outline"], viewer.layers["hand closed outline"]
     # defaults: two different contours
@@ -126,7 +96,7 @@ def test_hand_poses_lines_coloured_by_cost(viewer_widget, wait_done, notes, monk
     assert len(notes["info"]) == 1 and "67 of 67 nodes of a matched, 0 unmatched" in notes["info"][0]
     assert "good" in widget._legend.value and "poor" in widget._legend.value
     # progress: a (busy) napari progress bar, closed at the end
-    (pbar,) = RecordingProgress.instances
+    (pbar,) = bars
     assert pbar.was_closed
     assert widget._run_btn.enabled
 
@@ -260,19 +230,12 @@ def test_bad_input_shows_error_and_adds_no_layer(viewer_widget, wait_done, notes
     assert not matching_layers(viewer)
 
 
-def test_real_error_notification_reaches_napari(viewer_widget):
-    from napari.utils.notifications import notification_manager
-
+def test_real_error_notification_reaches_napari(viewer_widget, napari_notifications):
     viewer, widget = viewer_widget
     viewer.add_shapes(name="empty")
     widget.reset_choices()
-    received = []
-    notification_manager.notification_ready.connect(received.append)
-    try:
-        assert widget.run() is None
-    finally:
-        notification_manager.notification_ready.disconnect(received.append)
-    assert any("empty" in str(n.message) and n.severity == "error" for n in received)
+    assert widget.run() is None
+    assert any("empty" in str(n.message) and n.severity == "error" for n in napari_notifications)
 
 
 # --------------------------------------------------------------------------

@@ -78,22 +78,10 @@ def record_updates(widget, monkeypatch, on_update=None):
     return seen
 
 
-class RecordingProgress(napari.utils.progress):
-    instances = []
-
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
-        self.updates = []
-        self.was_closed = False
-        RecordingProgress.instances.append(self)
-
-    def update(self, n=1):
-        self.updates.append(n)
-        return super().update(n)
-
-    def close(self):
-        self.was_closed = True
-        return super().close()
+@pytest.fixture
+def viewer_widget(dock):
+    """A viewer with the segmentation widget docked in it."""
+    return dock(SegmentationWidget)
 
 
 # --------------------------------------------------------------------------
@@ -101,10 +89,9 @@ class RecordingProgress(napari.utils.progress):
 # --------------------------------------------------------------------------
 
 
-def test_sample_hand_end_to_end(viewer_widget, wait_done, errors, monkeypatch, hand):
+def test_sample_hand_end_to_end(viewer_widget, wait_done, errors, monkeypatch, record_progress, hand):
     viewer, widget = viewer_widget
-    RecordingProgress.instances.clear()
-    monkeypatch.setattr(seg, "progress", RecordingProgress)
+    bars = record_progress(seg)
     viewer.open_sample("napari-physeg", "hand_segmentation")
     assert widget._image.value is viewer.layers["hand"]
     assert widget._shapes.value is viewer.layers["initial contour"]
@@ -128,7 +115,7 @@ def test_sample_hand_end_to_end(viewer_widget, wait_done, errors, monkeypatch, h
     assert preview not in viewer.layers and widget.preview_layer is None
     assert not any(layer.metadata.get(PREVIEW_KEY) for layer in viewer.layers)
     # progress: reported through napari's progress bar, which is closed at the end
-    (pbar,) = RecordingProgress.instances
+    (pbar,) = bars
     assert sum(pbar.updates) == pbar.total == widget._max_steps.value and pbar.was_closed
     # one new Shapes layer of polygons on the hand
     assert len(viewer.layers) == n_before + 1
@@ -365,21 +352,14 @@ def test_divergence_is_reported_with_the_fix(viewer_widget, wait_done, errors, m
     assert len(viewer.layers) == 2
 
 
-def test_real_notification_reaches_napari(viewer_widget, hand):
+def test_real_notification_reaches_napari(viewer_widget, napari_notifications, hand):
     """Without the monkeypatch, the error goes through napari's notification manager."""
-    from napari.utils.notifications import notification_manager
-
     viewer, widget = viewer_widget
     viewer.add_image(hand.image, name="hand")
     viewer.add_shapes(name="empty")
     widget.reset_choices()
-    received = []
-    notification_manager.notification_ready.connect(received.append)
-    try:
-        assert widget.run() is None
-    finally:
-        notification_manager.notification_ready.disconnect(received.append)
-    assert any("empty" in str(n.message) and n.severity == "error" for n in received)
+    assert widget.run() is None
+    assert any("empty" in str(n.message) and n.severity == "error" for n in napari_notifications)
 
 
 # --------------------------------------------------------------------------

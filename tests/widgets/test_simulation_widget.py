@@ -15,7 +15,6 @@ napari = pytest.importorskip("napari")
 from napari.layers import Shapes, Tracks  # noqa: E402
 
 from napari_physeg import data  # noqa: E402
-from napari_physeg._widgets import matching as mat  # noqa: E402
 from napari_physeg._widgets import simulation as sim  # noqa: E402
 from napari_physeg._widgets.matching import MatchingWidget  # noqa: E402
 from napari_physeg._widgets.segmentation import SegmentationWidget  # noqa: E402
@@ -33,51 +32,13 @@ pytestmark = [
 ]
 
 
-class RecordingProgress(napari.utils.progress):
-    instances = []
-
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
-        self.updates = []
-        self.was_closed = False
-        RecordingProgress.instances.append(self)
-
-    def update(self, n=1):
-        self.updates.append(n)
-        return super().update(n)
-
-    def close(self):
-        self.was_closed = True
-        return super().close()
+#: Default timeout of the ``wait_done`` fixture (conftest.py).
+RUN_TIMEOUT_MS = 20_000
 
 
 @pytest.fixture
-def notes(monkeypatch):
-    """Messages the simulation (and matching) widgets pass to napari's notifications."""
-    seen = {"error": [], "info": [], "warning": []}
-    for module in (sim, mat):
-        for kind in ("error", "info"):
-            monkeypatch.setattr(module, f"show_{kind}", lambda message, k=kind: seen[k].append(str(message)))
-    monkeypatch.setattr(sim, "show_warning", lambda message: seen["warning"].append(str(message)))
-    return seen
-
-
-@pytest.fixture
-def viewer_widgets(make_napari_viewer):
-    viewer = make_napari_viewer()
-    matching = MatchingWidget(viewer)
-    simulation = SimulationWidget(viewer)
-    viewer.window.add_dock_widget(matching, name="matching")
-    viewer.window.add_dock_widget(simulation, name="simulation")
-    return viewer, matching, simulation
-
-
-@pytest.fixture
-def wait_done(qtbot):
-    def wait(widget, timeout=20_000):
-        qtbot.waitUntil(lambda: not widget.is_running, timeout=timeout)
-
-    return wait
+def viewer_widgets(dock):
+    return dock(MatchingWidget, SimulationWidget)
 
 
 def outline_distance(points, contour):
@@ -102,10 +63,9 @@ def helper_threads():
 # --------------------------------------------------------------------------
 
 
-def test_hand_poses_time_axis_reuses_the_matching(viewer_widgets, wait_done, notes, monkeypatch):
+def test_hand_poses_time_axis_reuses_the_matching(viewer_widgets, wait_done, notes, record_progress):
     viewer, mwidget, widget = viewer_widgets
-    RecordingProgress.instances.clear()
-    monkeypatch.setattr(sim, "progress", RecordingProgress)
+    bars = record_progress(sim)
     viewer.open_sample("napari-physeg", "hand_poses")
     la, lb = viewer.layers["hand open outline"], viewer.layers["hand closed outline"]
     assert widget._layer_a.value is la and widget._layer_b.value is lb
@@ -150,7 +110,7 @@ def test_hand_poses_time_axis_reuses_the_matching(viewer_widgets, wait_done, not
     np.testing.assert_allclose(node0[:, 1], np.arange(n_frames))
     np.testing.assert_allclose(node0[:, 2:], np.stack([p[0, 1:] for p in out.data]), atol=1e-4)
     # progress from the core's callback; the bar is filled and closed
-    (pbar,) = RecordingProgress.instances
+    (pbar,) = bars
     assert sum(pbar.updates) == pbar.total == widget._max_steps.value and len(pbar.updates) >= 2
     assert pbar.was_closed and widget.n_updates >= 1
     assert "came to rest" in widget._status.value and "matching reused" in widget._status.value

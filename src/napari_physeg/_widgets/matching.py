@@ -15,7 +15,8 @@ Three parts, from the least to the most napari-specific:
   pair's matching cost, with the Matching itself in ``metadata["matching"]``
   (the simulation widget reuses it). The simulation widget uses
   :func:`read_contour_pair` too.
-* :class:`MatchingWidget` - a magicgui ``Container``; Run matches in a
+* :class:`MatchingWidget` - a magicgui ``Container`` (a
+  :class:`~napari_physeg._widgets._worker.WorkerWidget`); Run matches in a
   ``napari.qt.threading.thread_worker`` with a (busy) napari progress bar.
 
 All physics lives in :mod:`napari_physeg.core`.
@@ -28,15 +29,15 @@ from dataclasses import dataclass
 
 import napari
 import numpy as np
-from magicgui.widgets import ComboBox, Container, Label, PushButton, SpinBox
+from magicgui.widgets import ComboBox, Label, PushButton, SpinBox
 from napari.layers import Layer, Shapes, Vectors
-from napari.qt.threading import thread_worker
 from napari.utils import progress
 from napari.utils.colormaps import Colormap
-from napari.utils.notifications import show_error, show_info
+from napari.utils.notifications import show_info
 
 from ..core import match
 from ._layers import contours_to_shapes_data, image_transform_kwargs, shape_in_layer_coords
+from ._worker import WorkerWidget
 from .segmentation import PREVIEW_KEY, InputError
 
 __all__ = [
@@ -395,7 +396,7 @@ _TIPS = {
 }
 
 
-class MatchingWidget(Container):
+class MatchingWidget(WorkerWidget):
     """Match the nodes of two contours by modal analysis.
 
     Parameters
@@ -416,14 +417,10 @@ class MatchingWidget(Container):
     """
 
     def __init__(self, viewer: napari.viewer.Viewer):
-        super().__init__(labels=True)
-        self.viewer = viewer
-        self.worker = None
+        super().__init__(viewer)
         self.pair: ContourPair | None = None
         self.last_outcome: MatchingOutcome | None = None
         self.output_layer = None
-        self._pbar = None
-        self._running = False
 
         self._layer_a = ComboBox(label="contour a (layer)", choices=self._shapes_choices, tooltip=_TIPS["layer_a"])
         self._index_a = SpinBox(label="shape of a", value=0, min=0, max=100000, tooltip=_TIPS["index_a"])
@@ -441,13 +438,7 @@ class MatchingWidget(Container):
         self._set_item_tooltips()
         self._status.native.setWordWrap(True)  # long reports must not widen the dock
 
-        self._run_btn.changed.connect(self.run)
-        self.native.destroyed.connect(self._on_destroyed)
-        events = viewer.layers.events
-        for name in ("inserted", "removed", "reordered", "renamed"):
-            emitter = getattr(events, name, None)
-            if emitter is not None:
-                emitter.connect(self._on_layers_changed)
+        self._connect_signals()
         self._pick_defaults()
 
     def _set_item_tooltips(self):
@@ -476,18 +467,9 @@ class MatchingWidget(Container):
             return
 
     # ------------------------------------------------------------ state
-    @property
-    def is_running(self) -> bool:
-        """True while a matching runs in the background."""
-        return self._running
-
     def parameters(self) -> dict:
         """The current settings as keyword arguments of :func:`compute_matching`."""
         return {"method": self._method.value, "n_modes": self._n_modes.value or None}
-
-    def _fail(self, message: str):
-        self._status.value = "Error (see notification)"
-        show_error(message)
 
     # ------------------------------------------------------------ run
     def run(self, *_):
@@ -507,31 +489,12 @@ class MatchingWidget(Container):
         self.pair = pair
         self.last_outcome = None
         self.output_layer = None
-        self._running = True
-        self._run_btn.enabled = False
-        self._status.value = f"Matching {len(pair.a)} to {len(pair.b)} nodes…"
+        self._begin(f"Matching {len(pair.a)} to {len(pair.b)} nodes…")
         # Busy indicator: the core's match() is one call without progress steps.
-        self._pbar = progress(total=0, desc=f"Matching {pair.a_label!r} to {pair.b_label!r}")
-        worker = thread_worker(compute_matching, start_thread=False)(pair.a, pair.b, **self.parameters())
-        worker.returned.connect(self._on_returned)
-        worker.errored.connect(self._on_errored)
-        worker.finished.connect(self._on_finished)
-        self.worker = worker
-        worker.start()
-        return worker
+        pbar = progress(total=0, desc=f"Matching {pair.a_label!r} to {pair.b_label!r}")
+        return self._start(pbar, compute_matching, pair.a, pair.b, **self.parameters())
 
     # ------------------------------------------------------------ worker signals (GUI thread)
-    def _gui_alive(self) -> bool:
-        try:
-            self.native.isHidden()
-        except RuntimeError:
-            return False
-        return True
-
-    def _on_destroyed(self, *_):
-        if self.worker is not None:
-            self.worker.quit()
-
     def _on_returned(self, outcome: MatchingOutcome):
         self.last_outcome = outcome
         if not self._gui_alive():
@@ -557,14 +520,3 @@ class MatchingWidget(Container):
         # compute_matching catches the core's errors itself; this is a last resort.
         self.last_outcome = MatchingOutcome(error=err)
         self._fail(error_message(err))
-
-    def _on_finished(self):
-        self.worker = None
-        self._running = False
-        pbar, self._pbar = self._pbar, None
-        if pbar is not None:
-            pbar.close()
-        try:
-            self._run_btn.enabled = True
-        except RuntimeError:  # the viewer or this widget was closed during the run
-            pass

@@ -12,7 +12,8 @@ Three parts, from the least to the most napari-specific:
   image's data coordinates), raising :class:`InputError` with a message that
   says how to fix bad input; :func:`result_layer_data` turns an outcome back
   into napari layer data tuples in the image's data coordinates.
-* :class:`SegmentationWidget` - a magicgui ``Container`` with the parameters,
+* :class:`SegmentationWidget` - a magicgui ``Container`` (a
+  :class:`~napari_physeg._widgets._worker.WorkerWidget`) with the parameters,
   a Run and a Cancel button; Run starts :func:`segment_contours` in a
   ``napari.qt.threading.thread_worker`` with a napari progress bar and a live
   preview Shapes layer, so the GUI never freezes.
@@ -37,9 +38,8 @@ from magicgui.widgets import (
     SpinBox,
 )
 from napari.layers import Image, Layer, Shapes
-from napari.qt.threading import thread_worker
 from napari.utils import progress
-from napari.utils.notifications import show_error, show_info, show_warning
+from napari.utils.notifications import show_info, show_warning
 
 from ..core import MATERIALS, DivergenceError, Material, segment
 from ._layers import (
@@ -50,6 +50,7 @@ from ._layers import (
     shapes_to_image_coords,
     slice_index,
 )
+from ._worker import WorkerWidget, run_to_completion
 
 __all__ = [
     "InputError",
@@ -236,17 +237,6 @@ def segment_contours(image, contours, kwargs_list, *, cancel: threading.Event | 
         results.append(result)
         yield SegmentationProgress(i, total, max_steps, max_steps, result.contour, done=True)
     return SegmentationOutcome(results, seconds=time.perf_counter() - t0)
-
-
-def run_to_completion(generator, on_progress=None) -> SegmentationOutcome:
-    """Drive :func:`segment_contours` synchronously (scripts, tests)."""
-    while True:
-        try:
-            update = next(generator)
-        except StopIteration as stop:
-            return stop.value
-        if on_progress is not None:
-            on_progress(update)
 
 
 # --------------------------------------------------------------------------
@@ -539,7 +529,7 @@ _TIPS = {
 }
 
 
-class SegmentationWidget(Container):
+class SegmentationWidget(WorkerWidget):
     """Segment objects with a physical deformable contour.
 
     Parameters
@@ -560,18 +550,11 @@ class SegmentationWidget(Container):
     """
 
     def __init__(self, viewer: napari.viewer.Viewer):
-        super().__init__(labels=True)
-        self.viewer = viewer
-        self.worker = None
+        super().__init__(viewer)
         self.job: SegmentationJob | None = None
         self.last_outcome: SegmentationOutcome | None = None
         self.preview_layer: Shapes | None = None
         self.preview_interval = 0.05
-        self._cancel = threading.Event()
-        self._pbar = None
-        self._progress_value = 0
-        self.n_updates = 0  # live-preview updates shown in the last run
-        self._running = False
 
         presets = list(MATERIALS)
         self._image = ComboBox(label="image", choices=self._image_choices, tooltip=_TIPS["image"])
@@ -622,14 +605,7 @@ class SegmentationWidget(Container):
         self._image.changed.connect(self._on_image_changed)
         self._material.changed.connect(self._on_material_changed)
         self._nodes_by.changed.connect(self._on_nodes_by_changed)
-        self._run_btn.changed.connect(self.run)
-        self._cancel_btn.changed.connect(self.cancel)
-        self.native.destroyed.connect(self._on_destroyed)
-        events = viewer.layers.events
-        for name in ("inserted", "removed", "reordered", "renamed"):
-            emitter = getattr(events, name, None)
-            if emitter is not None:
-                emitter.connect(self._on_layers_changed)
+        self._connect_signals()
         self._on_image_changed()
 
     # ------------------------------------------------------------ choices
@@ -668,11 +644,6 @@ class SegmentationWidget(Container):
         self._count.visible = not by_spacing
 
     # ------------------------------------------------------------ state
-    @property
-    def is_running(self) -> bool:
-        """True while a segmentation runs in the background."""
-        return self._running
-
     def parameters(self) -> dict:
         """The current settings as keyword arguments of :func:`segment_kwargs`."""
         by_spacing = self._nodes_by.value == "spacing"
@@ -688,10 +659,6 @@ class SegmentationWidget(Container):
             "polarity": self._polarity.value,
             "max_steps": self._max_steps.value,
         }
-
-    def _fail(self, message: str):
-        self._status.value = "Error (see notification)"
-        show_error(message)
 
     # ------------------------------------------------------------ run
     def run(self, *_):
@@ -718,11 +685,7 @@ class SegmentationWidget(Container):
 
         self.job = job
         self.last_outcome = None
-        self._cancel = threading.Event()
-        self._running = True
-        self._run_btn.enabled = False
-        self._cancel_btn.enabled = True
-        self._status.value = f"Segmenting {len(job.contours)} shape(s)…"
+        self._begin(f"Segmenting {len(job.contours)} shape(s)…")
 
         # Closed paths, not polygons: napari triangulates the faces of polygons
         # (slow without a compiled backend), paths only need their edges.
@@ -742,41 +705,11 @@ class SegmentationWidget(Container):
         if active is not None:  # keep the user's selection (and layer controls) while previewing
             self.viewer.layers.selection.active = active
         max_steps = kwargs_list[0]["max_steps"]
-        self._pbar = progress(total=len(job.contours) * max_steps, desc=f"Segmenting {job.shapes_name!r}")
-        self._progress_value = 0
-        self.n_updates = 0
-
-        worker = thread_worker(segment_contours, start_thread=False)(
-            job.image, job.contours, kwargs_list, cancel=self._cancel, preview_interval=self.preview_interval
-        )
-        worker.yielded.connect(self._on_yielded)
-        worker.returned.connect(self._on_returned)
-        worker.errored.connect(self._on_errored)
-        worker.finished.connect(self._on_finished)
-        self.worker = worker
-        worker.start()
-        return worker
-
-    def cancel(self, *_):
-        """Stop the running segmentation (its callback returns False); no layer is added."""
-        if self._running:
-            self._cancel.set()
-            self._status.value = "Cancelling…"
+        pbar = progress(total=len(job.contours) * max_steps, desc=f"Segmenting {job.shapes_name!r}")
+        return self._start(pbar, segment_contours, job.image, job.contours, kwargs_list, cancel=self._cancel,
+                           preview_interval=self.preview_interval)
 
     # ------------------------------------------------------------ worker signals (GUI thread)
-    def _gui_alive(self) -> bool:
-        """False once Qt has deleted this widget (e.g. the viewer was closed during a run)."""
-        try:
-            self.native.isHidden()
-        except RuntimeError:
-            return False
-        return True
-
-    def _on_destroyed(self, *_):
-        self._cancel.set()
-        if self.worker is not None:
-            self.worker.quit()
-
     def _on_yielded(self, update: SegmentationProgress):
         if not self._gui_alive():
             self._on_destroyed()
@@ -787,8 +720,7 @@ class SegmentationWidget(Container):
         value = update.index * update.max_steps + min(update.step, update.max_steps)
         if value <= self._progress_value and not update.done:
             return
-        delta = max(value - self._progress_value, 0)
-        self._progress_value = max(value, self._progress_value)
+        delta = self._record_progress(value)
         self.n_updates += 1
         if not update.done:
             self._status.value = f"Shape {update.index + 1}/{update.total}: step {update.step}"
@@ -798,8 +730,7 @@ class SegmentationWidget(Container):
             if update.index < len(polys):
                 polys[update.index] = contours_to_shapes_data([update.contour], self.job.leading, closed=True)[0]
                 layer.data = polys
-        if self._pbar is not None and delta:
-            self._pbar.update(delta)
+        self._move_pbar(delta)
 
     def _on_returned(self, outcome: SegmentationOutcome):
         self.last_outcome = outcome
@@ -831,17 +762,10 @@ class SegmentationWidget(Container):
         self._fail(error_message(self.last_outcome, None))
 
     def _on_finished(self):
-        self._cancel.set()  # stops the helper thread too if the worker was aborted
-        self.worker = None
-        self._running = False
         preview, self.preview_layer = self.preview_layer, None
-        pbar, self._pbar = self._pbar, None
-        if pbar is not None:
-            pbar.close()
+        super()._on_finished()
         try:
             if preview is not None and preview in self.viewer.layers:
                 self.viewer.layers.remove(preview)
-            self._run_btn.enabled = True
-            self._cancel_btn.enabled = False
-        except RuntimeError:  # the viewer or this widget was closed during the run
+        except RuntimeError:  # the viewer was closed during the run
             pass

@@ -12,7 +12,8 @@ Three parts, from the least to the most napari-specific:
   Shapes layer with a LEADING TIME AXIS (one polygon per frame, vertices
   ``(t, *leading, row, col)``) so napari's dims slider plays the deformation,
   and optionally a Tracks layer of the node trajectories.
-* :class:`SimulationWidget` - a magicgui ``Container``; Run starts
+* :class:`SimulationWidget` - a magicgui ``Container`` (a
+  :class:`~napari_physeg._widgets._worker.WorkerWidget`); Run starts
   :func:`simulate_contours` in a ``napari.qt.threading.thread_worker`` with a
   napari progress bar and a Cancel button.
 
@@ -33,12 +34,12 @@ import napari
 import numpy as np
 from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, Label, PushButton, SpinBox
 from napari.layers import Layer
-from napari.qt.threading import thread_worker
 from napari.utils import progress
-from napari.utils.notifications import show_error, show_info, show_warning
+from napari.utils.notifications import show_info, show_warning
 
 from ..core import MATERIALS, DivergenceError, match, simulate
 from ._layers import contours_to_shapes_data, prepend_axes_transform
+from ._worker import WorkerWidget, run_to_completion
 from .matching import (
     MATCHING_KEY,
     SIMULATION_KEY,
@@ -229,17 +230,6 @@ def simulate_contours(a, b, matching=None, kwargs: dict | None = None, *, cancel
         helper.join()
 
 
-def run_to_completion(generator, on_progress=None) -> SimulationOutcome:
-    """Drive :func:`simulate_contours` synchronously (scripts, tests)."""
-    while True:
-        try:
-            update = next(generator)
-        except StopIteration as stop:
-            return stop.value
-        if on_progress is not None:
-            on_progress(update)
-
-
 def choose_matching(layer, pair: ContourPair):
     """The Matching stored in ``layer`` if it was computed for ``pair``'s contours.
 
@@ -361,7 +351,7 @@ _TIPS = {
 }
 
 
-class SimulationWidget(Container):
+class SimulationWidget(WorkerWidget):
     """Simulate the deformation of one contour into another (paper section 4.2).
 
     Parameters
@@ -380,19 +370,12 @@ class SimulationWidget(Container):
     """
 
     def __init__(self, viewer: napari.viewer.Viewer):
-        super().__init__(labels=True)
-        self.viewer = viewer
-        self.worker = None
+        super().__init__(viewer)
         self.pair: ContourPair | None = None
         self.last_outcome: SimulationOutcome | None = None
         self.output_layers: list = []
         self.preview_interval = 0.02
-        self._cancel = threading.Event()
-        self._pbar = None
-        self._progress_value = 0
         self._max_steps_run = 0
-        self.n_updates = 0
-        self._running = False
 
         self._layer_a = ComboBox(label="initial a (layer)", choices=self._shapes_choices, tooltip=_TIPS["layer_a"])
         self._index_a = SpinBox(label="shape of a", value=0, min=0, max=100000, tooltip=_TIPS["index_a"])
@@ -414,14 +397,7 @@ class SimulationWidget(Container):
         self.extend([self._layer_a, self._index_a, self._layer_b, self._index_b, self._matching, self._q,
                      self._material, self._n_frames, self._max_steps, self._tracks, self._buttons, self._status])
 
-        self._run_btn.changed.connect(self.run)
-        self._cancel_btn.changed.connect(self.cancel)
-        self.native.destroyed.connect(self._on_destroyed)
-        events = viewer.layers.events
-        for name in ("inserted", "removed", "reordered", "renamed"):
-            emitter = getattr(events, name, None)
-            if emitter is not None:
-                emitter.connect(self._on_layers_changed)
+        self._connect_signals()
         self._status.native.setWordWrap(True)  # long reports must not widen the dock
         self._pick_defaults()
         self._select_newest_matching()
@@ -454,19 +430,10 @@ class SimulationWidget(Container):
             return
 
     # ------------------------------------------------------------ state
-    @property
-    def is_running(self) -> bool:
-        """True while a simulation runs in the background."""
-        return self._running
-
     def parameters(self) -> dict:
         """The current settings as keyword arguments of :func:`~napari_physeg.core.simulate`."""
         return {"q": float(self._q.value), "material": self._material.value, "n_frames": int(self._n_frames.value),
                 "max_steps": int(self._max_steps.value)}
-
-    def _fail(self, message: str):
-        self._status.value = "Error (see notification)"
-        show_error(message)
 
     # ------------------------------------------------------------ run
     def run(self, *_):
@@ -493,54 +460,14 @@ class SimulationWidget(Container):
         self.pair = pair
         self.last_outcome = None
         self.output_layers = []
-        self._cancel = threading.Event()
-        self._running = True
-        self._run_btn.enabled = False
-        self._cancel_btn.enabled = True
-        self._status.value = ("Simulating…" if matching is not None
-                              else f"Matching ({DEFAULT_METHOD}), then simulating…")
+        self._begin("Simulating…" if matching is not None else f"Matching ({DEFAULT_METHOD}), then simulating…")
         params = self.parameters()
         self._max_steps_run = params["max_steps"]
-        self._pbar = progress(total=self._max_steps_run, desc=f"Simulating {pair.a_label!r} → {pair.b_label!r}")
-        self._progress_value = 0
-        self.n_updates = 0
-        worker = thread_worker(simulate_contours, start_thread=False)(
-            pair.a, pair.b, matching, params, cancel=self._cancel, preview_interval=self.preview_interval
-        )
-        worker.yielded.connect(self._on_yielded)
-        worker.returned.connect(self._on_returned)
-        worker.errored.connect(self._on_errored)
-        worker.finished.connect(self._on_finished)
-        self.worker = worker
-        worker.start()
-        return worker
-
-    def cancel(self, *_):
-        """Stop the running simulation (the core's callback returns False); no layer is added."""
-        if self._running:
-            self._cancel.set()
-            self._status.value = "Cancelling…"
+        pbar = progress(total=self._max_steps_run, desc=f"Simulating {pair.a_label!r} → {pair.b_label!r}")
+        return self._start(pbar, simulate_contours, pair.a, pair.b, matching, params, cancel=self._cancel,
+                           preview_interval=self.preview_interval)
 
     # ------------------------------------------------------------ worker signals (GUI thread)
-    def _gui_alive(self) -> bool:
-        try:
-            self.native.isHidden()
-        except RuntimeError:
-            return False
-        return True
-
-    def _on_destroyed(self, *_):
-        self._cancel.set()
-        if self.worker is not None:
-            self.worker.quit()
-
-    def _advance(self, value: int):
-        delta = value - self._progress_value
-        if delta > 0:
-            self._progress_value = value
-            if self._pbar is not None:
-                self._pbar.update(delta)
-
     def _on_yielded(self, update: SimulationProgress):
         if not self._gui_alive():
             self._on_destroyed()
@@ -590,16 +517,3 @@ class SimulationWidget(Container):
         # simulate_contours catches the core's errors itself; this is a last resort.
         self.last_outcome = SimulationOutcome(error=err)
         self._fail(error_message(err))
-
-    def _on_finished(self):
-        self._cancel.set()  # stops the helper thread too if the worker was aborted
-        self.worker = None
-        self._running = False
-        pbar, self._pbar = self._pbar, None
-        if pbar is not None:
-            pbar.close()
-        try:
-            self._run_btn.enabled = True
-            self._cancel_btn.enabled = False
-        except RuntimeError:  # the viewer or this widget was closed during the run
-            pass

@@ -1,0 +1,157 @@
+"""What the segmentation, matching and simulation widgets share: running one
+computation at a time in a ``napari.qt.threading.thread_worker``.
+
+The computations themselves are plain functions or generators that know
+nothing about Qt. Around them every widget does the same: disable Run (and
+enable Cancel) while the worker runs, feed a napari progress bar, report
+errors as notifications, and make sure that closing the viewer during a run
+neither leaves a thread running nor touches deleted Qt widgets.
+"""
+
+from __future__ import annotations
+
+import threading
+
+from magicgui.widgets import Container
+from napari.qt.threading import GeneratorWorker, thread_worker
+from napari.utils.notifications import show_error
+
+__all__ = ["WorkerWidget", "run_to_completion"]
+
+
+class WorkerWidget(Container):
+    """A magicgui ``Container`` that runs its computation in a background worker.
+
+    A subclass builds its controls, among them ``_run_btn``, ``_status`` (a
+    Label) and, if its computation can be stopped, ``_cancel_btn``; then it
+    calls :meth:`_connect_signals`. Its ``run`` reads the input, then calls
+    :meth:`_begin` and :meth:`_start`; it handles the results in
+    ``_on_returned`` and ``_on_errored`` and, for a generator, the updates in
+    ``_on_yielded``. The widget's ``_on_layers_changed`` is called when the
+    viewer's layers change.
+
+    A computation that can be cancelled takes ``cancel=self._cancel`` (a
+    ``threading.Event``) and returns early once it is set.
+    """
+
+    #: Widgets whose computation cannot be stopped have no Cancel button.
+    _cancel_btn = None
+
+    def __init__(self, viewer):
+        super().__init__(labels=True)
+        self.viewer = viewer
+        self.worker = None
+        self._cancel = threading.Event()
+        self._pbar = None
+        self._progress_value = 0
+        self.n_updates = 0  # progress updates shown in the last run
+        self._running = False
+
+    def _connect_signals(self):
+        self._run_btn.changed.connect(self.run)
+        if self._cancel_btn is not None:
+            self._cancel_btn.changed.connect(self.cancel)
+        self.native.destroyed.connect(self._on_destroyed)
+        events = self.viewer.layers.events
+        for name in ("inserted", "removed", "reordered", "renamed"):
+            emitter = getattr(events, name, None)
+            if emitter is not None:
+                emitter.connect(self._on_layers_changed)
+
+    # ------------------------------------------------------------ state
+    @property
+    def is_running(self) -> bool:
+        """True while a computation runs in the background."""
+        return self._running
+
+    def _fail(self, message: str):
+        self._status.value = "Error (see notification)"
+        show_error(message)
+
+    # ------------------------------------------------------------ run
+    def _begin(self, status: str):
+        """Mark a run as started; after this ``self._cancel`` is the new run's event."""
+        self._cancel = threading.Event()  # a fresh one: the last run's stays set
+        self._running = True
+        self._run_btn.enabled = False
+        if self._cancel_btn is not None:
+            self._cancel_btn.enabled = True
+        self._status.value = status
+        self._progress_value = 0
+        self.n_updates = 0
+
+    def _start(self, pbar, function, *args, **kwargs):
+        """Run ``function(*args, **kwargs)`` in a worker that ``pbar`` reports on; return the worker."""
+        self._pbar = pbar
+        worker = thread_worker(function, start_thread=False)(*args, **kwargs)
+        if isinstance(worker, GeneratorWorker):  # only generators report progress
+            worker.yielded.connect(self._on_yielded)
+        worker.returned.connect(self._on_returned)
+        worker.errored.connect(self._on_errored)
+        worker.finished.connect(self._on_finished)
+        self.worker = worker
+        worker.start()
+        return worker
+
+    def cancel(self, *_):
+        """Stop the running computation; no layer is added."""
+        if self._running and self._cancel_btn is not None:
+            self._cancel.set()
+            self._status.value = "Cancelling…"
+
+    # ------------------------------------------------------------ worker signals (GUI thread)
+    def _gui_alive(self) -> bool:
+        """False once Qt has deleted this widget (e.g. the viewer was closed during a run)."""
+        try:
+            self.native.isHidden()
+        except RuntimeError:
+            return False
+        return True
+
+    def _on_destroyed(self, *_):
+        self._cancel.set()
+        if self.worker is not None:
+            self.worker.quit()
+
+    def _record_progress(self, value: int) -> int:
+        """Note that the run reached ``value``; return how far the bar must move (0: not forward)."""
+        delta = max(value - self._progress_value, 0)
+        self._progress_value = max(value, self._progress_value)
+        return delta
+
+    def _move_pbar(self, delta: int):
+        if self._pbar is not None and delta:
+            self._pbar.update(delta)
+
+    def _advance(self, value: int):
+        """Move the progress bar forward to ``value`` (never back)."""
+        self._move_pbar(self._record_progress(value))
+
+    def _on_finished(self):
+        self._cancel.set()  # stops a helper thread of the computation too if the worker was aborted
+        self.worker = None
+        self._running = False
+        pbar, self._pbar = self._pbar, None
+        if pbar is not None:
+            pbar.close()
+        try:
+            self._run_btn.enabled = True
+            if self._cancel_btn is not None:
+                self._cancel_btn.enabled = False
+        except RuntimeError:  # the viewer or this widget was closed during the run
+            pass
+
+
+def run_to_completion(generator, on_progress=None):
+    """Drive a computation's generator (``segment_contours``, ``simulate_contours``) synchronously.
+
+    For scripts and tests: ``on_progress`` (if given) receives each yielded
+    update; the generator's return value (its outcome) is returned.
+    """
+    while True:
+        try:
+            update = next(generator)
+        except StopIteration as stop:
+            return stop.value
+        if on_progress is not None:
+            on_progress(update)
