@@ -173,11 +173,10 @@ def open_napari() -> None:
     import napari
 
     viewer = napari.Viewer()
-    try:
-        viewer.open_sample("napari-physeg", "hand_segmentation")
-        viewer.window.add_plugin_dock_widget("napari-physeg")
-    except Exception as err:  # the plugin's widgets may not all exist yet
-        print(f"    (could not load every widget: {err})")
+    viewer.open_sample("napari-physeg", "hand_segmentation")
+    viewer.open_sample("napari-physeg", "hand_poses")
+    for k, name in enumerate(("Segmentation (physical contour)", "Matching (modal)", "Simulation (deformation)")):
+        viewer.window.add_plugin_dock_widget("napari-physeg", name, tabify=k > 0)
     napari.run()
 
 
