@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 export QT_API ?= pyqt5
 
-.PHONY: setup demo figures test bench clean
+.PHONY: setup demo figures test bench docs clean
 
 setup:
 	@bash scripts/setup.sh
@@ -23,6 +23,12 @@ test: setup
 bench: setup
 	$(PY) benchmarks/segmentation.py
 	$(PY) benchmarks/matching.py
+
+# Build the documentation (docs/ and the API reference from the docstrings) into site/;
+# --strict makes every warning (a broken link, a bad docstring) an error.
+docs: setup
+	@$(PY) -c "import mkdocs, mkdocstrings, mkdocstrings_handlers.python" 2>/dev/null || $(VENV)/bin/pip install -q -e ".[docs]"
+	$(VENV)/bin/mkdocs build --strict
 
 clean:
 	rm -rf $(VENV) demo_output .pytest_cache
