@@ -25,11 +25,8 @@ anchors' gradient images).
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +39,7 @@ from skimage.segmentation import (
     morphological_geodesic_active_contour,
 )
 
+from _common import machine, timed  # benchmarks/ is on sys.path when run as a script
 from napari_physeg import data
 from napari_physeg.core import segment
 from napari_physeg.core.contour import resample
@@ -53,13 +51,6 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
     return float((a & b).sum() / max((a | b).sum(), 1))
 
 
-def timed(fn, repeat):
-    times, out = [], None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return out, statistics.median(times)
 
 
 def run_physeg(obj, init, repeat, **kw):
@@ -108,16 +99,6 @@ def cases(quick: bool):
         yield f"hand, noise 0.1, {shape[0]}", data.hand(shape, noise=0.1)
 
 
-def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in open("/proc/cpuinfo"):
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
 
 
 def main(argv=None):
