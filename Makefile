@@ -3,7 +3,7 @@
 # root, a virtual environment in .venv, the package and its test dependencies).
 VENV ?= .venv
 PY := $(VENV)/bin/python
-export QT_API ?= pyqt5
+export QT_API ?= pyqt6
 
 .PHONY: setup demo figures test bench docs clean
 

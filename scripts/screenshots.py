@@ -1,6 +1,6 @@
 """Screenshots of the real napari widgets for docs/user-guide.md.
 
-    QT_API=pyqt5 .venv/bin/python scripts/screenshots.py [--out docs/images]
+    QT_API=pyqt6 .venv/bin/python scripts/screenshots.py [--out docs/images]
 
 Opens a napari viewer (under a virtual X display started here with
 pyvirtualdisplay when ``DISPLAY`` is unset; Xvfb must be installed), loads the
@@ -24,7 +24,7 @@ import sys
 import time
 from pathlib import Path
 
-os.environ.setdefault("QT_API", "pyqt5")
+os.environ.setdefault("QT_API", "pyqt6")
 
 ROOT = Path(__file__).resolve().parents[1]
 WINDOW = (1500, 900)
@@ -37,7 +37,7 @@ def _quiet_napari():
     os.environ.setdefault("NAPARI_CONFIG", str(Path(tempfile.mkdtemp(prefix="physeg-shots-")) / "settings.yaml"))
     from napari._qt import qt_main_window
 
-    qt_main_window.SHOW_QT_WARNING = False  # the PyQt5 deprecation pop-up
+    qt_main_window.SHOW_QT_WARNING = False  # napari's Qt-backend warning pop-up
 
 
 def _start_display():

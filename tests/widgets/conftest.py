@@ -8,7 +8,7 @@ are skipped with a message that says what is missing, instead of crashing Qt.
 import os
 import sys
 
-os.environ.setdefault("QT_API", "pyqt5")
+os.environ.setdefault("QT_API", "pyqt6")
 
 import pytest  # noqa: E402
 
@@ -17,7 +17,7 @@ def _why_no_gui():
     try:
         import qtpy  # noqa: F401
     except Exception as err:  # pragma: no cover - depends on the machine
-        return f"no Qt binding ({err}); pip install pyqt5"
+        return f"no Qt binding ({err}); pip install pyqt6"
     try:
         import napari  # noqa: F401
     except Exception as err:  # pragma: no cover
