@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from napari_physeg import data
-from napari_physeg.core.contour import outward_normals, resample
+from napari_physeg.core.contour import outward_normals
 from napari_physeg.core.features import compute_features
 from napari_physeg.core.forces import FORCE_NAMES, ForceField, normalize_weights
 from napari_physeg.core.segmentation import objectness_image

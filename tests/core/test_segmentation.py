@@ -1,7 +1,5 @@
 """segment(): accuracy on objects with a known answer, physics, and bad input."""
 
-import warnings
-
 import numpy as np
 import pytest
 from skimage.draw import polygon2mask

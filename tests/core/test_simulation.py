@@ -27,7 +27,6 @@ def _self_intersects(c):
     """True if two non-adjacent edges of the closed polyline cross."""
     p, q = c, np.roll(c, -1, axis=0)
     n = len(c)
-    d1 = q - p
 
     def orient(o, a, b):
         return np.sign((a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (b[..., 0] - o[..., 0]))

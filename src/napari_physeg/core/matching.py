@@ -42,6 +42,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
+from .contour import segment_lengths, signed_area
 from .materials import Material
 from .modes import MAX_AUTO_MODES, ModalBasis, _check_nodes, _modal_raw, select_modes, truncate
 
@@ -147,16 +148,14 @@ class Matching:
 def _ccw_permutation(nodes: np.ndarray) -> np.ndarray:
     """Index map that makes the contour positively oriented, node 0 kept first."""
     m = len(nodes)
-    r, c = nodes[:, 0], nodes[:, 1]
-    area = 0.5 * float(np.dot(r, np.roll(c, -1)) - np.dot(np.roll(r, -1), c))
-    if area >= 0:
+    if signed_area(nodes) >= 0:
         return np.arange(m)
     return (-np.arange(m)) % m
 
 
 def _arc_positions(nodes: np.ndarray):
     """Normalised arc-length position of every node (node 0 at 0) and the perimeter."""
-    seg = np.linalg.norm(np.roll(nodes, -1, axis=0) - nodes, axis=1)
+    seg = segment_lengths(nodes)
     total = float(seg.sum())
     t = np.concatenate([[0.0], np.cumsum(seg)[:-1]]) / total
     return t, total

@@ -46,7 +46,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.linalg as la
 
-from .contour import as_contour
+from .contour import as_contour, resample
 from .element import coefficient_system, default_sigma, element_matrices
 from .materials import Material, get_material
 
@@ -316,25 +316,15 @@ def _arc_positions(nodes: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(seg)[:-1]]) / seg.sum()
 
 
-def _resample_even(nodes: np.ndarray, n: int) -> np.ndarray:
-    """``n`` nodes evenly spaced in arc length, the first at node 0."""
-    closed = np.vstack([nodes, nodes[:1]])
-    seg = np.linalg.norm(np.diff(closed, axis=0), axis=1)
-    cum = np.concatenate([[0.0], np.cumsum(seg)])
-    t = np.arange(n) * (cum[-1] / n)
-    return np.column_stack([np.interp(t, cum, closed[:, 0]), np.interp(t, cum, closed[:, 1])])
-
-
 def _modal_raw(nodes, *, n_compute: int = MAX_AUTO_MODES + 4, sigma: float | None = None,
                sigma_factor: float = 1.0, material: str | Material = "rubber",
                model_nodes: int | None = None, name: str = "nodes") -> ModalBasis:
     """All ``n_compute`` lowest modes of validated nodes, without selection."""
     nodes = np.asarray(nodes, dtype=np.float64)
     mat = get_material(material)
-    m = len(nodes)
     centroid, axes, scale, anisotropy, skew = canonical_frame(nodes)
     canon = (nodes - centroid) @ axes.T / scale
-    model = canon if model_nodes is None else _resample_even(canon, int(model_nodes))
+    model = canon if model_nodes is None else resample(canon, int(model_nodes))
     mm = len(model)
     if sigma is None:
         sigma = default_sigma(model, sigma_factor)

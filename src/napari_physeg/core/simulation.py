@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg  # noqa: F401  (sp.linalg)
+from scipy.sparse.linalg import spsolve
 
 from .contour import as_contour, segment_lengths
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
@@ -258,7 +258,7 @@ def simulate(
     # a stiff material (or a weak q) comes to rest short of ``b``, as it should.
     gap = targets - a
     load = system.G @ (q * np.concatenate([gap[:, 0], gap[:, 1]]))
-    c_rest = sp.linalg.spsolve(stiffness, load)
+    c_rest = spsolve(stiffness, load)
     U_rest = system.G @ c_rest
     at_rest = a + np.column_stack([U_rest[:m], U_rest[m:]])
     X = a.copy()
