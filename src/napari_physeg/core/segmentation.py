@@ -23,6 +23,7 @@ from .element import coefficient_system, rayleigh_coefficients, reference_freque
 from .features import compute_features, normalized_intensity
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .materials import Material, get_material
+from .subpixel import polish
 
 __all__ = ["segment", "SegmentationResult", "object_polarity", "objectness_image"]
 
@@ -281,7 +282,12 @@ def segment(
     refine : bool, optional
         After coming to rest, let the region (intensity) force alone settle
         the nodes for sub-pixel accuracy (edge pixels lie up to half a pixel
-        off the true border). Only with the incremental reference.
+        off the true border), then polish them onto the border measured on
+        the raw image, averaged along the contour as the image noise requires,
+        with the polygon's edges fitted to it
+        (:func:`~napari_physeg.core.subpixel.polish`; no node moves more than
+        1.5 px). Only with the incremental reference, the intensity force,
+        and a contour that came to rest.
     history_every : int, optional
         Keep one contour in ``history`` every this many steps.
     callback : callable, optional
@@ -384,7 +390,8 @@ def segment(
     # Phase 1 uses every force; once at rest, a short second phase lets the
     # region force alone (sub-pixel: it balances where the lightly smoothed
     # intensity crosses the object/background mid-level) settle the nodes
-    # that edge pixels hold half a pixel off the true border.
+    # that edge pixels hold half a pixel off the true border; a geometric
+    # polish (subpixel.polish) then ends them on the border of the raw image.
     phases = [field_]
     if refine and reference == "incremental" and weights.get("intensity", 0) > 0 and len(weights) > 1:
         phases.append(field_.with_weights({"intensity": sum(weights.values())}))
@@ -441,6 +448,11 @@ def segment(
             field_now = phases.pop(0)
             quiet = 0
             cap = np.full(len(nodes), 0.5 * float(max_step_length))
+    if stop_reason == "converged" and refine and reference == "incremental" and weights.get("intensity", 0) > 0:
+        # At rest every node is within a few tenths of a pixel of the border,
+        # read on smoothed images and each on its own noise: measure the border
+        # on the raw image and fit the polygon to it (see subpixel.polish).
+        nodes = np.clip(polish(image, nodes, polarity=pol), 0.0, hi_bound)
     if not np.array_equal(history[-1], nodes):
         history.append(nodes.copy())
     t_end = time.perf_counter()
