@@ -128,7 +128,7 @@ def main(argv=None):
     out("| case | init | physeg nodes | steps | physeg ms | physeg IoU | copper IoU | snake IoU | snake ms "
         "| MGAC IoU | MGAC ms | MCV IoU | MCV ms |")
     out("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    worst_margin, speedups, copper_ratio, totals = np.inf, [], [], [0.0, 0.0]
+    worst_margin, speedups, copper_ratio, totals, short = np.inf, [], [], [0.0, 0.0], []
     for name, obj in cases(args.quick):
         for which in ("init_near", "init_far"):
             init = getattr(obj, which)
@@ -137,7 +137,11 @@ def main(argv=None):
             s_iou, s_t = run_snake(obj, init)
             g_iou, g_t = run_mgac(obj, init)
             c_iou, c_t = run_mcv(obj, init)
-            worst_margin = min(worst_margin, min(ours, cu) - max(s_iou, g_iou, c_iou))
+            margin = min(ours, cu) - max(s_iou, g_iou, c_iou)
+            worst_margin = min(worst_margin, margin)
+            if margin < 0:
+                short.append(f"{name} {which[5:]} ({margin:+.4f}, "
+                             f"{round(-margin * obj.mask.sum())} px of {int(obj.mask.sum())})")
             speedups.append(g_t / t_ours)
             totals[0] += t_ours
             totals[1] += g_t
@@ -145,7 +149,8 @@ def main(argv=None):
             out(f"| {name} | {which[5:]} | {res.n_nodes} | {res.steps} | {t_ours * 1e3:.0f} | {ours:.3f} | {cu:.3f} "
                 f"| {s_iou:.3f} | {s_t * 1e3:.0f} | {g_iou:.3f} | {g_t * 1e3:.0f} | {c_iou:.3f} | {c_t * 1e3:.0f} |")
     out()
-    out(f"- worst IoU margin over the best anchor (rubber and copper): {worst_margin:+.3f}")
+    out(f"- worst IoU margin over the best anchor (rubber and copper, unrounded): {worst_margin:+.4f}; "
+        f"cases below the best anchor: " + ("; ".join(short) or "none"))
     out(f"- total time: physeg {totals[0]:.2f} s, MGAC {totals[1]:.1f} s ({totals[1] / totals[0]:.0f}x); per case "
         f"MGAC / physeg min {min(speedups):.0f}x, median {statistics.median(speedups):.0f}x")
     out(f"- copper (r = 1e6) time / rubber (r = 2000) time: median {statistics.median(copper_ratio):.2f}, "
