@@ -392,3 +392,20 @@ def test_matching_invariant_to_similarity_transforms(a, tr, which):
     moved = similarity(a if which == "a" else b, tr[0], tr[1], (tr[2], tr[3]))
     got = match(moved, b).partner if which == "a" else match(a, moved).partner
     assert np.mean(got == ref) >= 0.98
+
+
+def test_callback_reports_progress_and_stops_the_matching():
+    from napari_physeg.core import MatchingCancelled
+
+    a, b, _ = data.hand_pair(500, 500, pose_a="spread", pose_b="closed")
+    seen = []
+    m = match(a, b, callback=seen.append)
+    assert m.detail_refined
+    # features, each start of the first search, refinement, detail pass
+    assert len(seen) >= 4 and seen == sorted(seen) and seen[-1] == 1.0 and 0 < seen[0] < 0.5
+    calls = []
+    with pytest.raises(MatchingCancelled, match="cancelled"):
+        match(a, b, callback=lambda f: calls.append(f) or len(calls) < 2)
+    assert len(calls) == 2  # stopped at once
+    with pytest.raises(ValueError, match="^callback must be callable"):
+        match(a, b, callback=3)

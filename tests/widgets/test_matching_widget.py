@@ -2,6 +2,8 @@
 correspondences coloured by cost out (with the Matching in its metadata);
 bad input reaches the user as notifications and adds no layer."""
 
+import threading
+
 import numpy as np
 import pytest
 
@@ -16,6 +18,7 @@ from napari_physeg._widgets.matching import (  # noqa: E402
     METHOD_TIPS,
     MatchingWidget,
     compute_matching,
+    match_contours,
     matching_layer_data,
     read_contour_pair,
 )
@@ -95,10 +98,46 @@ def test_hand_poses_lines_coloured_by_cost(viewer_widget, wait_done, notes, reco
     assert "67 of 67" in widget._status.value and "0 unmatched" in widget._status.value
     assert len(notes["info"]) == 1 and "67 of 67 nodes of a matched, 0 unmatched" in notes["info"][0]
     assert "good" in widget._legend.value and "poor" in widget._legend.value
-    # progress: a (busy) napari progress bar, closed at the end
+    # progress: a napari progress bar that reached 100 %, closed at the end
     (pbar,) = bars
-    assert pbar.was_closed
-    assert widget._run_btn.enabled
+    assert pbar.was_closed and pbar.total == 100
+    assert widget.n_updates >= 3 and sum(pbar.updates) == 100
+    assert widget._run_btn.enabled and not widget._cancel_btn.enabled
+
+
+def helper_threads():
+    return [t for t in threading.enumerate() if t.name.startswith("napari-physeg match")]
+
+
+def test_cancel_stops_the_matching(viewer_widget, wait_done, notes, monkeypatch):
+    viewer, widget = viewer_widget
+    # two dense contours, so the core has several stages to stop between
+    a = data.hand_outline("spread", n_nodes=800, scale=100.0, center=(250.0, 250.0))
+    b = data.hand_outline("closed", n_nodes=800, scale=100.0, center=(250.0, 250.0))
+    viewer.add_shapes([a], shape_type="polygon", name="a")
+    viewer.add_shapes([b], shape_type="polygon", name="b")
+    widget._layer_a.value, widget._layer_b.value = viewer.layers["a"], viewer.layers["b"]
+    seen = []
+    original = MatchingWidget._on_yielded
+
+    def cancel_once(self, percent):
+        original(self, percent)
+        seen.append(percent)
+        if len(seen) == 1:
+            assert self._cancel_btn.enabled
+            self.cancel()
+
+    monkeypatch.setattr(MatchingWidget, "_on_yielded", cancel_once)
+    n_before = len(viewer.layers)
+    widget.run()
+    wait_done(widget)
+    assert widget.last_outcome.cancelled and not widget.last_outcome.ok
+    assert notes["error"] == [] and any("cancelled" in n for n in notes["info"])
+    assert len(viewer.layers) == n_before and not matching_layers(viewer)
+    assert seen and max(seen) < 100  # stopped before the last stage
+    assert not helper_threads()
+    assert widget._run_btn.enabled and not widget._cancel_btn.enabled
+    assert "Cancelled" in widget._status.value
 
 
 def test_local_method_vectors_output_reports_unmatched(viewer_widget, wait_done, notes):
@@ -246,7 +285,7 @@ def test_real_error_notification_reaches_napari(viewer_widget, napari_notificati
 def test_every_parameter_has_a_tooltip(viewer_widget):
     _, widget = viewer_widget
     params = [widget._layer_a, widget._index_a, widget._layer_b, widget._index_b, widget._method,
-              widget._n_modes, widget._output, widget._legend]
+              widget._n_modes, widget._output, widget._legend, widget._run_btn, widget._cancel_btn]
     for w in params:
         assert w.tooltip and len(w.tooltip) > 30, w.label
     for name in ("order", "global", "local"):
@@ -299,3 +338,21 @@ def test_pure_functions_match_the_core(make_napari_viewer, poses):
     assert kind == "shapes" and len(data_) == 67 and meta["metadata"]["matching"] is outcome.matching
     bad = compute_matching(a, b, method="nearest")
     assert not bad.ok and "method" in str(bad.error)
+
+
+def test_generator_reports_progress_and_cancels_without_qt(poses):
+    a, b, _ = poses
+    gen = match_contours(a, b)
+    percents = []
+    while True:
+        try:
+            percents.append(next(gen))
+        except StopIteration as stop:
+            outcome = stop.value
+            break
+    assert outcome.ok and percents == sorted(percents) and percents[-1] == 100
+    np.testing.assert_array_equal(outcome.matching.pairs, match(a, b).pairs)
+    cancel = threading.Event()
+    cancel.set()
+    stopped = compute_matching(a, b, cancel=cancel)
+    assert stopped.cancelled and not stopped.ok and stopped.matching is None

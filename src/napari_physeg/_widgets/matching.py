@@ -4,8 +4,9 @@ Three parts, from the least to the most napari-specific:
 
 * :func:`compute_matching` - a plain function that matches two ``(N, 2)``
   contours with the core and returns a :class:`MatchingOutcome` (errors are
-  caught and returned, never raised); it runs in a worker thread, a script or
-  a test alike.
+  caught and returned, never raised; a ``threading.Event`` cancels it); it
+  runs in a worker thread, a script or a test alike. :func:`match_contours`
+  is the same as a generator of progress percentages, for a worker thread.
 * :func:`read_contour_pair` - reads shape ``i`` of one Shapes layer and shape
   ``j`` of another (or the same) layer into a :class:`ContourPair`: two
   contours in the data coordinates of the first layer, raising
@@ -17,25 +18,28 @@ Three parts, from the least to the most napari-specific:
   :func:`read_contour_pair` too.
 * :class:`MatchingWidget` - a magicgui ``Container`` (a
   :class:`~napari_physeg._widgets._worker.WorkerWidget`); Run matches in a
-  ``napari.qt.threading.thread_worker`` with a (busy) napari progress bar.
+  ``napari.qt.threading.thread_worker`` with a napari progress bar; Cancel
+  stops it.
 
 All physics lives in :mod:`napari_physeg.core`.
 """
 
 from __future__ import annotations
 
+import queue
+import threading
 import time
 from dataclasses import dataclass
 
 import napari
 import numpy as np
-from magicgui.widgets import ComboBox, Label, PushButton, SpinBox
+from magicgui.widgets import ComboBox, Container, Label, PushButton, SpinBox
 from napari.layers import Layer, Shapes, Vectors
 from napari.utils import progress
 from napari.utils.colormaps import Colormap
 from napari.utils.notifications import show_info
 
-from ..core import match
+from ..core import MatchingCancelled, match
 from ._layers import contours_to_shapes_data, image_transform_kwargs, shape_in_layer_coords
 from ._worker import WorkerWidget
 from .segmentation import PREVIEW_KEY, InputError
@@ -48,6 +52,7 @@ __all__ = [
     "MatchingOutcome",
     "MatchingWidget",
     "compute_matching",
+    "match_contours",
     "contour_layer_choices",
     "cost_legend_html",
     "is_matching_layer",
@@ -230,34 +235,75 @@ class MatchingOutcome:
     Attributes
     ----------
     matching : Matching or None
-        The result (None after an error).
+        The result (None after an error or a cancel).
     error : Exception or None
         The core's error, if any.
     seconds : float
         Wall time.
+    cancelled : bool
+        The run was stopped by the cancel event.
     """
 
     matching: object = None
     error: Exception | None = None
     seconds: float = 0.0
+    cancelled: bool = False
 
     @property
     def ok(self) -> bool:
-        return self.error is None and self.matching is not None
+        return self.error is None and not self.cancelled and self.matching is not None
 
 
-def compute_matching(a, b, *, method: str = "order", n_modes: int | None = None) -> MatchingOutcome:
+def compute_matching(a, b, *, method: str = "order", n_modes: int | None = None,
+                     cancel: threading.Event | None = None, on_progress=None) -> MatchingOutcome:
     """Match contour ``a`` to contour ``b`` with :func:`napari_physeg.core.match`.
 
-    ``n_modes`` of 0 or None chooses the number of modes automatically. Errors
-    of the core are returned in the outcome, not raised.
+    ``n_modes`` of 0 or None chooses the number of modes automatically.
+    ``on_progress(fraction)`` (optional) receives the core's progress, 0 to 1;
+    setting ``cancel`` stops the core at its next stage. Errors of the core
+    are returned in the outcome, not raised.
     """
     t0 = time.perf_counter()
+
+    def callback(fraction):
+        if on_progress is not None:
+            on_progress(fraction)
+        return not (cancel is not None and cancel.is_set())  # False stops the core
+
     try:
-        m = match(a, b, method=method, n_modes=int(n_modes) if n_modes else None)
+        m = match(a, b, method=method, n_modes=int(n_modes) if n_modes else None, callback=callback)
+    except MatchingCancelled:
+        return MatchingOutcome(cancelled=True, seconds=time.perf_counter() - t0)
     except Exception as err:  # reported to the user by the caller
         return MatchingOutcome(error=err, seconds=time.perf_counter() - t0)
     return MatchingOutcome(matching=m, seconds=time.perf_counter() - t0)
+
+
+def match_contours(a, b, *, method: str = "order", n_modes: int | None = None,
+                   cancel: threading.Event | None = None):
+    """:func:`compute_matching` as a generator for a worker thread.
+
+    The core runs in a helper thread and hands its progress over a queue;
+    this generator yields it as whole percentages (so a worker can show it
+    and be quit between two of them) and returns the
+    :class:`MatchingOutcome`.
+    """
+    updates: queue.SimpleQueue = queue.SimpleQueue()
+
+    def target():
+        try:
+            outcome = compute_matching(a, b, method=method, n_modes=n_modes, cancel=cancel,
+                                       on_progress=lambda f: updates.put(("progress", f)))
+        except BaseException as err:  # never lost in this thread
+            outcome = MatchingOutcome(error=err)
+        updates.put(("done", outcome))
+
+    threading.Thread(target=target, name="napari-physeg match", daemon=True).start()
+    while True:
+        kind, payload = updates.get()
+        if kind == "done":
+            return payload
+        yield int(round(100 * payload))
 
 
 def error_message(err: Exception) -> str:
@@ -393,6 +439,7 @@ _TIPS = {
               "red = high cost = doubtful. The scale spans this matching's lowest to highest cost; the values "
               "are in the layer's features (cost, affinity, node_a, node_b).",
     "run": "Match the nodes of a to those of b in the background and add a layer of correspondences.",
+    "cancel": "Stop the running matching; no layer is added.",
 }
 
 
@@ -409,7 +456,7 @@ class MatchingWidget(WorkerWidget):
     -----
     Press Run (or call :meth:`run`): the two contours are read (in layer a's
     data coordinates) and :func:`compute_matching` runs in a
-    ``thread_worker`` with a busy napari progress bar. A layer
+    ``thread_worker`` with a napari progress bar (Cancel stops it). A layer
     "<a> → <b> matching" of lines (or vectors) coloured by cost is added, the
     counts of matched and unmatched nodes are shown in the widget and in a
     notification, and the Matching is stored in the layer's
@@ -431,10 +478,12 @@ class MatchingWidget(WorkerWidget):
         self._output = ComboBox(label="output as", choices=[OUTPUT_LINES, OUTPUT_VECTORS], value=OUTPUT_LINES,
                                 tooltip=_TIPS["output"])
         self._run_btn = PushButton(text="Run", tooltip=_TIPS["run"])
+        self._cancel_btn = PushButton(text="Cancel", tooltip=_TIPS["cancel"], enabled=False)
+        self._buttons = Container(widgets=[self._run_btn, self._cancel_btn], layout="horizontal", labels=False)
         self._legend = Label(value=cost_legend_html(), tooltip=_TIPS["legend"])
         self._status = Label(value="")
         self.extend([self._layer_a, self._index_a, self._layer_b, self._index_b, self._method, self._n_modes,
-                     self._output, self._run_btn, self._legend, self._status])
+                     self._output, self._buttons, self._legend, self._status])
         self._set_item_tooltips()
         self._status.native.setWordWrap(True)  # long reports must not widen the dock
 
@@ -490,14 +539,24 @@ class MatchingWidget(WorkerWidget):
         self.last_outcome = None
         self.output_layer = None
         self._begin(f"Matching {len(pair.a)} to {len(pair.b)} nodes…")
-        # Busy indicator: the core's match() is one call without progress steps.
-        pbar = progress(total=0, desc=f"Matching {pair.a_label!r} to {pair.b_label!r}")
-        return self._start(pbar, compute_matching, pair.a, pair.b, **self.parameters())
+        pbar = progress(total=100, desc=f"Matching {pair.a_label!r} to {pair.b_label!r}")
+        return self._start(pbar, match_contours, pair.a, pair.b, **self.parameters(), cancel=self._cancel)
 
     # ------------------------------------------------------------ worker signals (GUI thread)
+    def _on_yielded(self, percent: int):
+        if not self._gui_alive():
+            self._on_destroyed()
+            return
+        self.n_updates += 1
+        self._advance(percent)
+
     def _on_returned(self, outcome: MatchingOutcome):
         self.last_outcome = outcome
         if not self._gui_alive():
+            return
+        if outcome.cancelled:
+            self._status.value = "Cancelled: no layer added"
+            show_info("Matching cancelled: no layer added")
             return
         if outcome.error is not None:
             self._fail(error_message(outcome.error))

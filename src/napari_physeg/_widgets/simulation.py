@@ -37,7 +37,7 @@ from napari.layers import Layer
 from napari.utils import progress
 from napari.utils.notifications import show_info, show_warning
 
-from ..core import MATERIALS, DivergenceError, match, simulate
+from ..core import MATERIALS, DivergenceError, MatchingCancelled, match, simulate
 from ._layers import contours_to_shapes_data, prepend_axes_transform
 from ._worker import WorkerWidget, run_to_completion
 from .matching import (
@@ -185,7 +185,11 @@ def simulate_contours(a, b, matching=None, kwargs: dict | None = None, *, cancel
             m = matching
             if m is None:
                 updates.put(("matching",))
-                m = match(a, b, method=method)
+                try:
+                    m = match(a, b, method=method, callback=lambda fraction: not cancel.is_set())
+                except MatchingCancelled:
+                    updates.put(("cancelled",))
+                    return
                 updates.put(("matched", m))
                 if cancel.is_set():
                     updates.put(("cancelled",))

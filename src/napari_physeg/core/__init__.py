@@ -7,7 +7,7 @@ calls: :func:`segment` (a rough contour onto an object's border),
 """
 
 from .dynamics import DivergenceError
-from .matching import Matching, match
+from .matching import Matching, MatchingCancelled, match
 from .materials import MATERIALS, Material, get_material
 from .segmentation import SegmentationResult, segment
 from .simulation import SimulationResult, simulate
@@ -17,6 +17,7 @@ __all__ = [
     "SegmentationResult",
     "match",
     "Matching",
+    "MatchingCancelled",
     "simulate",
     "SimulationResult",
     "Material",

@@ -29,6 +29,9 @@ Pipeline of :func:`match`:
    penalty for leaving the smoothed path, which removes node-to-node jitter
    (it helps where one contour has many more nodes; its net gain on the
    benchmark is small).
+7. **Detail pass** (``order``, on dense smooth contours): a last search within
+   a few node spacings of the path on curvature at 1-4 node spacings, which
+   pins articulated parts the coarser terms leave a few nodes off.
 
 The measured effect of each stage is in ``docs/benchmarks.md`` (section
 "Matching"). Coordinates are ``(row, col)``; contours are closed implicitly.
@@ -48,6 +51,7 @@ from .modes import MAX_AUTO_MODES, ModalBasis, _check_nodes, _modal_raw, select_
 
 __all__ = [
     "Matching",
+    "MatchingCancelled",
     "match",
     "modal_affinity",
     "curvature_signature",
@@ -84,6 +88,25 @@ _DETAIL_ROUGHNESS = 0.1
 _START_WINDOW = 0.02
 #: Anisotropy (minor / major second moment) above which the frame of b is searched.
 _ISOTROPIC = 0.8
+
+
+class MatchingCancelled(RuntimeError):
+    """Raised by :func:`match` when its ``callback`` returns False."""
+
+
+def _reporter(callback):
+    """``report(fraction)``: pass the progress to ``callback`` and raise
+    :class:`MatchingCancelled` when it returns False."""
+    if callback is None:
+        return lambda fraction: None
+    if not callable(callback):
+        raise ValueError(f"callback must be callable or None, got {callback!r}")
+
+    def report(fraction):
+        if callback(float(fraction)) is False:
+            raise MatchingCancelled("matching cancelled")
+
+    return report
 
 
 @dataclass(frozen=True, eq=False)
@@ -466,13 +489,16 @@ def _start_candidates(scores: np.ndarray, n: int, separation: int = 1) -> list[i
     return chosen
 
 
-def _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window):
+def _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window, on_start=None):
     """Run the DP around each candidate start node of ``b`` (free within
-    ``window`` nodes); return the best (part, total)."""
+    ``window`` nodes); return the best (part, total). ``on_start(k, n)`` is
+    called after the k-th of n starts."""
     na, nb = C.shape
     window = int(min(window, max((nb - 1) // 2, 0)))
     best = (None, np.inf)
-    for s in starts:
+    for k, s in enumerate(starts):
+        if k and on_start is not None:
+            on_start(k, len(starts))
         cols = (s - window + np.arange(nb + 2 * window)) % nb
         Cs = C[:, cols]
         if arc_weight > 0:
@@ -487,7 +513,7 @@ def _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window):
     return best
 
 
-def _search(method, C, t_a, t_b, *, arc_weight, n_starts, gap, penalty, start=None):
+def _search(method, C, t_a, t_b, *, arc_weight, n_starts, gap, penalty, start=None, on_start=None):
     """One pass of the chosen search on cost ``C``; returns (partners, total)."""
     na, nb = C.shape
     if method == "local":
@@ -500,7 +526,7 @@ def _search(method, C, t_a, t_b, *, arc_weight, n_starts, gap, penalty, start=No
             starts = _start_candidates(_diagonal_scores(C), n_starts, 2 * window + 1)
         else:
             starts = [start]
-        return _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window)
+        return _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window, on_start)
     ok = part >= 0
     return part, float(C[ok, part[ok]].sum())
 
@@ -636,7 +662,7 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
           sigma_factor: float = 1.0, material: str | Material = "rubber", curvature_weight: float = 8.0,
           arclength_weight: float = 0.0, refine: bool | None = None, sign_correction: bool = True,
           order_penalty: float = 5.0, n_starts: int = 4, gap_cost: float | None = None,
-          detail: bool | None = None) -> Matching:
+          detail: bool | None = None, callback=None) -> Matching:
     """Match the nodes of contour ``a`` to those of contour ``b`` by modal analysis.
 
     Parameters
@@ -709,6 +735,11 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
         0.1), where it raised the 1000-node articulated hands of the
         benchmark from 0.72 / 0.90 to 0.90 / 0.96 accuracy; on rough
         contours curvature at one node spacing is noise.
+    callback : callable, optional
+        ``callback(fraction)`` with the fraction of the work done (0 to 1,
+        increasing) after each stage and each start of the ``order`` search;
+        return False to stop: :func:`match` then raises
+        :class:`MatchingCancelled`.
 
     Returns
     -------
@@ -720,6 +751,8 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
         For an unknown ``method``, a contour with fewer than 3 nodes, NaN or
         infinite coordinates, identical nodes or all nodes on a line, or an
         invalid option; raised before any heavy work.
+    MatchingCancelled
+        When ``callback`` returned False.
 
     Notes
     -----
@@ -757,6 +790,7 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
         raise ValueError(f"sigma_factor must be a positive number, got {sigma_factor!r}")
     if refine is None:
         refine = method == "order"
+    report = _reporter(callback)
     if detail is not None and not isinstance(detail, (bool, np.bool_)):
         raise ValueError(f"detail must be True, False or None, got {detail!r}")
     if detail and method != "order":
@@ -785,19 +819,29 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
         kb = curvature_signature(B, scales)
         C = C + curvature_weight * _pairwise_sq(ka, kb) / ka.shape[1]
 
+    if detail is None:
+        detail = (method == "order" and min(na, nb) >= _DETAIL_MIN_NODES
+                  and max(roughness(A), roughness(B)) < _DETAIL_ROUGHNESS)
+    # Progress: the features, then the searches (the first, with its several
+    # starts, about three times the work of each later one).
+    work = np.cumsum([1.0, 3.0, 1.0 if refine else 0.0, 1.0 if detail else 0.0])
+    work /= work[-1]
+    report(work[0])
+
     penalty = order_penalty * float(np.median(C.min(axis=1))) + 1e-6 * float(np.median(C))
     opts = dict(arc_weight=arclength_weight, n_starts=n_starts, gap=gap, penalty=penalty)
-    part, total = _search(method, C, t_a, t_b, **opts)
+    part, total = _search(method, C, t_a, t_b, **opts,
+                          on_start=lambda k, n: report(work[0] + (work[1] - work[0]) * k / n))
+    report(work[1])
     final = C
     if refine:
         final = C + _drift_cost(part, t_a, t_b, _REFINE_WIDTH, _DRIFT_WEIGHT * penalty)
         start = int(part[0]) if part[0] >= 0 else None
         part, total = _search(method, final, t_a, t_b, start=start, **opts)
-    if detail is None:
-        detail = (method == "order" and min(na, nb) >= _DETAIL_MIN_NODES
-                  and max(roughness(A), roughness(B)) < _DETAIL_ROUGHNESS)
+        report(work[2])
     if detail:
         part, total = _detail_pass(A, B, part, t_a, t_b, perimeter_a, perimeter_b, opts)
+        report(work[3])
 
     # Back to the caller's node numbering.
     ia = np.flatnonzero(part >= 0)
