@@ -239,3 +239,53 @@ def test_fingertips_are_not_rounded(noise):
     gap = signed_distance(_fingertips(obj.image.shape), res.contour)  # > 0: tip cut off
     assert np.abs(gap).max() < (0.1 if noise == 0 else 0.2), gap
     assert abs(gap.mean()) < 0.05, gap
+
+
+# --------------------------------------------------------------------------
+# Feature window on large images
+# --------------------------------------------------------------------------
+
+
+def _feature_shapes(monkeypatch):
+    """Shapes of the images compute_features is called on from now on."""
+    import napari_physeg.core.segmentation as seg
+
+    shapes = []
+    real = seg.compute_features
+
+    def recording(image, **kwargs):
+        shapes.append(np.shape(image))
+        return real(image, **kwargs)
+
+    monkeypatch.setattr(seg, "compute_features", recording)
+    return shapes
+
+
+def test_small_object_in_a_large_image_gives_the_same_contour(monkeypatch):
+    obj = data.blob((256, 256), seed=2)
+    canvas = np.full((1200, 1500), np.median(obj.image[:5, :5]))
+    offset = np.array([700.0, 900.0])
+    canvas[700:956, 900:1156] = obj.image
+    alone = segment(obj.image, obj.init_near)
+    shapes = _feature_shapes(monkeypatch)
+    placed = segment(canvas, obj.init_near + offset)
+    # the features were computed around the object only
+    assert len(shapes) == 1 and shapes[0][0] * shapes[0][1] < 0.25 * canvas.size
+    assert placed.converged and len(placed.contour) == len(alone.contour)
+    np.testing.assert_allclose(placed.contour - offset, alone.contour, atol=0.01)
+    np.testing.assert_allclose(placed.history[0] - offset, alone.history[0], atol=1e-9)
+
+
+def test_contour_grows_out_of_its_feature_window(monkeypatch):
+    rows, cols = np.mgrid[:1000, :1100]
+    disc = (((rows - 480) ** 2 + (cols - 560) ** 2) < 250**2).astype(float)
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    inner = np.column_stack([480 + 25 * np.sin(t), 560 + 25 * np.cos(t)])
+    shapes = _feature_shapes(monkeypatch)
+    res = segment(disc, inner)
+    radius = np.hypot(res.contour[:, 0] - 480, res.contour[:, 1] - 560)
+    assert res.converged and np.abs(radius - 250).max() < 1.0
+    # it started on a small window and recomputed the features on larger ones
+    areas = [h * w for h, w in shapes]
+    assert len(areas) >= 2 and areas == sorted(areas) and areas[0] < 0.25 * disc.size
+    assert np.all(res.contour >= 0) and np.all(res.contour <= np.array(disc.shape) - 1)

@@ -105,6 +105,34 @@ def _clip_to_image(init: np.ndarray, shape) -> np.ndarray:
     return init
 
 
+#: The feature images are computed on a window around the contour when it
+#: covers at most this fraction of the image (below it the saving beats the
+#: cost of the rare re-computation when the contour grows out of its window).
+WINDOW_MAX_FRACTION = 0.5
+
+
+def _window(contour: np.ndarray, shape, margin: float, keep=None) -> tuple[slice, slice]:
+    """Rows and columns of the image within ``margin`` px of ``contour``'s
+    bounding box (and covering the window ``keep``, if given)."""
+    lo = np.maximum(np.floor(contour.min(0) - margin), 0).astype(int)
+    hi = np.minimum(np.ceil(contour.max(0) + margin) + 1, shape).astype(int)
+    if keep is not None:
+        lo = np.minimum(lo, [keep[0].start, keep[1].start])
+        hi = np.maximum(hi, [keep[0].stop, keep[1].stop])
+    return slice(int(lo[0]), int(hi[0])), slice(int(lo[1]), int(hi[1]))
+
+
+def _near_window_border(nodes: np.ndarray, window, shape, guard: float) -> bool:
+    """True when a node of ``nodes`` (window coordinates) is within ``guard`` px
+    of a side of the window that is not a side of the image."""
+    rows, cols = window
+    h, w = rows.stop - rows.start, cols.stop - cols.start
+    lo, hi = nodes.min(0), nodes.max(0)
+    return bool((rows.start > 0 and lo[0] < guard) or (cols.start > 0 and lo[1] < guard)
+                or (rows.stop < shape[0] and hi[0] > h - 1 - guard)
+                or (cols.stop < shape[1] and hi[1] > w - 1 - guard))
+
+
 def _fill(contour: np.ndarray, shape) -> np.ndarray:
     """Fast rasterisation of a polygon (OpenCV, 1/16 px vertex precision)."""
     mask = np.zeros(shape, dtype=np.uint8)
@@ -306,6 +334,14 @@ def segment(
     DivergenceError
         If the integration produced non-finite or exploding displacements.
 
+    Notes
+    -----
+    The feature images are computed on a window around the contour (its
+    bounding box plus ``2 (max_line_length + 8)`` px) when that window covers
+    at most half the image, and on a larger window whenever the contour comes
+    within ``max_line_length + 8`` px of its border; so a small object in a
+    large image costs about what it would cost in a small one.
+
     Examples
     --------
     >>> from napari_physeg import data
@@ -333,30 +369,56 @@ def segment(
         raise ValueError(f"n_nodes must be at least 3, got {n_nodes!r}")
 
     init = _clip_to_image(init, image.shape)
-    feats = compute_features(image, b=isef_b)
-    if not feats.edges.any() and np.ptp(feats.intensity) <= 1e-12:
-        raise ValueError("image is constant: there is no object border to segment")
-    # The region force needs the border where it is: a light denoising, not
-    # the strong ISEF smoothing used for edge detection.
-    intensity = cv2.GaussianBlur(normalized_intensity(image), (0, 0), 1.0, borderType=cv2.BORDER_REFLECT)
-    pol = {"bright": 1, "dark": -1}.get(polarity) or object_polarity(intensity, init)
-    objectness = objectness_image(intensity, init, pol)
-    field_ = ForceField.from_features(feats.edges, feats.distance, objectness, weights,
-                                      max_length=max_line_length)
+    # Feature images on a window around the contour: the forces read them
+    # along normal lines of at most max_line_length px, so a guard band of
+    # that width (and as much again as margin) suffices; the window grows
+    # when the contour nears its border. On a large image with a small
+    # object this is most of the cost of a segmentation.
+    guard = float(max_line_length) + 8.0
+    margin = 2.0 * guard
+    window = _window(init, image.shape, margin)
+    if (window[0].stop - window[0].start) * (window[1].stop - window[1].start) > WINDOW_MAX_FRACTION * image.size:
+        window = (slice(0, image.shape[0]), slice(0, image.shape[1]))
+    pol = {"bright": 1, "dark": -1}.get(polarity)
+
+    def fields_for(window):
+        """Force fields (all forces, then the region alone) on ``window``."""
+        nonlocal pol
+        sub = image[window]
+        origin = np.array([window[0].start, window[1].start], dtype=float)
+        feats = compute_features(sub, b=isef_b)
+        if not feats.edges.any() and np.ptp(feats.intensity) <= 1e-12:
+            if sub.shape != image.shape:  # nothing here: look at the whole image
+                return fields_for((slice(0, image.shape[0]), slice(0, image.shape[1])))
+            raise ValueError("image is constant: there is no object border to segment")
+        # The region force needs the border where it is: a light denoising,
+        # not the strong ISEF smoothing used for edge detection.
+        intensity = cv2.GaussianBlur(normalized_intensity(sub), (0, 0), 1.0, borderType=cv2.BORDER_REFLECT)
+        if pol is None:
+            pol = object_polarity(intensity, init - origin)
+        objectness = objectness_image(intensity, init - origin, pol)
+        field_ = ForceField.from_features(feats.edges, feats.distance, objectness, weights,
+                                          max_length=max_line_length)
+        fields = [field_]
+        if refine and reference == "incremental" and weights.get("intensity", 0) > 0 and len(weights) > 1:
+            fields.append(field_.with_weights({"intensity": sum(weights.values())}))
+        return window, origin, fields
+
+    window, origin, fields = fields_for(window)
     t_features = time.perf_counter()
 
     length = perimeter(init)
     if n_nodes is None:
         n_nodes = int(np.clip(round(length / 3.0), 24, 1000))
     spacing = length / int(n_nodes)
-    nodes = resample(init, int(n_nodes))
+    nodes = resample(init, int(n_nodes)) - origin
     sigma_used = float(sigma) if sigma is not None else sigma_factor * spacing
     if not (np.isfinite(sigma_used) and 0 < sigma_used <= 2.0 * spacing):
         raise ValueError(
             f"sigma = {sigma_used!r} must be positive and at most 2 x the node spacing ({spacing:.3g} px); "
             "typical values are 0.75-1.5 x the spacing"
         )
-    hi_bound = np.array(image.shape, dtype=float) - 1.0
+    hi_bound = np.array(image[window].shape, dtype=float) - 1.0
     divergence_limit = 10.0 * float(np.hypot(*image.shape))
 
     model_time = 0.0
@@ -381,7 +443,7 @@ def segment(
 
     system, sim = build(nodes)
     rest = nodes.copy()
-    history = [nodes.copy()]
+    history = [nodes + origin]
     cap = np.full(len(nodes), float(max_step_length))
     last_sign = np.zeros(len(nodes))
     quiet = 0
@@ -392,11 +454,17 @@ def segment(
     # intensity crosses the object/background mid-level) settle the nodes
     # that edge pixels hold half a pixel off the true border; a geometric
     # polish (subpixel.polish) then ends them on the border of the raw image.
-    phases = [field_]
-    if refine and reference == "incremental" and weights.get("intensity", 0) > 0 and len(weights) > 1:
-        phases.append(field_.with_weights({"intensity": sum(weights.values())}))
-    field_now = phases.pop(0)
+    phase = 0
     for steps in range(1, int(max_steps) + 1):
+        if window[0].stop - window[0].start < image.shape[0] or window[1].stop - window[1].start < image.shape[1]:
+            if _near_window_border(nodes, window, image.shape, guard):
+                # The contour grew toward the window's border: a larger window.
+                old_origin = origin
+                window, origin, fields = fields_for(_window(nodes + origin, image.shape, margin, keep=window))
+                shift = old_origin - origin
+                nodes, rest = nodes + shift, rest + shift
+                hi_bound = np.array(image[window].shape, dtype=float) - 1.0
+        field_now = fields[phase]
         normals = outward_normals(nodes)
         F = stiffness * field_now(nodes, normals)
         f = np.concatenate([F[:, 0], F[:, 1]])
@@ -437,22 +505,23 @@ def segment(
                 system, sim = build(nodes)
         quiet = quiet + 1 if moved < tol else 0
         if steps % max(int(history_every), 1) == 0:
-            history.append(nodes.copy())
-        if callback is not None and callback(steps, nodes.copy()) is False:
+            history.append(nodes + origin)
+        if callback is not None and callback(steps, nodes + origin) is False:
             stop_reason = "cancelled"
             break
         if quiet >= patience:
-            if not phases:
+            if phase == len(fields) - 1:
                 stop_reason = "converged"
                 break
-            field_now = phases.pop(0)
+            phase += 1
             quiet = 0
             cap = np.full(len(nodes), 0.5 * float(max_step_length))
     if stop_reason == "converged" and refine and reference == "incremental" and weights.get("intensity", 0) > 0:
         # At rest every node is within a few tenths of a pixel of the border,
         # read on smoothed images and each on its own noise: measure the border
         # on the raw image and fit the polygon to it (see subpixel.polish).
-        nodes = np.clip(polish(image, nodes, polarity=pol), 0.0, hi_bound)
+        nodes = np.clip(polish(image[window], nodes, polarity=pol), 0.0, hi_bound)
+    nodes = nodes + origin
     if not np.array_equal(history[-1], nodes):
         history.append(nodes.copy())
     t_end = time.perf_counter()
