@@ -289,3 +289,14 @@ def test_contour_grows_out_of_its_feature_window(monkeypatch):
     areas = [h * w for h, w in shapes]
     assert len(areas) >= 2 and areas == sorted(areas) and areas[0] < 0.25 * disc.size
     assert np.all(res.contour >= 0) and np.all(res.contour <= np.array(disc.shape) - 1)
+
+
+def test_contour_with_no_border_in_reach_reports_the_collapse():
+    # An object far away and nothing near the contour: the region force
+    # shrinks it to a point; that is an error naming the fix, not a result.
+    image = np.zeros((600, 600))
+    image[450:520, 450:520] = 1.0
+    t = np.linspace(0, 2 * np.pi, 30, endpoint=False)
+    init = np.column_stack([150 + 40 * np.sin(t), 150 + 40 * np.cos(t)])
+    with pytest.raises(ValueError, match="collapsed to a point.*no object border was found within reach"):
+        segment(image, init, max_steps=300)

@@ -17,7 +17,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from skimage.filters import threshold_otsu
 
-from .contour import as_contour, outward_normals, perimeter, remove_loops, resample, segment_lengths
+from .contour import as_contour, outward_normals, perimeter, remove_loops, resample, segment_lengths, signed_area
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
 from .features import compute_features, normalized_intensity
@@ -330,7 +330,8 @@ def segment(
     ValueError
         For bad input: a non-2D image, NaN pixels, a constant image, a contour
         with fewer than 3 distinct nodes or wholly outside the image, bad
-        parameters.
+        parameters; and when the contour collapses to a point because no
+        object border lies within reach of it.
     DivergenceError
         If the integration produced non-finite or exploding displacements.
 
@@ -516,6 +517,13 @@ def segment(
             phase += 1
             quiet = 0
             cap = np.full(len(nodes), 0.5 * float(max_step_length))
+    if stop_reason != "cancelled" and abs(signed_area(nodes)) < 1.0:
+        # Nothing held it: the region force shrinks a contour drawn on a
+        # uniform background until it is a point. Say so rather than return it.
+        raise ValueError(
+            f"the contour collapsed to a point after {steps} steps: no object border was found within reach "
+            f"({max_line_length:g} px) of the initial contour; draw it around the object, closer to its border"
+        )
     if stop_reason == "converged" and refine and reference == "incremental" and weights.get("intensity", 0) > 0:
         # At rest every node is within a few tenths of a pixel of the border,
         # read on smoothed images and each on its own noise: measure the border
