@@ -377,9 +377,10 @@ def segment(
     # object this is most of the cost of a segmentation.
     guard = float(max_line_length) + 8.0
     margin = 2.0 * guard
+    whole_image = (slice(0, image.shape[0]), slice(0, image.shape[1]))
     window = _window(init, image.shape, margin)
     if (window[0].stop - window[0].start) * (window[1].stop - window[1].start) > WINDOW_MAX_FRACTION * image.size:
-        window = (slice(0, image.shape[0]), slice(0, image.shape[1]))
+        window = whole_image
     pol = {"bright": 1, "dark": -1}.get(polarity)
 
     def fields_for(window):
@@ -390,7 +391,7 @@ def segment(
         feats = compute_features(sub, b=isef_b)
         if not feats.edges.any() and np.ptp(feats.intensity) <= 1e-12:
             if sub.shape != image.shape:  # nothing here: look at the whole image
-                return fields_for((slice(0, image.shape[0]), slice(0, image.shape[1])))
+                return fields_for(whole_image)
             raise ValueError("image is constant: there is no object border to segment")
         # The region force needs the border where it is: a light denoising,
         # not the strong ISEF smoothing used for edge detection.
@@ -457,14 +458,13 @@ def segment(
     # polish (subpixel.polish) then ends them on the border of the raw image.
     phase = 0
     for steps in range(1, int(max_steps) + 1):
-        if window[0].stop - window[0].start < image.shape[0] or window[1].stop - window[1].start < image.shape[1]:
-            if _near_window_border(nodes, window, image.shape, guard):
-                # The contour grew toward the window's border: a larger window.
-                old_origin = origin
-                window, origin, fields = fields_for(_window(nodes + origin, image.shape, margin, keep=window))
-                shift = old_origin - origin
-                nodes, rest = nodes + shift, rest + shift
-                hi_bound = np.array(image[window].shape, dtype=float) - 1.0
+        if _near_window_border(nodes, window, image.shape, guard):
+            # The contour grew toward the window's border: a larger window.
+            old_origin = origin
+            window, origin, fields = fields_for(_window(nodes + origin, image.shape, margin, keep=window))
+            shift = old_origin - origin
+            nodes, rest = nodes + shift, rest + shift
+            hi_bound = np.array(image[window].shape, dtype=float) - 1.0
         field_now = fields[phase]
         normals = outward_normals(nodes)
         F = stiffness * field_now(nodes, normals)
