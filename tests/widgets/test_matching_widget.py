@@ -356,3 +356,14 @@ def test_generator_reports_progress_and_cancels_without_qt(poses):
     cancel.set()
     stopped = compute_matching(a, b, cancel=cancel)
     assert stopped.cancelled and not stopped.ok and stopped.matching is None
+
+
+def test_closing_the_generator_early_stops_the_core():
+    # A worker quit while the core runs closes the generator at a yield: the
+    # helper thread must stop too, not keep matching in the background.
+    a = data.hand_outline("spread", n_nodes=800, scale=100.0)
+    b = data.hand_outline("closed", n_nodes=800, scale=100.0)
+    gen = match_contours(a, b)
+    assert 0 < next(gen) < 100
+    gen.close()
+    assert not helper_threads()

@@ -288,6 +288,7 @@ def match_contours(a, b, *, method: str = "order", n_modes: int | None = None,
     and be quit between two of them) and returns the
     :class:`MatchingOutcome`.
     """
+    cancel = cancel if cancel is not None else threading.Event()
     updates: queue.SimpleQueue = queue.SimpleQueue()
 
     def target():
@@ -298,12 +299,20 @@ def match_contours(a, b, *, method: str = "order", n_modes: int | None = None,
             outcome = MatchingOutcome(error=err)
         updates.put(("done", outcome))
 
-    threading.Thread(target=target, name="napari-physeg match", daemon=True).start()
-    while True:
-        kind, payload = updates.get()
-        if kind == "done":
-            return payload
-        yield int(round(100 * payload))
+    helper = threading.Thread(target=target, name="napari-physeg match", daemon=True)
+    helper.start()
+    settled = False
+    try:
+        while True:
+            kind, payload = updates.get()
+            if kind == "done":
+                settled = True
+                return payload
+            yield int(round(100 * payload))
+    finally:
+        if not settled:  # closed early (the worker was aborted): stop the helper as well
+            cancel.set()
+        helper.join()
 
 
 def error_message(err: Exception) -> str:
