@@ -8,13 +8,13 @@ from napari_physeg import data
 from napari_physeg.core.contour import outward_normals
 from napari_physeg.core.features import compute_features
 from napari_physeg.core.forces import FORCE_NAMES, ForceField, normalize_weights
-from napari_physeg.core.segmentation import objectness_image
+from napari_physeg.core.region import drawing_levels, objectness
 
 
 def _field(obj, weights):
     f = compute_features(obj.image, b=0.7)
-    objectness = objectness_image(obj.image, obj.init_near, 1 if obj.image[obj.mask].mean() > obj.image.mean() else -1)
-    return ForceField.from_features(f.edges, f.distance, objectness, weights)
+    model = drawing_levels(f.intensity, obj.init_near)
+    return ForceField.from_features(f.edges, f.distance, objectness(f.intensity, model), weights)
 
 
 def _circle(c, r, n=80):

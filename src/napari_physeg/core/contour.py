@@ -203,3 +203,35 @@ def remove_loops(contour: np.ndarray, max_loops: int = 100) -> np.ndarray:
         else:
             contour = np.vstack([x, contour[i + 1: j + 1]])
     return contour
+
+
+def cut_pinches(contour: np.ndarray, gap: float, max_cuts: int = 100) -> np.ndarray:
+    """Split a closed contour where two non-neighbouring parts come closer than ``gap``.
+
+    A contour squeezed through a narrow neck (between two touching objects,
+    or against the image border) brings nodes of its two sides within a
+    fraction of a pixel of each other without crossing: the pieces on either
+    side of such a pinch are separate regions. The piece enclosing the larger
+    area is kept; so is the body of a contour folded back on itself (a spike of
+    zero width, as clipping to the image's corner makes).
+    """
+    from scipy.spatial import cKDTree
+
+    contour = np.asarray(contour, dtype=np.float64)
+    for _ in range(max_cuts):
+        n = len(contour)
+        if n < 8:
+            break
+        pairs = cKDTree(contour).query_pairs(gap, output_type="ndarray")
+        if not len(pairs):
+            break
+        i, j = pairs.min(1), pairs.max(1)
+        apart = np.minimum(j - i, n - (j - i))
+        far = apart >= 2
+        if not far.any():
+            break
+        k = np.flatnonzero(far)[np.argmax(apart[far])]
+        i, j = int(i[k]), int(j[k])
+        inner, outer = contour[i: j + 1], np.vstack([contour[j:], contour[: i + 1]])
+        contour = inner if abs(signed_area(inner)) >= abs(signed_area(outer)) else outer
+    return contour

@@ -128,8 +128,11 @@ class ForceField:
         grid = np.zeros((rows * width, 2), dtype=np.float32)
         grid[:n] = flat
         grid = grid.reshape(rows, width, 2)
+        # The image's border is a wall: an edge, with no object beyond it, so
+        # a contour around an object cut by the border rests on the border.
         out = cv2.remap(self._stack, np.ascontiguousarray(grid[..., 1]), np.ascontiguousarray(grid[..., 0]),
-                        interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+                        interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                        borderValue=(1.0, 0.0, -1.0, 0.0))
         return out.reshape(-1, 3)[:n].reshape(pts.shape[:-1] + (3,))
 
     @cached_property
@@ -156,7 +159,11 @@ class ForceField:
         total = np.zeros(len(nodes))
         w = self.weights
         if w.get("edges", 0) > 0:
-            e = values[..., 0]
+            # An edge counts only where the object-ness falls outward across
+            # it (object inside, background outside): the far side of the
+            # object seen across it, edges within the background, and the
+            # image's border beside background do not pull the node.
+            e = values[..., 0] * (np.gradient(values[..., 2], axis=1) < -1e-3)
             plus, minus = e[:, S + 1:].sum(1), e[:, :S].sum(1)
             total += w["edges"] * (plus - minus) / (plus + minus + 0.1)
         if w.get("distance", 0) > 0:
@@ -171,3 +178,15 @@ class ForceField:
             short = nodes[:, None, :] + self._region_offsets[None, :, None] * normals[:, None, :]
             total += w["intensity"] * self.sample(short)[..., 2].mean(1)
         return total[:, None] * normals
+
+    def on_border(self, nodes: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
+        """Which nodes rest on a feature: the object-ness changes sign within
+        the shortest normal line, or an edge lies within a pixel and a half."""
+        if normals is None:
+            normals = outward_normals(nodes)
+        offsets = self._region_offsets
+        values = self.sample(nodes[:, None, :] + offsets[None, :, None] * normals[:, None, :])
+        region = values[..., 2]
+        crossing = (region.min(1) < 0) & (region.max(1) > 0)
+        near = np.abs(offsets) <= 1.5
+        return crossing | (values[:, near, 0].max(1) > 0.3)

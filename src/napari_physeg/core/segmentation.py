@@ -15,17 +15,17 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 from scipy.spatial import cKDTree
-from skimage.filters import threshold_otsu
 
-from .contour import as_contour, outward_normals, perimeter, remove_loops, resample, segment_lengths, signed_area
+from .contour import as_contour, cut_pinches, outward_normals, perimeter, remove_loops, resample, segment_lengths, signed_area
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
-from .features import compute_features, normalized_intensity
+from .features import chamfer_distance, compute_features, normalized_intensity
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .materials import Material, get_material
+from .region import _disk, drawing_levels, object_region, objectness
 from .subpixel import polish
 
-__all__ = ["segment", "SegmentationResult", "object_polarity", "objectness_image"]
+__all__ = ["segment", "SegmentationResult", "region_features"]
 
 #: Nodes are redistributed (and the element rebuilt) when an edge of the
 #: contour grows or shrinks by this factor relative to the target spacing.
@@ -133,60 +133,58 @@ def _near_window_border(nodes: np.ndarray, window, shape, guard: float) -> bool:
                 or (cols.stop < shape[1] and hi[1] > w - 1 - guard))
 
 
-def _fill(contour: np.ndarray, shape) -> np.ndarray:
-    """Fast rasterisation of a polygon (OpenCV, 1/16 px vertex precision)."""
-    mask = np.zeros(shape, dtype=np.uint8)
-    pts = np.round(contour[:, ::-1] * 16).astype(np.int32)
-    cv2.fillPoly(mask, [pts], 1, lineType=cv2.LINE_8, shift=4)
-    return mask.view(bool)
+#: Edges count only within this many neck widths (see region.object_region)
+#: of the object's own region: texture inside it and neighbours' far sides
+#: do not hold the contour.
+EDGE_GATE = 3.0
 
 
-def object_polarity(intensity: np.ndarray, init: np.ndarray) -> int:
-    """+1 if the region inside ``init`` is brighter than a band around it, else -1."""
-    inside = _fill(init, intensity.shape)
-    if not inside.any():
-        return 1
-    width = max(3, int(0.1 * np.sqrt(inside.sum())))
-    kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * width + 1, 2 * width + 1))  # separable: fast
-    band = cv2.dilate(inside.view(np.uint8), kernel).view(bool) & ~inside
-    if not band.any():
-        return 1
-    return 1 if intensity[inside].mean() >= intensity[band].mean() else -1
+def region_features(intensity, feats, drawing, polarity=None):
+    """Object-ness and edge images for the object the user drew.
 
+    Parameters
+    ----------
+    intensity : (H, W) ndarray
+        Lightly smoothed, normalised intensity.
+    feats : FeatureImages
+        Edge and distance images of the same window.
+    drawing : (N, 2) ndarray
+        The initial contour in the window's frame.
+    polarity : {None, 1, -1}
+        Known polarity, or None to infer it from the drawing.
 
-def objectness_image(intensity: np.ndarray, init: np.ndarray, polarity: int) -> np.ndarray:
-    """Signed object-ness in [-1, 1]: ``polarity (I - t) / s`` clipped.
-
-    ``t`` is the mid-level between the two classes Otsu's method finds in a window three times the initial contour's
-    size (the whole image when that window holds no clear two-class contrast,
-    e.g. a contour drawn well inside a uniform object), ``s`` half the gap
-    between the two classes' means.
+    Returns
+    -------
+    signed, edges, distance : ndarray
+        Object-ness in [-1, 1] (+1 on the object's own region, -1 on its
+        background and on look-alike neighbours), the edge map gated to a band
+        around that region, and the distance to those edges.
+    polarity : int
     """
-    size = np.ptp(init, 0)
-    lo = np.maximum(np.floor(init.min(0) - size), 0).astype(int)
-    hi = np.minimum(np.ceil(init.max(0) + size), np.array(intensity.shape) - 1).astype(int)
-    # Statistics on a sub-grid of at most ~2**16 pixels: as good, much faster.
-    def thin(x):
-        stride = max(1, int(np.sqrt(x.size / 65536.0)))
-        return x[::stride, ::stride]
-
-    sample = thin(intensity)
-    lo1, hi99 = np.percentile(sample, [1, 99])
-    span = hi99 - lo1
-    threshold = half_gap = 0.0
-    for region in (thin(intensity[lo[0]: hi[0] + 1, lo[1]: hi[1] + 1]), sample):
-        if np.ptp(region) <= 1e-12:
-            continue
-        split = threshold_otsu(region)
-        above, below = region[region > split].mean(), region[region <= split].mean()
-        # Otsu's split of a two-level image can sit anywhere between the
-        # levels; the border of an antialiased object is at their mid-level.
-        threshold, half_gap = 0.5 * (above + below), 0.5 * (above - below)
-        if half_gap > 0.125 * span:
-            break
-    if not half_gap > 1e-6:
-        return np.zeros_like(intensity)
-    return np.clip(polarity * (intensity - threshold) / half_gap, -1.0, 1.0)
+    model = drawing_levels(intensity, drawing, polarity)
+    if not model.is_visible(intensity):
+        # No object here that the eye could tell from its background: no
+        # region force (edges may still guide the contour).
+        return np.zeros(intensity.shape, np.float32), feats.edges, feats.distance, model.polarity
+    signed = objectness(intensity, model)
+    region = object_region(signed, drawing, model)
+    if region is None:
+        return signed, feats.edges, feats.distance, model.polarity
+    signed = np.where(region, np.where(signed > 0, signed, 1.0), np.where(signed > 0, -1.0, signed))
+    # Texture inside the object's own region is the object: no edge holds
+    # the contour there, and only a rim keeps graded object-ness values (for
+    # the sub-pixel balance of the region force). Outside, edges count within
+    # a band around the region (neighbours' far sides do not).
+    size = np.sqrt(max(region.sum(), 1) / np.pi)
+    rim = int(np.clip(round(0.1 * size), 1, 3))
+    gate = int(np.ceil(EDGE_GATE * rim))
+    r8 = region.view(np.uint8)
+    interior = cv2.erode(r8, _disk(rim + 1)).view(bool)
+    band = cv2.dilate(r8, _disk(gate)).view(bool) & ~interior
+    edges = np.where(band, feats.edges, 0.0)
+    signed[cv2.erode(r8, _disk(rim)).view(bool)] = 1.0
+    distance = chamfer_distance(edges) if edges.any() else feats.distance
+    return signed.astype(np.float32), edges, distance, model.polarity
 
 
 def _update_caps(move, normals, cap, last_sign, max_step_length, tol):
@@ -216,6 +214,82 @@ def _total_step(sim, system, f, nodes, rest, cap):
         f = f * np.concatenate([scale, scale])
     U = system.G @ sim.step(system.G @ f)
     return np.column_stack([U[:m], U[m:]]) + rest - nodes
+
+
+#: Non-neighbouring nodes closer than this many node spacings pinch the
+#: contour: it is split there (see contour.cut_pinches).
+PINCH_GAP = 0.35
+
+#: A contour whose area and centroid changed by less than this (in px of
+#: mean normal displacement) over PLATEAU_STEPS steps has come to rest, even
+#: if a few nodes still jitter.
+PLATEAU_MOTION = 0.1
+PLATEAU_STEPS = 50
+
+#: At rest, the contour is on the object when at least this fraction of its
+#: nodes rest on a feature (an edge or an object/background switch).
+ON_BORDER_FRACTION = 0.7
+
+
+def _distance_with_image_border(edges: np.ndarray, window, shape) -> np.ndarray:
+    """Chamfer distance to the nearest edge, the image's own border counting
+    as an edge: an object cut by the border ends there, and a node on the
+    border does not reach across the object for the far side's edge."""
+    rows, cols = window
+    pad = ((int(rows.start == 0), int(rows.stop == shape[0])), (int(cols.start == 0), int(cols.stop == shape[1])))
+    framed = np.pad(np.asarray(edges) > 0, pad, constant_values=True)
+    distance = chamfer_distance(framed)
+    return distance[pad[0][0]: distance.shape[0] - pad[0][1], pad[1][0]: distance.shape[1] - pad[1][1]]
+
+
+def _element(nodes, sigma, material, rayleigh, integrator, dt, divergence_limit):
+    """Sclaroff's element for ``nodes`` and its time integrator."""
+    system = coefficient_system(nodes, sigma, material)
+    mu, gamma = rayleigh
+    if integrator == "newmark":
+        sim = NewmarkIntegrator(system.M, system.K, mu * system.M + gamma * system.K, dt=dt,
+                                divergence_limit=divergence_limit)
+    else:
+        sim = ModalIntegrator(system.M, system.K, mu=mu, gamma=gamma, dt=dt, divergence_limit=divergence_limit)
+    return system, sim
+
+
+def _needs_remesh(nodes: np.ndarray, spacing: float) -> bool:
+    seg = segment_lengths(nodes)
+    return bool(seg.max() > REMESH_STRETCH * spacing or seg.min() < spacing / REMESH_STRETCH
+                or len(cKDTree(nodes).query_pairs(PINCH_GAP * spacing)) > 0)
+
+
+class _Plateau:
+    """Detects a contour whose shape no longer changes over many steps."""
+
+    def __init__(self, spacing: float):
+        self.trace = []
+        self.spacing = spacing
+
+    def reached(self, nodes: np.ndarray) -> bool:
+        area = signed_area(nodes)
+        length = max(perimeter(nodes), 1e-9)
+        self.trace.append((area / length, *nodes.mean(0)))
+        if len(self.trace) <= PLATEAU_STEPS:
+            return False
+        then = np.array(self.trace[-PLATEAU_STEPS - 1])
+        now = np.array(self.trace[-1])
+        return bool(np.abs(now - then).max() < PLATEAU_MOTION)
+
+
+def _rest_reason(field: ForceField, nodes: np.ndarray, still: bool) -> str:
+    """Why a contour at rest stopped: on the object's border, or not."""
+    if field.on_border(nodes).mean() < ON_BORDER_FRACTION:
+        return "stalled"
+    return "converged" if still else "converged"
+
+
+def _divergence(steps: int, stiffness: float) -> DivergenceError:
+    return DivergenceError(
+        f"the contour's element became numerically singular at step {steps} and could not be repaired; "
+        f"try a finer node spacing (n_nodes) or a smaller sigma_factor (stiffness r = {stiffness:g})"
+    )
 
 
 def segment(
@@ -396,11 +470,9 @@ def segment(
         # The region force needs the border where it is: a light denoising,
         # not the strong ISEF smoothing used for edge detection.
         intensity = cv2.GaussianBlur(normalized_intensity(sub), (0, 0), 1.0, borderType=cv2.BORDER_REFLECT)
-        if pol is None:
-            pol = object_polarity(intensity, init - origin)
-        objectness = objectness_image(intensity, init - origin, pol)
-        field_ = ForceField.from_features(feats.edges, feats.distance, objectness, weights,
-                                          max_length=max_line_length)
+        signed, edges, distance, pol = region_features(intensity, feats, init - origin, pol)
+        distance = _distance_with_image_border(edges, window, image.shape)
+        field_ = ForceField.from_features(edges, distance, signed, weights, max_length=max_line_length)
         fields = [field_]
         if refine and reference == "incremental" and weights.get("intensity", 0) > 0 and len(weights) > 1:
             fields.append(field_.with_weights({"intensity": sum(weights.values())}))
@@ -420,29 +492,28 @@ def segment(
             f"sigma = {sigma_used!r} must be positive and at most 2 x the node spacing ({spacing:.3g} px); "
             "typical values are 0.75-1.5 x the spacing"
         )
-    hi_bound = np.array(image[window].shape, dtype=float) - 1.0
     divergence_limit = 10.0 * float(np.hypot(*image.shape))
-
     model_time = 0.0
-    rayleigh = None
+    rayleigh = rayleigh_coefficients(damping_ratio, *reference_frequency_range(spacing, sigma_used, material))
 
     def build(nodes):
-        nonlocal model_time, rayleigh
+        nonlocal model_time
         t0 = time.perf_counter()
-        system = coefficient_system(nodes, sigma_used, material)
-        if rayleigh is None:
-            rayleigh = rayleigh_coefficients(damping_ratio, *reference_frequency_range(spacing, sigma_used,
-                                                                                      material))
-        mu, gamma = rayleigh
-        if integrator == "newmark":
-            sim = NewmarkIntegrator(system.M, system.K, mu * system.M + gamma * system.K, dt=dt,
-                                    divergence_limit=divergence_limit)
-        else:
-            sim = ModalIntegrator(system.M, system.K, mu=mu, gamma=gamma, dt=dt,
-                                  divergence_limit=divergence_limit)
-        model_time += time.perf_counter() - t0
+        try:
+            system, sim = _element(nodes, sigma_used, material, rayleigh, integrator, dt, divergence_limit)
+        finally:
+            model_time += time.perf_counter() - t0
         return system, sim
 
+    def repaired(nodes):
+        """The contour without pinches, loops and crowded nodes, evenly resampled."""
+        # Clipped first: nodes pushed past a corner of the image meet there.
+        inside = np.clip(nodes, -0.5, bounds)
+        fixed = resample(remove_loops(cut_pinches(inside, PINCH_GAP * spacing)), spacing=spacing)
+        keep = np.linalg.norm(fixed - np.roll(fixed, 1, axis=0), axis=1) > 1e-3 * spacing
+        return fixed[keep] if keep.sum() >= 3 else fixed
+
+    bounds = np.array(image[window].shape, dtype=float) - 0.5  # pixel edges: the image's extent
     system, sim = build(nodes)
     rest = nodes.copy()
     history = [nodes + origin]
@@ -451,6 +522,7 @@ def segment(
     quiet = 0
     stop_reason = "max_steps"
     steps = 0
+    plateau = _Plateau(spacing)
     # Phase 1 uses every force; once at rest, a short second phase lets the
     # region force alone (sub-pixel: it balances where the lightly smoothed
     # intensity crosses the object/background mid-level) settle the nodes
@@ -464,7 +536,7 @@ def segment(
             window, origin, fields = fields_for(_window(nodes + origin, image.shape, margin, keep=window))
             shift = old_origin - origin
             nodes, rest = nodes + shift, rest + shift
-            hi_bound = np.array(image[window].shape, dtype=float) - 1.0
+            bounds = np.array(image[window].shape, dtype=float) - 0.5
         field_now = fields[phase]
         normals = outward_normals(nodes)
         F = stiffness * field_now(nodes, normals)
@@ -484,40 +556,50 @@ def segment(
                 proposal = np.column_stack([U[:m], U[m:]]) + rest - nodes
                 cap, last_sign = _update_caps(proposal, normals, cap, last_sign, max_step_length, tol)
                 move = _total_step(sim, system, f, nodes, rest, cap)
-        except DivergenceError as err:
-            raise DivergenceError(
-                f"{err} at step {steps}: lower the stiffness r ({stiffness:g}) or use a stiffer material"
-            ) from None
-        new_nodes = np.clip(nodes + move, 0.0, hi_bound)
+        except (DivergenceError, np.linalg.LinAlgError, RuntimeError, ValueError) as err:
+            # Image forces are bounded and the scheme unconditionally stable:
+            # a blow-up means the element is ill-conditioned (nodes of two
+            # parts of the contour nearly touching). Repair it and go on.
+            if reference != "incremental" or getattr(err, "_repaired", False):
+                raise _divergence(steps, stiffness) from None
+            nodes = repaired(nodes)
+            try:
+                system, sim = build(nodes)
+            except (np.linalg.LinAlgError, RuntimeError, ValueError) as err2:
+                raise _divergence(steps, stiffness) from err2
+            cap, last_sign = np.full(len(nodes), float(max_step_length)), np.zeros(len(nodes))
+            continue
+        new_nodes = np.clip(nodes + move, -0.5, bounds)
         moved = float(np.abs(new_nodes - nodes).max())
         if not np.isfinite(moved) or moved > divergence_limit:
-            raise DivergenceError(
-                f"the contour diverged at step {steps}: lower the stiffness r ({stiffness:g}) or use a "
-                "stiffer material"
-            )
+            raise _divergence(steps, stiffness)
         nodes = new_nodes
-        if reference == "incremental":
-            seg = segment_lengths(nodes)
-            if seg.max() > REMESH_STRETCH * spacing or seg.min() < spacing / REMESH_STRETCH:
-                old = nodes
-                nodes = resample(remove_loops(nodes), spacing=spacing)
-                nearest = cKDTree(old).query(nodes)[1]
-                cap, last_sign = cap[nearest], last_sign[nearest]
+        if reference == "incremental" and _needs_remesh(nodes, spacing):
+            old = nodes
+            nodes = repaired(nodes)
+            if len(nodes) < 3 or abs(signed_area(nodes)) < 1.0:
+                break
+            nearest = cKDTree(old).query(nodes)[1]
+            cap, last_sign = cap[nearest], last_sign[nearest]
+            try:
                 system, sim = build(nodes)
+            except (np.linalg.LinAlgError, RuntimeError, ValueError):
+                raise _divergence(steps, stiffness) from None
         quiet = quiet + 1 if moved < tol else 0
         if steps % max(int(history_every), 1) == 0:
             history.append(nodes + origin)
         if callback is not None and callback(steps, nodes + origin) is False:
             stop_reason = "cancelled"
             break
-        if quiet >= patience:
+        if quiet >= patience or plateau.reached(nodes):
             if phase == len(fields) - 1:
-                stop_reason = "converged"
+                stop_reason = _rest_reason(field_now, nodes, quiet >= patience)
                 break
             phase += 1
             quiet = 0
+            plateau = _Plateau(spacing)
             cap = np.full(len(nodes), 0.5 * float(max_step_length))
-    if stop_reason != "cancelled" and abs(signed_area(nodes)) < 1.0:
+    if stop_reason != "cancelled" and (len(nodes) < 3 or abs(signed_area(nodes)) < 1.0):
         # Nothing held it: the region force shrinks a contour drawn on a
         # uniform background until it is a point. Say so rather than return it.
         raise ValueError(
@@ -528,7 +610,7 @@ def segment(
         # At rest every node is within a few tenths of a pixel of the border,
         # read on smoothed images and each on its own noise: measure the border
         # on the raw image and fit the polygon to it (see subpixel.polish).
-        nodes = np.clip(polish(image[window], nodes, polarity=pol), 0.0, hi_bound)
+        nodes = np.clip(polish(image[window], nodes, polarity=pol), -0.5, bounds)
     nodes = nodes + origin
     if not np.array_equal(history[-1], nodes):
         history.append(nodes.copy())

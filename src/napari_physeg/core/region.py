@@ -1,0 +1,213 @@
+"""Which pixels belong to the object: a region model read from the drawing.
+
+The region (intensity) force of :mod:`.forces` needs a signed *object-ness*
+image, +1 on the object and -1 on its background. A global two-class
+threshold gets it wrong on real microscopy: textured interiors, touching
+neighbours as bright as the object, three intensity levels, and objects cut
+by the image border. Here every statistic is local to the contour the user
+drew (``docs/physics.md`` §3b):
+
+1. **Levels and polarity** (:func:`drawing_levels`). The drawing is either
+   *around* the object (its line lies on the background and its centre on the
+   object) or *inside* it (line and centre alike, the background further out).
+   Medians of the intensity on the drawn line, in the drawing's centre and in
+   rings outside it tell which, give the object's and the background's levels,
+   and so the polarity: no global threshold, no guess.
+2. **The object's own region** (:func:`object_region`). The pixels closer to
+   the object's level than to the background's are split at narrow necks (a
+   small erosion), and the piece the drawing covers most is kept, holes
+   filled. Everything else that looks like the object (a touching neighbour,
+   or, for a drawing around the object, anything beyond the drawing) counts
+   as background: neighbours cannot capture the contour and texture inside
+   the object cannot trap it.
+
+The image border is not background: :mod:`.forces` reads the object-ness as
+-1 only *beyond* it, so an object cut by the border ends on the border.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy import ndimage as ndi
+
+from .features import _noise_sigma
+
+__all__ = ["RegionModel", "drawing_levels", "object_region", "objectness"]
+
+#: Rings outside the drawing (in multiples of its size about its centroid)
+#: tried in turn for the background of a drawing made inside the object.
+_OUTER_RINGS = ((1.15, 1.5), (1.5, 2.2), (2.2, 3.2))
+
+#: A drawing inside the object bounds it to this many times its size.
+_INSIDE_REACH = 4.0
+
+#: Levels closer than this many noise standard deviations, or than this
+#: fraction of the normalised intensity range, are not a contrast.
+MIN_CONTRAST_SIGMAS = 3.0
+MIN_CONTRAST = 0.02
+
+
+@dataclass(frozen=True)
+class RegionModel:
+    """The object's and the background's intensity levels near the drawing.
+
+    Attributes
+    ----------
+    polarity : int
+        +1 when the object is brighter than its background, -1 darker.
+    object_level, background_level : float
+        Median intensities of the object and of its background.
+    drawn_around : bool
+        Whether the drawing surrounds the object (else it lies inside it).
+    """
+
+    polarity: int
+    object_level: float
+    background_level: float
+    drawn_around: bool
+
+    @property
+    def contrast(self) -> float:
+        return abs(self.object_level - self.background_level)
+
+    def is_visible(self, intensity: np.ndarray) -> bool:
+        """Whether the object stands out of its background's noise in ``intensity`` (in [0, 1])."""
+        return self.contrast > max(MIN_CONTRAST_SIGMAS * _noise_sigma(intensity), MIN_CONTRAST)
+
+
+def _fill(contour: np.ndarray, shape) -> np.ndarray:
+    """Polygon mask (OpenCV, 1/16 px vertex precision)."""
+    mask = np.zeros(shape, dtype=np.uint8)
+    pts = np.round(contour[:, ::-1] * 16).astype(np.int32)
+    cv2.fillPoly(mask, [pts], 1, lineType=cv2.LINE_8, shift=4)
+    return mask.view(bool)
+
+
+def _line_band(contour: np.ndarray, shape, half_width: int) -> np.ndarray:
+    mask = np.zeros(shape, dtype=np.uint8)
+    pts = np.round(contour[:, ::-1] * 16).astype(np.int32)
+    cv2.polylines(mask, [pts], True, 1, thickness=2 * half_width + 1, lineType=cv2.LINE_8, shift=4)
+    return mask.view(bool)
+
+
+def _scaled(contour: np.ndarray, factor: float) -> np.ndarray:
+    centre = contour.mean(0)
+    return centre + factor * (contour - centre)
+
+
+def _median(values: np.ndarray) -> float:
+    return float(np.median(values)) if values.size else np.nan
+
+
+def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | None = None) -> RegionModel:
+    """Object and background levels, polarity, and whether the drawing is around the object.
+
+    Parameters
+    ----------
+    intensity : (H, W) ndarray
+        Lightly smoothed intensity (any scale).
+    drawing : (N, 2) ndarray
+        The contour the user drew, ``(row, col)`` in ``intensity``'s frame.
+    polarity : {None, 1, -1}, optional
+        Known polarity (+1 bright object); None to infer it.
+
+    Returns
+    -------
+    RegionModel
+    """
+    shape = intensity.shape
+    size = float(np.sqrt(max(abs(np.ptp(drawing[:, 0]) * np.ptp(drawing[:, 1])), 1.0)))
+    half_width = int(np.clip(round(0.05 * size), 1, 3))
+    on_line = _median(intensity[_line_band(drawing, shape, half_width)])
+    centre = _median(intensity[_fill(_scaled(drawing, 0.5), shape)])
+    if np.isnan(centre):  # a drawing too thin to have a centre
+        centre = on_line
+    # The background of a drawing made inside the object: the ring outside
+    # it that differs most from the drawn line.
+    outside, best = np.nan, -1.0
+    for lo, hi in _OUTER_RINGS:
+        ring = _fill(_scaled(drawing, hi), shape) & ~_fill(_scaled(drawing, lo), shape)
+        level = _median(intensity[ring])
+        if not np.isnan(level) and abs(level - on_line) > best:
+            outside, best = level, abs(level - on_line)
+    around = np.isnan(outside) or abs(centre - on_line) >= abs(on_line - outside)
+    obj, background = (centre, on_line) if around else (on_line, outside)
+    if polarity is None:
+        polarity = 1 if obj >= background else -1
+    elif np.sign(obj - background) not in (0, polarity):
+        # The user knows better: take the levels in the order they say.
+        obj, background = (max(obj, background), min(obj, background)) if polarity > 0 else \
+            (min(obj, background), max(obj, background))
+    return RegionModel(int(polarity), float(obj), float(background), bool(around))
+
+
+def objectness(intensity: np.ndarray, model: RegionModel) -> np.ndarray:
+    """Signed object-ness ``clip((I - mid) / half_gap, -1, 1)`` toward the object's level."""
+    mid = 0.5 * (model.object_level + model.background_level)
+    half_gap = max(0.5 * model.contrast, 1e-12)
+    return np.clip(model.polarity * (intensity - mid) / half_gap, -1.0, 1.0).astype(np.float32)
+
+
+def _disk(radius: int) -> np.ndarray:
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+
+
+def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel) -> np.ndarray | None:
+    """The object's own pixels: the object-like piece the drawing covers most.
+
+    Parameters
+    ----------
+    signed : (H, W) ndarray
+        Object-ness from :func:`objectness`.
+    drawing : (N, 2) ndarray
+        The drawn contour in the same frame.
+    model : RegionModel
+
+    Returns
+    -------
+    ndarray of bool, or None
+        The object's region (holes filled), or None when no object-like pixel
+        lies under the drawing.
+    """
+    shape = signed.shape
+    drawn = _fill(drawing, shape)
+    drawn_size = np.sqrt(max(drawn.sum(), 1) / np.pi)
+    like = signed > 0
+    # The object is about where the user drew it: nothing beyond the drawing
+    # (and a margin for a hasty hand) when drawn around it, nothing beyond a
+    # few times the drawing when drawn inside it. Growth past that is a leak.
+    if model.drawn_around:
+        margin = int(np.clip(round(0.15 * drawn_size), 2, 8))
+        like &= cv2.dilate(drawn.view(np.uint8), _disk(margin)).view(bool)
+    else:
+        like &= _fill(_scaled(drawing, _INSIDE_REACH), shape)
+    piece = _largest_covered_piece(like, drawn, neck=int(np.clip(round(0.1 * drawn_size), 1, 4)))
+    if piece is None:
+        return None
+    # Necks are cut at the object's scale, which a drawing inside it understates.
+    size = np.sqrt(piece.sum() / np.pi)
+    if size > 1.5 * drawn_size:
+        finer = _largest_covered_piece(like, drawn, neck=int(np.clip(round(0.1 * size), 1, 4)))
+        piece = piece if finer is None else finer
+    return ndi.binary_fill_holes(piece)
+
+
+def _largest_covered_piece(like: np.ndarray, drawn: np.ndarray, neck: int) -> np.ndarray | None:
+    """The piece of ``like``, split at necks thinner than ~2 ``neck`` px, that ``drawn`` covers most."""
+    core = cv2.erode(like.view(np.uint8), _disk(neck)).view(bool)
+    labels, n = ndi.label(core)
+    if n == 0:
+        labels, n = ndi.label(like)
+        neck = 0
+        if n == 0:
+            return None
+    overlap = np.bincount(labels[drawn], minlength=n + 1)[1:]
+    if not overlap.any():
+        return None
+    piece = labels == 1 + int(np.argmax(overlap))
+    if neck:
+        piece = cv2.dilate(piece.view(np.uint8), _disk(neck)).view(bool) & like
+    return piece
