@@ -67,25 +67,34 @@ def run_snake(obj, init):
     return iou(polygon2mask(obj.image.shape, snake), obj.mask), t
 
 
-def run_mgac(obj, init):
+def run_mgac(obj, init, balloon=-1):
+    """``balloon`` -1 shrinks from an init around the object, +1 grows from one inside it."""
     def go():
         g = inverse_gaussian_gradient(obj.image)
         return morphological_geodesic_active_contour(
-            g, 400, init_level_set=polygon2mask(obj.image.shape, init), smoothing=1, balloon=-1,
+            g, 400, init_level_set=polygon2mask(obj.image.shape, init), smoothing=1, balloon=balloon,
             threshold="auto")
     ls, t = timed(go, 1)
     return iou(ls.astype(bool), obj.mask), t
 
 
-def run_mcv(obj, init):
+def run_mcv(obj, init, point=None, return_mask=False):
+    """IoU and time; the phase is the one that overlaps the object best, or, given a
+    ``point`` (row, col) inside the image, the one that contains it (no look at the truth)."""
     def go():
         return morphological_chan_vese(obj.image, 200, init_level_set=polygon2mask(obj.image.shape, init),
                                        smoothing=2)
     ls, t = timed(go, 1)
     ls = ls.astype(bool)
-    # Chan-Vese labels one phase 1; take the phase that overlaps the object.
-    if iou(~ls, obj.mask) > iou(ls, obj.mask):
+    # Chan-Vese labels its two phases 0 and 1 arbitrarily: choose one.
+    if point is not None:
+        r, c = (min(max(int(round(v)), 0), n - 1) for v, n in zip(point, ls.shape))
+        if not ls[r, c]:
+            ls = ~ls
+    elif iou(~ls, obj.mask) > iou(ls, obj.mask):
         ls = ~ls
+    if return_mask:
+        return iou(ls, obj.mask), t, ls
     return iou(ls, obj.mask), t
 
 

