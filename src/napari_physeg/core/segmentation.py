@@ -155,21 +155,21 @@ def region_features(intensity, feats, drawing, polarity=None):
 
     Returns
     -------
-    signed, edges, distance : ndarray
+    signed, edges : ndarray
         Object-ness in [-1, 1] (+1 on the object's own region, -1 on its
-        background and on look-alike neighbours), the edge map gated to a band
-        around that region, and the distance to those edges.
+        background and on look-alike neighbours), and the edge map gated to a
+        band around that region.
     polarity : int
     """
     model = drawing_levels(intensity, drawing, polarity)
     if not model.is_visible(intensity):
         # No object here that the eye could tell from its background: no
         # region force (edges may still guide the contour).
-        return np.zeros(intensity.shape, np.float32), feats.edges, feats.distance, model.polarity
+        return np.zeros(intensity.shape, np.float32), feats.edges, model.polarity
     signed = objectness(intensity, model)
     region = object_region(signed, drawing, model)
     if region is None:
-        return signed, feats.edges, feats.distance, model.polarity
+        return signed, feats.edges, model.polarity
     signed = np.where(region, np.where(signed > 0, signed, 1.0), np.where(signed > 0, -1.0, signed))
     # Texture inside the object's own region is the object: no edge holds
     # the contour there, and only a rim keeps graded object-ness values (for
@@ -183,8 +183,7 @@ def region_features(intensity, feats, drawing, polarity=None):
     band = cv2.dilate(r8, _disk(gate)).view(bool) & ~interior
     edges = np.where(band, feats.edges, 0.0)
     signed[cv2.erode(r8, _disk(rim)).view(bool)] = 1.0
-    distance = chamfer_distance(edges) if edges.any() else feats.distance
-    return signed.astype(np.float32), edges, distance, model.polarity
+    return signed.astype(np.float32), edges, model.polarity
 
 
 def _update_caps(move, normals, cap, last_sign, max_step_length, tol):
@@ -263,9 +262,8 @@ def _needs_remesh(nodes: np.ndarray, spacing: float) -> bool:
 class _Plateau:
     """Detects a contour whose shape no longer changes over many steps."""
 
-    def __init__(self, spacing: float):
+    def __init__(self):
         self.trace = []
-        self.spacing = spacing
 
     def reached(self, nodes: np.ndarray) -> bool:
         area = signed_area(nodes)
@@ -278,11 +276,9 @@ class _Plateau:
         return bool(np.abs(now - then).max() < PLATEAU_MOTION)
 
 
-def _rest_reason(field: ForceField, nodes: np.ndarray, still: bool) -> str:
+def _rest_reason(field: ForceField, nodes: np.ndarray) -> str:
     """Why a contour at rest stopped: on the object's border, or not."""
-    if field.on_border(nodes).mean() < ON_BORDER_FRACTION:
-        return "stalled"
-    return "converged" if still else "converged"
+    return "stalled" if field.on_border(nodes).mean() < ON_BORDER_FRACTION else "converged"
 
 
 def _divergence(steps: int, stiffness: float) -> DivergenceError:
@@ -470,7 +466,7 @@ def segment(
         # The region force needs the border where it is: a light denoising,
         # not the strong ISEF smoothing used for edge detection.
         intensity = cv2.GaussianBlur(normalized_intensity(sub), (0, 0), 1.0, borderType=cv2.BORDER_REFLECT)
-        signed, edges, distance, pol = region_features(intensity, feats, init - origin, pol)
+        signed, edges, pol = region_features(intensity, feats, init - origin, pol)
         distance = _distance_with_image_border(edges, window, image.shape)
         field_ = ForceField.from_features(edges, distance, signed, weights, max_length=max_line_length)
         fields = [field_]
@@ -522,7 +518,7 @@ def segment(
     quiet = 0
     stop_reason = "max_steps"
     steps = 0
-    plateau = _Plateau(spacing)
+    plateau = _Plateau()
     # Phase 1 uses every force; once at rest, a short second phase lets the
     # region force alone (sub-pixel: it balances where the lightly smoothed
     # intensity crosses the object/background mid-level) settle the nodes
@@ -556,11 +552,11 @@ def segment(
                 proposal = np.column_stack([U[:m], U[m:]]) + rest - nodes
                 cap, last_sign = _update_caps(proposal, normals, cap, last_sign, max_step_length, tol)
                 move = _total_step(sim, system, f, nodes, rest, cap)
-        except (DivergenceError, np.linalg.LinAlgError, RuntimeError, ValueError) as err:
+        except (DivergenceError, np.linalg.LinAlgError, RuntimeError, ValueError):
             # Image forces are bounded and the scheme unconditionally stable:
             # a blow-up means the element is ill-conditioned (nodes of two
             # parts of the contour nearly touching). Repair it and go on.
-            if reference != "incremental" or getattr(err, "_repaired", False):
+            if reference != "incremental":
                 raise _divergence(steps, stiffness) from None
             nodes = repaired(nodes)
             try:
@@ -593,11 +589,11 @@ def segment(
             break
         if quiet >= patience or plateau.reached(nodes):
             if phase == len(fields) - 1:
-                stop_reason = _rest_reason(field_now, nodes, quiet >= patience)
+                stop_reason = _rest_reason(field_now, nodes)
                 break
             phase += 1
             quiet = 0
-            plateau = _Plateau(spacing)
+            plateau = _Plateau()
             cap = np.full(len(nodes), 0.5 * float(max_step_length))
     if stop_reason != "cancelled" and (len(nodes) < 3 or abs(signed_area(nodes)) < 1.0):
         # Nothing held it: the region force shrinks a contour drawn on a
