@@ -43,9 +43,14 @@ class SegmentationResult:
     steps : int
         Time steps taken.
     converged : bool
-        True when the contour came to rest (see ``stop_reason``).
+        True when the contour came to rest on the object's border (see
+        ``stop_reason``).
     stop_reason : str
-        ``"converged"``, ``"max_steps"`` or ``"cancelled"``.
+        ``"converged"`` (at rest, at least 70 % of the nodes on an edge or an
+        object/background switch), ``"stalled"`` (at rest elsewhere: nothing
+        in reach pulls it), ``"max_steps"`` or ``"cancelled"``. At rest means
+        no node moved more than ``tol`` for ``patience`` steps, or the area and
+        centroid changed by less than 0.1 px over 50 steps.
     history : tuple of ndarray
         Sub-sampled evolution, first the resampled initial contour, last the
         final one.
@@ -403,7 +408,9 @@ def segment(
         parameters; and when the contour collapses to a point because no
         object border lies within reach of it.
     DivergenceError
-        If the integration produced non-finite or exploding displacements.
+        If the element stays numerically singular after the contour was
+        repaired (pinches, loops and crowded nodes cut, nodes resampled), or
+        the integration produced non-finite or exploding displacements.
 
     Notes
     -----
