@@ -305,3 +305,25 @@ def test_contour_on_a_uniform_background_stalls_honestly():
     init = np.column_stack([150 + 40 * np.sin(t), 150 + 40 * np.cos(t)])
     res = segment(image, init, max_steps=300)
     assert not res.converged and res.stop_reason in ("stalled", "max_steps")
+
+
+def test_object_cut_by_the_image_border_among_bright_neighbours():
+    """A circle drawn around a nucleus that the image's lower side cuts, half
+    of it beyond the image, with bright neighbours all around: the nodes
+    clipped onto the nucleus do not make it look like background (the
+    polarity stays bright) and the contour ends on the image's side."""
+    shape = (96, 128)
+    rr, cc = np.mgrid[: shape[0], : shape[1]]
+
+    def disk(r, c, radius):
+        return (rr - r) ** 2 + (cc - c) ** 2 <= radius**2
+
+    mask = disk(90, 64, 18)
+    neighbours = disk(58, 26, 16) | disk(58, 102, 16) | disk(40, 64, 12)
+    image = np.where(mask | neighbours, 0.8, 0.2) + 0.03 * np.random.default_rng(1).standard_normal(shape)
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    drawing = np.column_stack([92 + 24 * np.sin(t), 64 + 24 * np.cos(t)])
+    with pytest.warns(UserWarning, match="outside the image"):
+        res = segment(image, drawing)
+    assert res.polarity == 1 and res.converged
+    assert iou(res.contour, mask) > 0.9

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from scipy import ndimage as ndi
+from skimage import segmentation
 
 from .features import _noise_sigma
 
@@ -126,14 +127,17 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     if np.isnan(centre):  # a drawing too thin to have a centre
         centre = on_line
     # The background of a drawing made inside the object: the ring outside
-    # it that differs most from the drawn line.
+    # it that differs most from the drawing's centre.
     outside, best = np.nan, -1.0
     for lo, hi in _OUTER_RINGS:
         ring = _fill(_scaled(drawing, hi), shape) & ~_fill(_scaled(drawing, lo), shape)
         level = _median(intensity[ring])
-        if not np.isnan(level) and abs(level - on_line) > best:
-            outside, best = level, abs(level - on_line)
-    around = np.isnan(outside) or abs(centre - on_line) >= abs(on_line - outside)
+        if not np.isnan(level) and abs(level - centre) > best:
+            outside, best = level, abs(level - centre)
+    # Around the object, the line lies on the background: at least halfway
+    # from the centre's level to the outside's. (Comparing the line with the
+    # outside instead fails when the rings hold look-alike neighbours.)
+    around = np.isnan(outside) or abs(centre - on_line) >= 0.5 * abs(centre - outside)
     obj, background = (centre, on_line) if around else (on_line, outside)
     if polarity is None:
         polarity = 1 if obj >= background else -1
@@ -156,7 +160,16 @@ def _disk(radius: int) -> np.ndarray:
 
 
 def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel) -> np.ndarray | None:
-    """The object's own pixels: the object-like piece the drawing covers most.
+    """The object's own pixels: the object-like blob the drawing marks, split from its neighbours.
+
+    Object-like pixels (``signed > 0``) are split into blobs at necks by a
+    watershed of their distance to the background, seeded by the cores of the
+    blobs (the pixels deeper than half the object's inscribed radius): touching
+    neighbours meet the object at a neck narrower than the object, its own
+    lobes and protrusions do not. The cores the drawing marks are the object's
+    (for a drawing around it, those lying mostly inside the drawing; for a
+    drawing inside it, those it touches), all others are neighbours. Holes
+    are filled.
 
     Parameters
     ----------
@@ -169,45 +182,61 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel) -
     Returns
     -------
     ndarray of bool, or None
-        The object's region (holes filled), or None when no object-like pixel
-        lies under the drawing.
+        The object's region, or None when no object-like pixel lies under the
+        drawing.
     """
     shape = signed.shape
     drawn = _fill(drawing, shape)
     drawn_size = np.sqrt(max(drawn.sum(), 1) / np.pi)
-    like = signed > 0
     # The object is about where the user drew it: nothing beyond the drawing
     # (and a margin for a hasty hand) when drawn around it, nothing beyond a
     # few times the drawing when drawn inside it. Growth past that is a leak.
     if model.drawn_around:
         margin = int(np.clip(round(0.15 * drawn_size), 2, 8))
-        like &= cv2.dilate(drawn.view(np.uint8), _disk(margin)).view(bool)
+        reach = cv2.dilate(drawn.view(np.uint8), _disk(margin)).view(bool)
+        marked = _fill(_scaled(drawing, 0.5), shape)
     else:
-        like &= _fill(_scaled(drawing, _INSIDE_REACH), shape)
-    piece = _largest_covered_piece(like, drawn, neck=int(np.clip(round(0.1 * drawn_size), 1, 4)))
-    if piece is None:
+        reach = _fill(_scaled(drawing, _INSIDE_REACH), shape)
+        marked = drawn
+    # Neighbours are split off whole (their cores lie beyond the drawing),
+    # then the reach applies. Small holes (texture) would make false necks.
+    like = _without_small_holes(signed > 0, 0.25 * drawn.sum())
+    seed = (marked if (marked & like).any() else drawn) & like
+    if not seed.any():
         return None
-    # Necks are cut at the object's scale, which a drawing inside it understates.
-    size = np.sqrt(piece.sum() / np.pi)
-    if size > 1.5 * drawn_size:
-        finer = _largest_covered_piece(like, drawn, neck=int(np.clip(round(0.1 * size), 1, 4)))
-        piece = piece if finer is None else finer
-    return ndi.binary_fill_holes(piece)
+    # Depth below the object's outline; beyond the image is not object, so
+    # two objects cut by the image's side meet there at a neck too.
+    depth = cv2.distanceTransform(np.pad(like, 1).view(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
+    inscribed = float(depth[seed].max())
+    cores, n = ndi.label(depth > 0.5 * inscribed)
+    ours = np.unique(cores[seed])
+    if model.drawn_around:
+        # Lobes of the object lie inside the drawing; neighbours cross it.
+        inside_share = ndi.mean(drawn, cores, index=np.arange(1, n + 1))
+        ours = np.union1d(ours, 1 + np.flatnonzero(inside_share >= 0.8))
+    ours = ours[ours > 0]
+    if ours.size == 0:  # the drawing marks only a thin part: its blob is the object
+        blobs = ndi.label(like)[0]
+        return _smoothed((blobs == blobs[seed][0]) & reach)
+    markers = np.where(cores > 0, 2, 0).astype(np.int32)
+    markers[np.isin(cores, ours)] = 1
+    blobs = segmentation.watershed(-depth, markers, mask=like)
+    return _smoothed((blobs == 1) & reach)
 
 
-def _largest_covered_piece(like: np.ndarray, drawn: np.ndarray, neck: int) -> np.ndarray | None:
-    """The piece of ``like``, split at necks thinner than ~2 ``neck`` px, that ``drawn`` covers most."""
-    core = cv2.erode(like.view(np.uint8), _disk(neck)).view(bool)
-    labels, n = ndi.label(core)
+def _smoothed(region: np.ndarray) -> np.ndarray:
+    """``region`` without one-pixel spurs (noise at its rim), holes filled."""
+    opened = cv2.morphologyEx(region.view(np.uint8), cv2.MORPH_OPEN, _disk(1)).view(bool)
+    return ndi.binary_fill_holes(opened if opened.any() else region)
+
+
+def _without_small_holes(mask: np.ndarray, max_area: float) -> np.ndarray:
+    """``mask`` with its holes (not open to the image's sides) of at most ``max_area`` px filled."""
+    holes, n = ndi.label(~mask)
     if n == 0:
-        labels, n = ndi.label(like)
-        neck = 0
-        if n == 0:
-            return None
-    overlap = np.bincount(labels[drawn], minlength=n + 1)[1:]
-    if not overlap.any():
-        return None
-    piece = labels == 1 + int(np.argmax(overlap))
-    if neck:
-        piece = cv2.dilate(piece.view(np.uint8), _disk(neck)).view(bool) & like
-    return piece
+        return mask
+    small = np.bincount(holes.ravel(), minlength=n + 1) <= max_area
+    open_to_side = np.concatenate([holes[0], holes[-1], holes[:, 0], holes[:, -1]])
+    small[0] = False
+    small[open_to_side] = False
+    return mask | small[holes]

@@ -446,6 +446,9 @@ def segment(
     if n_nodes is not None and int(n_nodes) < 3:
         raise ValueError(f"n_nodes must be at least 3, got {n_nodes!r}")
 
+    # The drawing as the user made it (partly beyond the image, maybe) tells
+    # the object from its background; the clipped one starts the contour.
+    drawing = init
     init = _clip_to_image(init, image.shape)
     # Feature images on a window around the contour: the forces read them
     # along normal lines of at most max_line_length px, so a guard band of
@@ -473,7 +476,7 @@ def segment(
         # The region force needs the border where it is: a light denoising,
         # not the strong ISEF smoothing used for edge detection.
         intensity = cv2.GaussianBlur(normalized_intensity(sub), (0, 0), 1.0, borderType=cv2.BORDER_REFLECT)
-        signed, edges, pol = region_features(intensity, feats, init - origin, pol)
+        signed, edges, pol = region_features(intensity, feats, drawing - origin, pol)
         distance = _distance_with_image_border(edges, window, image.shape)
         field_ = ForceField.from_features(edges, distance, signed, weights, max_length=max_line_length)
         fields = [field_]

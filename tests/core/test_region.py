@@ -1,0 +1,93 @@
+"""The region model read from the drawing: levels, polarity, and the object's own pixels."""
+
+import numpy as np
+import pytest
+
+from napari_physeg.core.region import drawing_levels, object_region, objectness
+
+
+def disk(shape, center, radius):
+    rr, cc = np.mgrid[: shape[0], : shape[1]]
+    return (rr - center[0]) ** 2 + (cc - center[1]) ** 2 <= radius**2
+
+
+def circle(center, radius, n=64):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.column_stack([center[0] + radius * np.sin(t), center[1] + radius * np.cos(t)])
+
+
+def render(mask, bright=True, noise=0.03, seed=0):
+    rng = np.random.default_rng(seed)
+    image = np.where(mask, 0.8, 0.2) if bright else np.where(mask, 0.2, 0.8)
+    return image + noise * rng.standard_normal(mask.shape)
+
+
+def region_for(image, drawing):
+    model = drawing_levels(image, drawing)
+    return model, object_region(objectness(image, model), drawing, model)
+
+
+def overlap(a, b):
+    return (a & b).sum() / b.sum()
+
+
+@pytest.mark.parametrize("bright", [True, False])
+@pytest.mark.parametrize("drawn", ["around", "inside"])
+def test_polarity_and_placement_of_the_drawing(bright, drawn):
+    mask = disk((96, 96), (48, 48), 20)
+    drawing = circle((48, 48), 27 if drawn == "around" else 9)
+    model = drawing_levels(render(mask, bright), drawing)
+    assert model.polarity == (1 if bright else -1)
+    assert model.drawn_around == (drawn == "around")
+    assert model.object_level == pytest.approx(0.8 if bright else 0.2, abs=0.05)
+
+
+def test_drawing_beyond_the_image_border_among_bright_neighbours():
+    """A nucleus cut by the image's lower side, drawn around with a circle
+    that leaves the image, its outer rings full of bright neighbours: the
+    part of the line beyond the image says nothing, the polarity stays right."""
+    shape = (96, 128)
+    mask = disk(shape, (90, 64), 18)
+    neighbours = disk(shape, (58, 24), 16) | disk(shape, (58, 104), 16) | disk(shape, (40, 64), 12)
+    image = render(mask | neighbours)
+    model, region = region_for(image, circle((88, 64), 23))
+    assert model.polarity == 1 and model.drawn_around
+    assert overlap(region, mask) > 0.95
+    assert (region & neighbours).sum() < 0.02 * neighbours.sum()
+
+
+def test_touching_neighbour_is_split_at_the_neck():
+    """Two disks touching along a contact 0.87 times as wide as their radius:
+    a drawing inside one of them gets that one only."""
+    shape = (80, 120)
+    a, b = disk(shape, (40, 40), 20), disk(shape, (40, 76), 20)
+    image = render(a | b)
+    _, region = region_for(image, circle((40, 40), 8))
+    assert overlap(region, a) > 0.95
+    assert (region & b & ~a).sum() < 0.05 * (b & ~a).sum()
+
+
+def test_neighbour_crossed_by_the_drawing_is_left_out():
+    shape = (100, 100)
+    obj, other = disk(shape, (50, 45), 18), disk(shape, (50, 80), 14)
+    _, region = region_for(render(obj | other), circle((50, 45), 26))
+    assert overlap(region, obj) > 0.95
+    assert (region & other & ~obj).sum() < 0.05 * other.sum()
+
+
+def test_lobes_and_thin_parts_drawn_around_are_kept():
+    """A dumbbell (two lobes joined by a narrow neck) with a thin arm: drawn
+    around, all of it is the object; neck splitting only parts neighbours."""
+    shape = (100, 140)
+    lobes = disk(shape, (50, 40), 16) | disk(shape, (50, 90), 16)
+    neck = np.zeros(shape, bool)
+    neck[47:54, 40:90] = True
+    arm = np.zeros(shape, bool)
+    arm[20:50, 88:92] = True
+    mask = lobes | neck | arm
+    t = np.linspace(0, 2 * np.pi, 128, endpoint=False)
+    drawing = np.column_stack([50 + 38 * np.sin(t), 65 + 50 * np.cos(t)])
+    _, region = region_for(render(mask), drawing)
+    assert overlap(region, mask) > 0.95
+    assert overlap(region, arm) > 0.85
+    assert (region & ~mask).sum() < 0.05 * mask.sum()
