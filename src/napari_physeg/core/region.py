@@ -185,6 +185,25 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel) -
         The object's region, or None when no object-like pixel lies under the
         drawing.
     """
+    # Everything happens near the drawing: within its reach (below) and one
+    # drawing size beyond, where neighbours that could take the object lie.
+    extent = _scaled(drawing, 1.0 if model.drawn_around else _INSIDE_REACH)
+    size = float(np.sqrt(max(np.ptp(drawing[:, 0]) * np.ptp(drawing[:, 1]), 1.0)))
+    lo = np.maximum(np.floor(extent.min(0) - size - 10), 0).astype(int)
+    hi = np.minimum(np.ceil(extent.max(0) + size + 10) + 1, signed.shape).astype(int)
+    box = (slice(lo[0], hi[0]), slice(lo[1], hi[1]))
+    region = np.zeros(signed.shape, bool)
+    if np.any(hi <= lo):
+        return None
+    local = _object_region_near(signed[box], drawing - lo, model)
+    if local is None:
+        return None
+    region[box] = local
+    return region
+
+
+def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionModel) -> np.ndarray | None:
+    """:func:`object_region` on a crop around the drawing."""
     shape = signed.shape
     drawn = _fill(drawing, shape)
     drawn_size = np.sqrt(max(drawn.sum(), 1) / np.pi)
@@ -208,18 +227,25 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel) -
     # two objects cut by the image's side meet there at a neck too.
     depth = cv2.distanceTransform(np.pad(like, 1).view(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
     inscribed = float(depth[seed].max())
-    cores, n = ndi.label(depth > 0.5 * inscribed)
+    cores, n = _label(depth > 0.5 * inscribed)
     ours = np.unique(cores[seed])
     if model.drawn_around:
         # Lobes of the object lie inside the drawing; neighbours cross it.
-        inside_share = ndi.mean(drawn, cores, index=np.arange(1, n + 1))
-        ours = np.union1d(ours, 1 + np.flatnonzero(inside_share >= 0.8))
+        core_area = np.maximum(np.bincount(cores.ravel(), minlength=n + 1), 1)
+        inside_share = np.bincount(cores[drawn], minlength=n + 1) / core_area
+        ours = np.union1d(ours, np.flatnonzero(inside_share >= 0.8))
     ours = ours[ours > 0]
     if ours.size == 0:  # the drawing marks only a thin part: its blob is the object
-        blobs = ndi.label(like)[0]
+        blobs = _label(like)[0]
         return _smoothed((blobs == blobs[seed][0]) & reach)
+    mine = np.isin(cores, ours)
+    blobs, _ = _label(like)
+    own_blobs = np.unique(blobs[mine])
+    own = np.isin(blobs, own_blobs)
+    if not (own & (cores > 0) & ~mine).any():
+        return _smoothed(own & reach)  # no neighbour touches it
     markers = np.where(cores > 0, 2, 0).astype(np.int32)
-    markers[np.isin(cores, ours)] = 1
+    markers[mine] = 1
     blobs = segmentation.watershed(-depth, markers, mask=like)
     return _smoothed((blobs == 1) & reach)
 
@@ -227,16 +253,31 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel) -
 def _smoothed(region: np.ndarray) -> np.ndarray:
     """``region`` without one-pixel spurs (noise at its rim), holes filled."""
     opened = cv2.morphologyEx(region.view(np.uint8), cv2.MORPH_OPEN, _disk(1)).view(bool)
-    return ndi.binary_fill_holes(opened if opened.any() else region)
+    return _fill_holes(opened if opened.any() else region)
+
+
+def _label(mask: np.ndarray) -> tuple[np.ndarray, int]:
+    """4-connected pieces of ``mask`` (labels from 1) and their number (OpenCV: fast)."""
+    n, labels = cv2.connectedComponents(np.ascontiguousarray(mask, dtype=np.uint8), connectivity=4)
+    return labels, n - 1
+
+
+def _holes(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Labels of the pieces of ``~mask``, and which of them are holes (not open to the sides)."""
+    pieces, n = _label(~mask)
+    hole = np.ones(n + 1, bool)
+    hole[0] = False
+    hole[np.concatenate([pieces[0], pieces[-1], pieces[:, 0], pieces[:, -1]])] = False
+    return pieces, hole
+
+
+def _fill_holes(mask: np.ndarray) -> np.ndarray:
+    pieces, hole = _holes(mask)
+    return mask | hole[pieces]
 
 
 def _without_small_holes(mask: np.ndarray, max_area: float) -> np.ndarray:
-    """``mask`` with its holes (not open to the image's sides) of at most ``max_area`` px filled."""
-    holes, n = ndi.label(~mask)
-    if n == 0:
-        return mask
-    small = np.bincount(holes.ravel(), minlength=n + 1) <= max_area
-    open_to_side = np.concatenate([holes[0], holes[-1], holes[:, 0], holes[:, -1]])
-    small[0] = False
-    small[open_to_side] = False
-    return mask | small[holes]
+    """``mask`` with its holes of at most ``max_area`` px filled."""
+    pieces, hole = _holes(mask)
+    hole &= np.bincount(pieces.ravel(), minlength=len(hole)) <= max_area
+    return mask | hole[pieces]
