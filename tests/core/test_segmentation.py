@@ -5,7 +5,7 @@ import pytest
 from skimage.draw import polygon2mask
 
 from napari_physeg import data
-from napari_physeg.core import DivergenceError, segment
+from napari_physeg.core import DivergenceError, iter_segment, segment
 from napari_physeg.core.contour import segment_lengths
 
 
@@ -327,3 +327,30 @@ def test_object_cut_by_the_image_border_among_bright_neighbours():
         res = segment(image, drawing)
     assert res.polarity == 1 and res.converged
     assert iou(res.contour, mask) > 0.9
+
+
+def test_iter_segment_yields_every_step_and_returns_what_segment_returns():
+    obj = data.ellipse(noise=0.1)
+    run = iter_segment(obj.image, obj.init_far)
+    states = []
+    try:
+        while True:
+            states.append(next(run))
+    except StopIteration as done:
+        res = done.value
+    assert [s.step for s in states] == list(range(1, res.steps + 1))
+    assert {s.phase for s in states} == {"evolution", "refinement"}
+    assert states[0].phase == "evolution" and states[-1].phase == "refinement"
+    np.testing.assert_array_equal(res.contour, segment(obj.image, obj.init_far).contour)
+
+
+def test_iter_segment_stops_when_told_and_keeps_the_contour():
+    obj = data.ellipse()
+    run = iter_segment(obj.image, obj.init_far)
+    for _ in range(3):
+        state = next(run)
+    with pytest.raises(StopIteration) as done:
+        run.send(True)
+    res = done.value.value  # the StopIteration's value
+    assert res.stop_reason == "cancelled" and not res.converged and res.steps == 3
+    np.testing.assert_array_equal(res.contour, state.contour)

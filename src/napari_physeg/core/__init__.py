@@ -9,12 +9,14 @@ calls: :func:`segment` (a rough contour onto an object's border),
 from .dynamics import DivergenceError
 from .matching import Matching, MatchingCancelled, match
 from .materials import MATERIALS, Material, get_material
-from .segmentation import SegmentationResult, segment
+from .segmentation import SegmentationProgress, SegmentationResult, iter_segment, segment
 from .simulation import SimulationResult, simulate
 
 __all__ = [
     "segment",
+    "iter_segment",
     "SegmentationResult",
+    "SegmentationProgress",
     "match",
     "Matching",
     "MatchingCancelled",

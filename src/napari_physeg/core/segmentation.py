@@ -25,7 +25,7 @@ from .materials import Material, get_material
 from .region import _disk, drawing_levels, object_region, objectness
 from .subpixel import polish
 
-__all__ = ["segment", "SegmentationResult", "region_features"]
+__all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "region_features"]
 
 #: Nodes are redistributed (and the element rebuilt) when an edge of the
 #: contour grows or shrinks by this factor relative to the target spacing.
@@ -191,35 +191,6 @@ def region_features(intensity, feats, drawing, polarity=None):
     return signed.astype(np.float32), edges, model.polarity
 
 
-def _update_caps(move, normals, cap, last_sign, max_step_length, tol):
-    """Per-node trust region (as in Rprop): a node whose motion along its
-    normal reverses (it stepped over its equilibrium) halves its cap, one that
-    keeps going lets it grow back; so every material comes to rest."""
-    sign = np.sign((move * normals).sum(1))
-    cap = np.where(sign * last_sign < 0, 0.5 * cap, np.minimum(1.25 * cap, max_step_length))
-    return np.maximum(cap, 0.25 * tol), sign
-
-
-def _total_step(sim, system, f, nodes, rest, cap):
-    """One step with the initial shape as rest shape (full dynamics, state kept).
-
-    Forces on nodes that would move more than their cap are scaled down
-    before the step is taken, so the integrator's state stays consistent.
-    """
-    m = len(nodes)
-    for _ in range(2):
-        U = system.G @ sim.trial(system.G @ f)
-        move = np.column_stack([U[:m], U[m:]]) + rest - nodes
-        reach = np.linalg.norm(move, axis=1)
-        over = reach > cap
-        if not over.any():
-            break
-        scale = np.where(over, cap / np.maximum(reach, 1e-12), 1.0)
-        f = f * np.concatenate([scale, scale])
-    U = system.G @ sim.step(system.G @ f)
-    return np.column_stack([U[:m], U[m:]]) + rest - nodes
-
-
 #: Non-neighbouring nodes closer than this many node spacings pinch the
 #: contour: it is split there (see contour.cut_pinches).
 PINCH_GAP = 0.35
@@ -244,18 +215,6 @@ def _distance_with_image_border(edges: np.ndarray, window, shape) -> np.ndarray:
     framed = np.pad(np.asarray(edges) > 0, pad, constant_values=True)
     distance = chamfer_distance(framed)
     return distance[pad[0][0]: distance.shape[0] - pad[0][1], pad[1][0]: distance.shape[1] - pad[1][1]]
-
-
-def _element(nodes, sigma, material, rayleigh, integrator, dt, divergence_limit):
-    """Sclaroff's element for ``nodes`` and its time integrator."""
-    system = coefficient_system(nodes, sigma, material)
-    mu, gamma = rayleigh
-    if integrator == "newmark":
-        sim = NewmarkIntegrator(system.M, system.K, mu * system.M + gamma * system.K, dt=dt,
-                                divergence_limit=divergence_limit)
-    else:
-        sim = ModalIntegrator(system.M, system.K, mu=mu, gamma=gamma, dt=dt, divergence_limit=divergence_limit)
-    return system, sim
 
 
 def _needs_remesh(nodes: np.ndarray, spacing: float) -> bool:
@@ -286,14 +245,241 @@ def _rest_reason(field: ForceField, nodes: np.ndarray) -> str:
     return "stalled" if field.on_border(nodes).mean() < ON_BORDER_FRACTION else "converged"
 
 
-def _divergence(steps: int, stiffness: float) -> DivergenceError:
+def _divergence(steps: int, stiffness: float, repaired: bool = True) -> DivergenceError:
+    what = "became numerically singular and could not be repaired" if repaired else "diverged"
     return DivergenceError(
-        f"the contour's element became numerically singular at step {steps} and could not be repaired; "
-        f"try a finer node spacing (n_nodes) or a smaller sigma_factor (stiffness r = {stiffness:g})"
+        f"the contour's element {what} at step {steps}; try a finer node spacing (n_nodes) or a smaller "
+        f"sigma_factor (stiffness r = {stiffness:g})"
     )
 
 
-def segment(
+@dataclass(frozen=True)
+class SegmentationProgress:
+    """What :func:`iter_segment` yields after every time step.
+
+    Attributes
+    ----------
+    step : int
+        Time steps taken so far.
+    contour : ndarray, shape (M, 2)
+        The current nodes ``(row, col)`` in the image.
+    phase : str
+        ``"evolution"`` (every image force) or ``"refinement"`` (the region
+        force alone settles the nodes, see ``refine``).
+    """
+
+    step: int
+    contour: np.ndarray
+    phase: str
+
+
+class _FeatureWindow:
+    """The image forces, computed on a window around the contour.
+
+    The forces read the feature images along normal lines of at most
+    ``max_line_length`` px, so a guard band of that width (and as much again
+    as margin) around the contour suffices; the window grows when the contour
+    nears its border. On a large image with a small object this is most of
+    the cost of a segmentation.
+    """
+
+    def __init__(self, image, drawing, init, *, polarity, weights, max_line_length, isef_b, refine):
+        self.image, self.drawing, self.polarity = image, drawing, polarity
+        self.weights, self.max_line_length, self.isef_b = weights, max_line_length, isef_b
+        # A second phase with the region force alone (sub-pixel refinement).
+        self.with_refinement = refine and weights.get("intensity", 0) > 0 and len(weights) > 1
+        self.guard = float(max_line_length) + 8.0
+        window = _window(init, image.shape, 2.0 * self.guard)
+        if (window[0].stop - window[0].start) * (window[1].stop - window[1].start) > WINDOW_MAX_FRACTION * image.size:
+            window = self._whole_image
+        self._compute(window)
+
+    @property
+    def _whole_image(self):
+        return slice(0, self.image.shape[0]), slice(0, self.image.shape[1])
+
+    def _compute(self, window) -> None:
+        sub = self.image[window]
+        origin = np.array([window[0].start, window[1].start], dtype=float)
+        feats = compute_features(sub, b=self.isef_b)
+        if not feats.edges.any() and np.ptp(feats.intensity) <= 1e-12:
+            if sub.shape != self.image.shape:  # nothing here: look at the whole image
+                return self._compute(self._whole_image)
+            raise ValueError("image is constant: there is no object border to segment")
+        # The region force needs the border where it is: a light denoising,
+        # not the strong ISEF smoothing used for edge detection.
+        intensity = cv2.GaussianBlur(normalized_intensity(sub), (0, 0), 1.0, borderType=cv2.BORDER_REFLECT)
+        signed, edges, self.polarity = region_features(intensity, feats, self.drawing - origin, self.polarity)
+        distance = _distance_with_image_border(edges, window, self.image.shape)
+        field = ForceField.from_features(edges, distance, signed, self.weights, max_length=self.max_line_length)
+        self.fields = [field]
+        if self.with_refinement:
+            self.fields.append(field.with_weights({"intensity": sum(self.weights.values())}))
+        self.window, self.origin = window, origin
+        # Nodes stay within the image's pixel edges.
+        self.bounds = np.array(sub.shape, dtype=float) - 0.5
+
+    def follow(self, nodes: np.ndarray) -> np.ndarray:
+        """Grow the window if ``nodes`` (window frame) near its border; the shift of the frame."""
+        if not _near_window_border(nodes, self.window, self.image.shape, self.guard):
+            return np.zeros(2)
+        old = self.origin
+        self._compute(_window(nodes + old, self.image.shape, 2.0 * self.guard, keep=self.window))
+        return old - self.origin
+
+
+class _ElasticBody:
+    """Sclaroff's element for the current nodes, its time integrator, and
+    the per-node trust region that keeps each step within ``max_step_length``.
+
+    With the incremental reference the current shape is the rest shape at
+    every step; with the total reference the initial shape stays the rest
+    shape and the integrator keeps its state.
+    """
+
+    def __init__(self, nodes, *, spacing, sigma, material, rayleigh, integrator, dt, divergence_limit,
+                 reference, max_step_length, tol):
+        self.spacing, self.sigma, self.material, self.rayleigh = spacing, sigma, material, rayleigh
+        self.integrator, self.dt, self.divergence_limit = integrator, dt, divergence_limit
+        self.reference, self.max_step_length, self.tol = reference, float(max_step_length), tol
+        self.model_time = 0.0
+        self.nodes = nodes
+        self.rest = nodes.copy()
+        self._build()
+        self._reset_caps()
+
+    def _reset_caps(self, fraction: float = 1.0) -> None:
+        self.cap = np.full(len(self.nodes), fraction * self.max_step_length)
+        self.last_sign = np.zeros(len(self.nodes))
+
+    def _build(self) -> None:
+        """Assemble and factor the element for the current nodes."""
+        t0 = time.perf_counter()
+        try:
+            self.system = coefficient_system(self.nodes, self.sigma, self.material)
+            M, K = self.system.M, self.system.K
+            mu, gamma = self.rayleigh
+            if self.integrator == "newmark":
+                self.sim = NewmarkIntegrator(M, K, mu * M + gamma * K, dt=self.dt,
+                                             divergence_limit=self.divergence_limit)
+            else:
+                self.sim = ModalIntegrator(M, K, mu=mu, gamma=gamma, dt=self.dt,
+                                           divergence_limit=self.divergence_limit)
+        finally:
+            self.model_time += time.perf_counter() - t0
+
+    def _displacement(self, U: np.ndarray) -> np.ndarray:
+        m = len(self.nodes)
+        return np.column_stack([U[:m], U[m:]])
+
+    def move_under(self, forces: np.ndarray, normals: np.ndarray) -> np.ndarray:
+        """The nodes' motion over one time step under ``forces`` (M, 2)."""
+        G = self.system.G
+        f = np.concatenate([forces[:, 0], forces[:, 1]])
+        if self.reference == "incremental":
+            # The current shape is the rest shape and the body starts the
+            # step at rest: one solve of the dynamic equation over dt.
+            move = self._displacement(G @ self.sim.from_rest(G @ f))
+            self._update_caps(move, normals)
+            reach = np.linalg.norm(move, axis=1)
+            return move * np.minimum(1.0, self.cap / np.maximum(reach, 1e-12))[:, None]
+        proposal = self._displacement(G @ self.sim.trial(G @ f)) + self.rest - self.nodes
+        self._update_caps(proposal, normals)
+        # Forces on nodes that would move more than their cap are scaled down
+        # before the step is taken, so the integrator's state stays consistent.
+        for _ in range(2):
+            move = self._displacement(G @ self.sim.trial(G @ f)) + self.rest - self.nodes
+            reach = np.linalg.norm(move, axis=1)
+            over = reach > self.cap
+            if not over.any():
+                break
+            scale = np.where(over, self.cap / np.maximum(reach, 1e-12), 1.0)
+            f = f * np.concatenate([scale, scale])
+        return self._displacement(G @ self.sim.step(G @ f)) + self.rest - self.nodes
+
+    def _update_caps(self, move, normals) -> None:
+        """Per-node trust region (as in Rprop): a node whose motion along its
+        normal reverses (it stepped over its equilibrium) halves its cap, one
+        that keeps going lets it grow back; so every material comes to rest."""
+        sign = np.sign((move * normals).sum(1))
+        cap = np.where(sign * self.last_sign < 0, 0.5 * self.cap, np.minimum(1.25 * self.cap, self.max_step_length))
+        self.cap, self.last_sign = np.maximum(cap, 0.25 * self.tol), sign
+
+    def remesh(self, nodes: np.ndarray, bounds: np.ndarray) -> None:
+        """New nodes without pinches, loops or crowded nodes, evenly spaced; a new element.
+
+        Each new node inherits the trust cap of the old node nearest to it.
+        """
+        old, nodes = nodes, self._repaired(nodes, bounds)
+        nearest = cKDTree(old).query(nodes)[1]
+        cap, last_sign = self.cap[nearest], self.last_sign[nearest]
+        self.nodes = self.rest = nodes
+        if len(nodes) >= 3 and abs(signed_area(nodes)) >= 1.0:
+            self._build()
+        self.cap, self.last_sign = cap, last_sign
+
+    def _repaired(self, nodes: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+        # Clipped first: nodes pushed past a corner of the image meet there.
+        inside = np.clip(nodes, -0.5, bounds)
+        fixed = resample(remove_loops(cut_pinches(inside, PINCH_GAP * self.spacing)), spacing=self.spacing)
+        keep = np.linalg.norm(fixed - np.roll(fixed, 1, axis=0), axis=1) > 1e-3 * self.spacing
+        return fixed[keep] if keep.sum() >= 3 else fixed
+
+    @property
+    def collapsed(self) -> bool:
+        return len(self.nodes) < 3 or abs(signed_area(self.nodes)) < 1.0
+
+    def shift(self, offset: np.ndarray) -> None:
+        self.nodes, self.rest = self.nodes + offset, self.rest + offset
+
+
+class _RestDetector:
+    """At rest: no node moved more than ``tol`` for ``patience`` steps, or the
+    shape reached a plateau (see :class:`_Plateau`)."""
+
+    def __init__(self, tol, patience):
+        self.tol, self.patience = tol, patience
+        self.restart()
+
+    def restart(self) -> None:
+        self.quiet, self.plateau = 0, _Plateau()
+
+    def at_rest(self, moved: float, nodes: np.ndarray) -> bool:
+        self.quiet = self.quiet + 1 if moved < self.tol else 0
+        return self.quiet >= self.patience or self.plateau.reached(nodes)
+
+
+def _check_options(stiffness, reference, integrator, polarity, max_step_length, tol, max_steps, n_nodes):
+    if not (np.isfinite(stiffness) and stiffness > 0):
+        raise ValueError(f"stiffness r must be a positive number, got {stiffness!r}")
+    if reference not in ("incremental", "total"):
+        raise ValueError(f"reference must be 'incremental' or 'total', got {reference!r}")
+    if integrator not in ("newmark", "modal"):
+        raise ValueError(f"integrator must be 'newmark' or 'modal', got {integrator!r}")
+    if polarity not in ("auto", "bright", "dark"):
+        raise ValueError(f"polarity must be 'auto', 'bright' or 'dark', got {polarity!r}")
+    if not (max_step_length > 0 and tol > 0 and int(max_steps) >= 0):
+        raise ValueError("max_step_length and tol must be positive and max_steps non-negative")
+    if n_nodes is not None and int(n_nodes) < 3:
+        raise ValueError(f"n_nodes must be at least 3, got {n_nodes!r}")
+
+
+def _initial_nodes(init, n_nodes, sigma, sigma_factor):
+    """Evenly spaced nodes on ``init``, their spacing and the element's sigma."""
+    length = perimeter(init)
+    if n_nodes is None:
+        n_nodes = int(np.clip(round(length / 3.0), 24, 1000))
+    spacing = length / int(n_nodes)
+    sigma_used = float(sigma) if sigma is not None else sigma_factor * spacing
+    if not (np.isfinite(sigma_used) and 0 < sigma_used <= 2.0 * spacing):
+        raise ValueError(
+            f"sigma = {sigma_used!r} must be positive and at most 2 x the node spacing ({spacing:.3g} px); "
+            "typical values are 0.75-1.5 x the spacing"
+        )
+    return resample(init, int(n_nodes)), spacing, sigma_used
+
+
+def iter_segment(
     image,
     init,
     *,
@@ -317,8 +503,137 @@ def segment(
     isef_b: float = 0.7,
     refine: bool = True,
     history_every: int = 5,
-    callback=None,
-) -> SegmentationResult:
+):
+    """:func:`segment` as a generator: one :class:`SegmentationProgress` per time step.
+
+    Takes the parameters of :func:`segment` (but ``callback``) and returns
+    (as ``StopIteration.value``) its :class:`SegmentationResult`. Send
+    ``True`` into the generator to stop it after the current step: the result
+    then has ``stop_reason="cancelled"``. Bad input raises before the first
+    step. napari's ``thread_worker`` runs it as it is.
+
+    Examples
+    --------
+    >>> from napari_physeg import data
+    >>> obj = data.ellipse()
+    >>> run = iter_segment(obj.image, obj.init_near)
+    >>> first = next(run)
+    >>> first.step, first.phase
+    (1, 'evolution')
+    """
+    t_start = time.perf_counter()
+    image = _validate_image(image)
+    init = as_contour(init, name="init")
+    material = get_material(material)
+    weights = normalize_weights(forces, weights)
+    _check_options(stiffness, reference, integrator, polarity, max_step_length, tol, max_steps, n_nodes)
+    # The drawing as the user made it (partly beyond the image, maybe) tells
+    # the object from its background; the clipped one starts the contour.
+    drawing = init
+    init = _clip_to_image(init, image.shape)
+    features = _FeatureWindow(image, drawing, init, polarity={"bright": 1, "dark": -1}.get(polarity),
+                              weights=weights, max_line_length=max_line_length, isef_b=isef_b,
+                              refine=refine and reference == "incremental")
+    t_features = time.perf_counter()
+
+    nodes, spacing, sigma_used = _initial_nodes(init, n_nodes, sigma, sigma_factor)
+    body = _ElasticBody(
+        nodes - features.origin, spacing=spacing, sigma=sigma_used, material=material,
+        rayleigh=rayleigh_coefficients(damping_ratio, *reference_frequency_range(spacing, sigma_used, material)),
+        integrator=integrator, dt=dt, divergence_limit=10.0 * float(np.hypot(*image.shape)),
+        reference=reference, max_step_length=max_step_length, tol=tol)
+    history = [body.nodes + features.origin]
+    rest = _RestDetector(tol, patience)
+    stop_reason, steps = "max_steps", 0
+    # The paper's loop: image forces along the normals, one step of the
+    # dynamic equilibrium, remesh when the nodes crowd or thin out. Phase 0
+    # uses every force; once at rest, a short second phase lets the region
+    # force alone (sub-pixel: it balances where the lightly smoothed intensity
+    # crosses the object/background mid-level) settle the nodes that edge
+    # pixels hold half a pixel off the true border; a geometric polish
+    # (subpixel.polish) then ends them on the border of the raw image.
+    phase = 0
+    for steps in range(1, int(max_steps) + 1):
+        body.shift(features.follow(body.nodes))
+        moved = _time_step(body, features.fields[phase], stiffness, features.bounds, steps)
+        if body.collapsed:
+            break
+        if steps % max(int(history_every), 1) == 0:
+            history.append(body.nodes + features.origin)
+        stop = yield SegmentationProgress(steps, body.nodes + features.origin,
+                                          "evolution" if phase == 0 else "refinement")
+        if stop:
+            stop_reason = "cancelled"
+            break
+        if rest.at_rest(moved, body.nodes):
+            if phase == len(features.fields) - 1:
+                stop_reason = _rest_reason(features.fields[phase], body.nodes)
+                break
+            phase += 1
+            rest.restart()
+            body.cap = np.full(len(body.nodes), 0.5 * body.max_step_length)
+    if stop_reason != "cancelled" and body.collapsed:
+        # Nothing held it: the region force shrinks a contour drawn on a
+        # uniform background until it is a point. Say so rather than return it.
+        raise ValueError(
+            f"the contour collapsed to a point after {steps} steps: no object border was found within reach "
+            f"({max_line_length:g} px) of the initial contour; draw it around the object, closer to its border"
+        )
+    nodes = body.nodes
+    if stop_reason == "converged" and features.with_refinement:
+        # At rest every node is within a few tenths of a pixel of the border,
+        # read on smoothed images and each on its own noise: measure the border
+        # on the raw image and fit the polygon to it (see subpixel.polish).
+        nodes = np.clip(polish(image[features.window], nodes, polarity=features.polarity), -0.5, features.bounds)
+    nodes = nodes + features.origin
+    if not np.array_equal(history[-1], nodes):
+        history.append(nodes.copy())
+    t_end = time.perf_counter()
+    return SegmentationResult(
+        contour=nodes, steps=steps, converged=stop_reason == "converged", stop_reason=stop_reason,
+        history=tuple(history), polarity=features.polarity,
+        timings={"features": t_features - t_start, "model": body.model_time,
+                 "evolution": t_end - t_features - body.model_time, "total": t_end - t_start},
+    )
+
+
+def _time_step(body: _ElasticBody, field: ForceField, stiffness: float, bounds: np.ndarray, step: int) -> float:
+    """Image forces, one step of the dynamic equilibrium, and a remesh if due;
+    the largest node motion (px)."""
+    normals = outward_normals(body.nodes)
+    forces = stiffness * field(body.nodes, normals)
+    try:
+        move = body.move_under(forces, normals)
+    except (DivergenceError, np.linalg.LinAlgError, RuntimeError, ValueError):
+        # Image forces are bounded and the scheme unconditionally stable: a
+        # blow-up means the element is ill-conditioned (nodes of two parts of
+        # the contour nearly touching). Repair it and go on.
+        if body.reference != "incremental":
+            raise _divergence(step, stiffness, repaired=False) from None
+        _remesh(body, body.nodes, bounds, step, stiffness)
+        body._reset_caps()
+        return np.inf
+    new_nodes = np.clip(body.nodes + move, -0.5, bounds)
+    moved = float(np.abs(new_nodes - body.nodes).max())
+    if not np.isfinite(moved) or moved > body.divergence_limit:
+        raise _divergence(step, stiffness, repaired=False)
+    if body.reference == "incremental" and _needs_remesh(new_nodes, body.spacing):
+        _remesh(body, new_nodes, bounds, step, stiffness)
+    else:
+        body.nodes = new_nodes
+        if body.reference == "incremental":
+            body.rest = new_nodes
+    return moved
+
+
+def _remesh(body, nodes, bounds, step, stiffness) -> None:
+    try:
+        body.remesh(nodes, bounds)
+    except (np.linalg.LinAlgError, RuntimeError, ValueError) as err:
+        raise _divergence(step, stiffness) from err
+
+
+def segment(image, init, *, callback=None, **options) -> SegmentationResult:
     """Segment the object around (or inside) ``init`` with a physical contour.
 
     The initial contour is resampled to evenly spaced nodes and modelled as an
@@ -428,210 +743,11 @@ def segment(
     >>> res.converged
     True
     """
-    t_start = time.perf_counter()
-    image = _validate_image(image)
-    init = as_contour(init, name="init")
-    material = get_material(material)
-    weights = normalize_weights(forces, weights)
-    if not (np.isfinite(stiffness) and stiffness > 0):
-        raise ValueError(f"stiffness r must be a positive number, got {stiffness!r}")
-    if reference not in ("incremental", "total"):
-        raise ValueError(f"reference must be 'incremental' or 'total', got {reference!r}")
-    if integrator not in ("newmark", "modal"):
-        raise ValueError(f"integrator must be 'newmark' or 'modal', got {integrator!r}")
-    if polarity not in ("auto", "bright", "dark"):
-        raise ValueError(f"polarity must be 'auto', 'bright' or 'dark', got {polarity!r}")
-    if not (max_step_length > 0 and tol > 0 and int(max_steps) >= 0):
-        raise ValueError("max_step_length and tol must be positive and max_steps non-negative")
-    if n_nodes is not None and int(n_nodes) < 3:
-        raise ValueError(f"n_nodes must be at least 3, got {n_nodes!r}")
-
-    # The drawing as the user made it (partly beyond the image, maybe) tells
-    # the object from its background; the clipped one starts the contour.
-    drawing = init
-    init = _clip_to_image(init, image.shape)
-    # Feature images on a window around the contour: the forces read them
-    # along normal lines of at most max_line_length px, so a guard band of
-    # that width (and as much again as margin) suffices; the window grows
-    # when the contour nears its border. On a large image with a small
-    # object this is most of the cost of a segmentation.
-    guard = float(max_line_length) + 8.0
-    margin = 2.0 * guard
-    whole_image = (slice(0, image.shape[0]), slice(0, image.shape[1]))
-    window = _window(init, image.shape, margin)
-    if (window[0].stop - window[0].start) * (window[1].stop - window[1].start) > WINDOW_MAX_FRACTION * image.size:
-        window = whole_image
-    pol = {"bright": 1, "dark": -1}.get(polarity)
-
-    def fields_for(window):
-        """Force fields (all forces, then the region alone) on ``window``."""
-        nonlocal pol
-        sub = image[window]
-        origin = np.array([window[0].start, window[1].start], dtype=float)
-        feats = compute_features(sub, b=isef_b)
-        if not feats.edges.any() and np.ptp(feats.intensity) <= 1e-12:
-            if sub.shape != image.shape:  # nothing here: look at the whole image
-                return fields_for(whole_image)
-            raise ValueError("image is constant: there is no object border to segment")
-        # The region force needs the border where it is: a light denoising,
-        # not the strong ISEF smoothing used for edge detection.
-        intensity = cv2.GaussianBlur(normalized_intensity(sub), (0, 0), 1.0, borderType=cv2.BORDER_REFLECT)
-        signed, edges, pol = region_features(intensity, feats, drawing - origin, pol)
-        distance = _distance_with_image_border(edges, window, image.shape)
-        field_ = ForceField.from_features(edges, distance, signed, weights, max_length=max_line_length)
-        fields = [field_]
-        if refine and reference == "incremental" and weights.get("intensity", 0) > 0 and len(weights) > 1:
-            fields.append(field_.with_weights({"intensity": sum(weights.values())}))
-        return window, origin, fields
-
-    window, origin, fields = fields_for(window)
-    t_features = time.perf_counter()
-
-    length = perimeter(init)
-    if n_nodes is None:
-        n_nodes = int(np.clip(round(length / 3.0), 24, 1000))
-    spacing = length / int(n_nodes)
-    nodes = resample(init, int(n_nodes)) - origin
-    sigma_used = float(sigma) if sigma is not None else sigma_factor * spacing
-    if not (np.isfinite(sigma_used) and 0 < sigma_used <= 2.0 * spacing):
-        raise ValueError(
-            f"sigma = {sigma_used!r} must be positive and at most 2 x the node spacing ({spacing:.3g} px); "
-            "typical values are 0.75-1.5 x the spacing"
-        )
-    divergence_limit = 10.0 * float(np.hypot(*image.shape))
-    model_time = 0.0
-    rayleigh = rayleigh_coefficients(damping_ratio, *reference_frequency_range(spacing, sigma_used, material))
-
-    def build(nodes):
-        nonlocal model_time
-        t0 = time.perf_counter()
-        try:
-            system, sim = _element(nodes, sigma_used, material, rayleigh, integrator, dt, divergence_limit)
-        finally:
-            model_time += time.perf_counter() - t0
-        return system, sim
-
-    def repaired(nodes):
-        """The contour without pinches, loops and crowded nodes, evenly resampled."""
-        # Clipped first: nodes pushed past a corner of the image meet there.
-        inside = np.clip(nodes, -0.5, bounds)
-        fixed = resample(remove_loops(cut_pinches(inside, PINCH_GAP * spacing)), spacing=spacing)
-        keep = np.linalg.norm(fixed - np.roll(fixed, 1, axis=0), axis=1) > 1e-3 * spacing
-        return fixed[keep] if keep.sum() >= 3 else fixed
-
-    bounds = np.array(image[window].shape, dtype=float) - 0.5  # pixel edges: the image's extent
-    system, sim = build(nodes)
-    rest = nodes.copy()
-    history = [nodes + origin]
-    cap = np.full(len(nodes), float(max_step_length))
-    last_sign = np.zeros(len(nodes))
-    quiet = 0
-    stop_reason = "max_steps"
-    steps = 0
-    plateau = _Plateau()
-    # Phase 1 uses every force; once at rest, a short second phase lets the
-    # region force alone (sub-pixel: it balances where the lightly smoothed
-    # intensity crosses the object/background mid-level) settle the nodes
-    # that edge pixels hold half a pixel off the true border; a geometric
-    # polish (subpixel.polish) then ends them on the border of the raw image.
-    phase = 0
-    for steps in range(1, int(max_steps) + 1):
-        if _near_window_border(nodes, window, image.shape, guard):
-            # The contour grew toward the window's border: a larger window.
-            old_origin = origin
-            window, origin, fields = fields_for(_window(nodes + origin, image.shape, margin, keep=window))
-            shift = old_origin - origin
-            nodes, rest = nodes + shift, rest + shift
-            bounds = np.array(image[window].shape, dtype=float) - 0.5
-        field_now = fields[phase]
-        normals = outward_normals(nodes)
-        F = stiffness * field_now(nodes, normals)
-        f = np.concatenate([F[:, 0], F[:, 1]])
-        m = len(nodes)
-        try:
-            if reference == "incremental":
-                # The current shape is the rest shape and the body starts the
-                # step at rest: one solve of the dynamic equation over dt.
-                U = system.G @ sim.from_rest(system.G @ f)
-                move = np.column_stack([U[:m], U[m:]])
-                cap, last_sign = _update_caps(move, normals, cap, last_sign, max_step_length, tol)
-                reach = np.linalg.norm(move, axis=1)
-                move *= np.minimum(1.0, cap / np.maximum(reach, 1e-12))[:, None]
-            else:
-                U = system.G @ sim.trial(system.G @ f)
-                proposal = np.column_stack([U[:m], U[m:]]) + rest - nodes
-                cap, last_sign = _update_caps(proposal, normals, cap, last_sign, max_step_length, tol)
-                move = _total_step(sim, system, f, nodes, rest, cap)
-        except (DivergenceError, np.linalg.LinAlgError, RuntimeError, ValueError):
-            # Image forces are bounded and the scheme unconditionally stable:
-            # a blow-up means the element is ill-conditioned (nodes of two
-            # parts of the contour nearly touching). Repair it and go on.
-            if reference != "incremental":
-                raise _divergence(steps, stiffness) from None
-            nodes = repaired(nodes)
-            try:
-                system, sim = build(nodes)
-            except (np.linalg.LinAlgError, RuntimeError, ValueError) as err2:
-                raise _divergence(steps, stiffness) from err2
-            cap, last_sign = np.full(len(nodes), float(max_step_length)), np.zeros(len(nodes))
-            continue
-        new_nodes = np.clip(nodes + move, -0.5, bounds)
-        moved = float(np.abs(new_nodes - nodes).max())
-        if not np.isfinite(moved) or moved > divergence_limit:
-            raise _divergence(steps, stiffness)
-        nodes = new_nodes
-        if reference == "incremental" and _needs_remesh(nodes, spacing):
-            old = nodes
-            nodes = repaired(nodes)
-            if len(nodes) < 3 or abs(signed_area(nodes)) < 1.0:
-                break
-            nearest = cKDTree(old).query(nodes)[1]
-            cap, last_sign = cap[nearest], last_sign[nearest]
-            try:
-                system, sim = build(nodes)
-            except (np.linalg.LinAlgError, RuntimeError, ValueError):
-                raise _divergence(steps, stiffness) from None
-        quiet = quiet + 1 if moved < tol else 0
-        if steps % max(int(history_every), 1) == 0:
-            history.append(nodes + origin)
-        if callback is not None and callback(steps, nodes + origin) is False:
-            stop_reason = "cancelled"
-            break
-        if quiet >= patience or plateau.reached(nodes):
-            if phase == len(fields) - 1:
-                stop_reason = _rest_reason(field_now, nodes)
-                break
-            phase += 1
-            quiet = 0
-            plateau = _Plateau()
-            cap = np.full(len(nodes), 0.5 * float(max_step_length))
-    if stop_reason != "cancelled" and (len(nodes) < 3 or abs(signed_area(nodes)) < 1.0):
-        # Nothing held it: the region force shrinks a contour drawn on a
-        # uniform background until it is a point. Say so rather than return it.
-        raise ValueError(
-            f"the contour collapsed to a point after {steps} steps: no object border was found within reach "
-            f"({max_line_length:g} px) of the initial contour; draw it around the object, closer to its border"
-        )
-    if stop_reason == "converged" and refine and reference == "incremental" and weights.get("intensity", 0) > 0:
-        # At rest every node is within a few tenths of a pixel of the border,
-        # read on smoothed images and each on its own noise: measure the border
-        # on the raw image and fit the polygon to it (see subpixel.polish).
-        nodes = np.clip(polish(image[window], nodes, polarity=pol), -0.5, bounds)
-    nodes = nodes + origin
-    if not np.array_equal(history[-1], nodes):
-        history.append(nodes.copy())
-    t_end = time.perf_counter()
-    return SegmentationResult(
-        contour=nodes,
-        steps=steps,
-        converged=stop_reason == "converged",
-        stop_reason=stop_reason,
-        history=tuple(history),
-        polarity=pol,
-        timings={
-            "features": t_features - t_start,
-            "model": model_time,
-            "evolution": t_end - t_features - model_time,
-            "total": t_end - t_start,
-        },
-    )
+    run = iter_segment(image, init, **options)
+    stop = False
+    try:
+        while True:
+            progress = run.send(None) if not stop else run.send(True)
+            stop = callback is not None and callback(progress.step, progress.contour) is False
+    except StopIteration as done:
+        return done.value
