@@ -354,3 +354,9 @@ def test_iter_segment_stops_when_told_and_keeps_the_contour():
     res = done.value.value  # the StopIteration's value
     assert res.stop_reason == "cancelled" and not res.converged and res.steps == 3
     np.testing.assert_array_equal(res.contour, state.contour)
+
+
+def test_modal_integrator_refuses_long_contours_before_any_work():
+    obj = data.blob((512, 512))
+    with pytest.raises(ValueError, match="integrator='newmark'"):
+        segment(obj.image, obj.init_near, integrator="modal", n_nodes=2000)
