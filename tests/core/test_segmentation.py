@@ -360,3 +360,30 @@ def test_modal_integrator_refuses_long_contours_before_any_work():
     obj = data.blob((512, 512))
     with pytest.raises(ValueError, match="integrator='newmark'"):
         segment(obj.image, obj.init_near, integrator="modal", n_nodes=2000)
+
+
+def test_remesh_of_a_contour_doubled_back_along_the_image_side():
+    """Nodes clipped onto the image's side can overlap there: this contour of
+    a real nucleus (z26/n19) runs up the side and its last two nodes come
+    back over its first edge. Resampling it put nodes on top of each other:
+    a singular element and a DivergenceError. The repaired contour has no two
+    nodes closer than the pinch gap, and its element solves."""
+    from scipy.spatial import cKDTree
+
+    from napari_physeg.core.segmentation import PINCH_GAP, _ElasticBody
+
+    nodes = np.array([
+        [114.78, 116.5], [111.87, 116.5], [107.74, 116.5], [103.97, 116.5], [100.49, 116.5], [97.17, 116.5],
+        [93.88, 116.5], [90.68, 116.5], [87.51, 116.5], [84.29, 116.5], [80.69, 116.5], [76.95, 116.48],
+        [78.98, 115.69], [78.34, 114.96], [79.01, 111.89], [81.12, 107.54], [83.27, 104.58], [86.46, 102.21],
+        [89.55, 100.57], [92.98, 100.2], [96.62, 102.02], [100.01, 105.19], [103.22, 107.24], [105.21, 109.42],
+        [108.34, 111.66], [109.49, 113.78], [110.82, 116.5], [113.41, 116.5]])
+    spacing = 2.99578
+    circle = np.column_stack([95 + 15 * np.sin(np.linspace(0, 2 * np.pi, len(nodes), endpoint=False)),
+                              105 + 10 * np.cos(np.linspace(0, 2 * np.pi, len(nodes), endpoint=False))])
+    body = _ElasticBody(circle, spacing=spacing, sigma=spacing, material="rubber", rayleigh=(0.1, 0.1),
+                        integrator="newmark", dt=1.0, divergence_limit=1e4, reference="incremental",
+                        max_step_length=2.0, tol=0.02)
+    body.remesh(nodes, bounds=np.array([215.5, 116.5]))
+    assert not cKDTree(body.nodes).query_pairs(PINCH_GAP * spacing)
+    assert np.isfinite(body.sim.from_rest(np.ones(2 * len(body.nodes)))).all()

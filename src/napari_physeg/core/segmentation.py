@@ -28,7 +28,7 @@ from .subpixel import polish
 __all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "region_features"]
 
 #: Nodes are redistributed (and the element rebuilt) when an edge of the
-#: contour grows or shrinks by this factor relative to the target spacing.
+#: contour grows past this many target spacings (see also PINCH_GAP).
 REMESH_STRETCH = 2.0
 
 
@@ -218,8 +218,10 @@ def _distance_with_image_border(edges: np.ndarray, window, shape) -> np.ndarray:
 
 
 def _needs_remesh(nodes: np.ndarray, spacing: float) -> bool:
-    seg = segment_lengths(nodes)
-    return bool(seg.max() > REMESH_STRETCH * spacing or seg.min() < spacing / REMESH_STRETCH
+    """An edge stretched past REMESH_STRETCH spacings, or two nodes (neighbours
+    or not) closer than PINCH_GAP spacings: the element would lose resolution
+    or become ill-conditioned."""
+    return bool(segment_lengths(nodes).max() > REMESH_STRETCH * spacing
                 or len(cKDTree(nodes).query_pairs(PINCH_GAP * spacing)) > 0)
 
 
@@ -420,8 +422,14 @@ class _ElasticBody:
 
     def _repaired(self, nodes: np.ndarray, bounds: np.ndarray) -> np.ndarray:
         # Clipped first: nodes pushed past a corner of the image meet there.
-        inside = np.clip(nodes, -0.5, bounds)
-        fixed = resample(remove_loops(cut_pinches(inside, PINCH_GAP * self.spacing)), spacing=self.spacing)
+        fixed = np.clip(nodes, -0.5, bounds)
+        gap = PINCH_GAP * self.spacing
+        # Resampling a contour that runs out along the image's side and back
+        # puts new nodes on top of each other: cut again until none pinch.
+        for _ in range(3):
+            fixed = resample(remove_loops(cut_pinches(fixed, gap)), spacing=self.spacing)
+            if len(fixed) < 4 or not cKDTree(fixed).query_pairs(gap):
+                break
         keep = np.linalg.norm(fixed - np.roll(fixed, 1, axis=0), axis=1) > 1e-3 * self.spacing
         return fixed[keep] if keep.sum() >= 3 else fixed
 
