@@ -75,12 +75,14 @@ def signed_area(contour: np.ndarray) -> float:
     """Shoelace area with rows as the first axis; positive when the nodes run
     counter-clockwise in the (row, col) frame."""
     r, c = contour[:, 0], contour[:, 1]
-    return 0.5 * float(np.dot(r, np.roll(c, -1)) - np.dot(np.roll(r, -1), c))
+    # np.roll-free: this runs several times per time step on small arrays.
+    return 0.5 * float(r[:-1] @ c[1:] - r[1:] @ c[:-1] + r[-1] * c[0] - r[0] * c[-1])
 
 
 def segment_lengths(contour: np.ndarray) -> np.ndarray:
     """Length of each edge ``i -> i+1`` (the last edge closes the contour)."""
-    return np.linalg.norm(np.roll(contour, -1, axis=0) - contour, axis=1)
+    edge = np.diff(contour, axis=0, append=contour[:1])
+    return np.hypot(edge[:, 0], edge[:, 1])
 
 
 def perimeter(contour: np.ndarray) -> float:
@@ -115,12 +117,12 @@ def outward_normals(contour: np.ndarray) -> np.ndarray:
     The tangent at each node is the chord between its two neighbours (the
     central difference), which keeps the normal well defined at corners.
     """
-    tangent = np.roll(contour, -1, axis=0) - np.roll(contour, 1, axis=0)
+    tangent = np.concatenate([contour[1:], contour[:1]]) - np.concatenate([contour[-1:], contour[:-1]])
     # Rotating the tangent by -90 degrees points outward for a counter-clockwise contour.
     normal = np.column_stack([tangent[:, 1], -tangent[:, 0]])
     if signed_area(contour) < 0:
         normal = -normal
-    norm = np.linalg.norm(normal, axis=1, keepdims=True)
+    norm = np.hypot(normal[:, 0], normal[:, 1])[:, None]
     return normal / np.maximum(norm, 1e-12)
 
 

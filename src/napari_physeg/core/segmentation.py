@@ -199,7 +199,7 @@ PINCH_GAP = 0.35
 #: mean normal displacement) over PLATEAU_STEPS steps has come to rest, even
 #: if a few nodes still jitter.
 PLATEAU_MOTION = 0.1
-PLATEAU_STEPS = 50
+PLATEAU_STEPS = 25
 
 #: At rest, the contour is on the object when at least this fraction of its
 #: nodes rest on a feature (an edge or an object/background switch).
