@@ -171,8 +171,9 @@ def test_bad_parameters_get_a_clear_error(kwargs, message):
 def test_contour_partly_outside_is_clipped_with_a_warning():
     obj = data.ellipse((128, 128))
     init = obj.init_far * 1.3 - 20  # sticks out of the top-left corner
-    with pytest.warns(UserWarning, match="clipped"):
+    with pytest.warns(UserWarning, match="clipped") as caught:
         res = segment(obj.image, init)
+    assert caught[0].filename == __file__  # it points at the user's call
     assert res.contour.min() >= 0 and np.all(res.contour <= 127)
     assert iou(res.contour, obj.mask) >= 0.9
 

@@ -104,7 +104,7 @@ def _clip_to_image(init: np.ndarray, shape) -> np.ndarray:
         warnings.warn(
             f"{outside.sum()} of {len(init)} nodes of init lie outside the image and were clipped to it",
             UserWarning,
-            stacklevel=3,
+            stacklevel=4,  # the caller of segment() (iter_segment, then segment)
         )
         init = as_contour(np.clip(init, 0.0, hi), name="init (clipped to the image)")
     return init
