@@ -14,12 +14,12 @@ drew (``docs/physics.md`` §3b):
    rings outside it tell which, give the object's and the background's levels,
    and so the polarity: no global threshold, no guess.
 2. **The object's own region** (:func:`object_region`). The pixels closer to
-   the object's level than to the background's are split at narrow necks (a
-   small erosion), and the piece the drawing covers most is kept, holes
-   filled. Everything else that looks like the object (a touching neighbour,
-   or, for a drawing around the object, anything beyond the drawing) counts
-   as background: neighbours cannot capture the contour and texture inside
-   the object cannot trap it.
+   the object's level than to the background's are split into blobs at
+   necks (a watershed of their depth, seeded by the blobs' cores), and the
+   blobs the drawing marks are the object. Everything else that looks like
+   the object (a touching neighbour, or, for a drawing around the object,
+   anything beyond the drawing) counts as background: neighbours cannot
+   capture the contour and texture inside the object cannot trap it.
 
 The image border is not background: :mod:`.forces` reads the object-ness as
 -1 only *beyond* it, so an object cut by the border ends on the border.

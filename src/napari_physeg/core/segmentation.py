@@ -50,7 +50,7 @@ class SegmentationResult:
         object/background switch), ``"stalled"`` (at rest elsewhere: nothing
         in reach pulls it), ``"max_steps"`` or ``"cancelled"``. At rest means
         no node moved more than ``tol`` for ``patience`` steps, or the area and
-        centroid changed by less than 0.1 px over 50 steps.
+        centroid changed by less than 0.1 px over 25 steps.
     history : tuple of ndarray
         Sub-sampled evolution, first the resampled initial contour, last the
         final one.
