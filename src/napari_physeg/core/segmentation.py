@@ -25,7 +25,7 @@ from .materials import Material, get_material
 from .region import _disk, drawing_levels, object_region, objectness
 from .subpixel import polish
 
-__all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "region_features"]
+__all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "FrameFeatures", "region_features"]
 
 #: Nodes are redistributed (and the element rebuilt) when an edge of the
 #: contour grows past this many target spacings (see also PINCH_GAP).
@@ -144,19 +144,22 @@ def _near_window_border(nodes: np.ndarray, window, shape, guard: float) -> bool:
 EDGE_GATE = 3.0
 
 
-def region_features(intensity, feats, drawing, polarity=None):
+def region_features(intensity, edges, drawing, polarity=None, avoid=None):
     """Object-ness and edge images for the object the user drew.
 
     Parameters
     ----------
     intensity : (H, W) ndarray
         Lightly smoothed, normalised intensity.
-    feats : FeatureImages
-        Edge and distance images of the same window.
+    edges : (H, W) ndarray
+        Edge map of the same window.
     drawing : (N, 2) ndarray
         The initial contour in the window's frame.
     polarity : {None, 1, -1}
         Known polarity, or None to infer it from the drawing.
+    avoid : (H, W) ndarray of bool, optional
+        Pixels of other objects: background for this one, whatever they
+        look like (objects tracked together repel each other).
 
     Returns
     -------
@@ -170,11 +173,13 @@ def region_features(intensity, feats, drawing, polarity=None):
     if not model.is_visible(intensity):
         # No object here that the eye could tell from its background: no
         # region force (edges may still guide the contour).
-        return np.zeros(intensity.shape, np.float32), feats.edges, model.polarity
+        return np.zeros(intensity.shape, np.float32), edges, model.polarity
     signed = objectness(intensity, model)
+    if avoid is not None:
+        signed[avoid] = -1.0
     region = object_region(signed, drawing, model)
     if region is None:
-        return signed, feats.edges, model.polarity
+        return signed, edges, model.polarity
     signed = np.where(region, np.where(signed > 0, signed, 1.0), np.where(signed > 0, -1.0, signed))
     # Texture inside the object's own region is the object: no edge holds
     # the contour there, and only a rim keeps graded object-ness values (for
@@ -186,7 +191,7 @@ def region_features(intensity, feats, drawing, polarity=None):
     r8 = region.view(np.uint8)
     interior = cv2.erode(r8, _disk(rim + 1)).view(bool)
     band = cv2.dilate(r8, _disk(gate)).view(bool) & ~interior
-    edges = np.where(band, feats.edges, 0.0)
+    edges = np.where(band, edges, 0.0)
     signed[cv2.erode(r8, _disk(rim)).view(bool)] = 1.0
     return signed.astype(np.float32), edges, model.polarity
 
@@ -275,6 +280,29 @@ class SegmentationProgress:
     phase: str
 
 
+@dataclass(frozen=True, eq=False)
+class FrameFeatures:
+    """The feature images of a whole image, computed once and shared by
+    several segmentations of it (the objects of one frame when tracking).
+
+    Create with :meth:`of`; pass to :func:`segment` as ``features=``.
+    """
+
+    edges: np.ndarray
+    intensity: np.ndarray  # normalised, lightly smoothed (sigma 1 px)
+
+    @classmethod
+    def of(cls, image, isef_b: float = 0.7) -> FrameFeatures:
+        image = _validate_image(image)
+        return cls(compute_features(image, b=isef_b).edges, _light_intensity(image))
+
+
+def _light_intensity(image) -> np.ndarray:
+    """The region force needs the border where it is: a light denoising, not
+    the strong ISEF smoothing used for edge detection."""
+    return cv2.GaussianBlur(normalized_intensity(image), (0, 0), 1.0, borderType=cv2.BORDER_REFLECT)
+
+
 class _FeatureWindow:
     """The image forces, computed on a window around the contour.
 
@@ -285,8 +313,10 @@ class _FeatureWindow:
     the cost of a segmentation.
     """
 
-    def __init__(self, image, drawing, init, *, polarity, weights, max_line_length, isef_b, refine):
+    def __init__(self, image, drawing, init, *, polarity, weights, max_line_length, isef_b, refine,
+                 shared=None, avoid=None):
         self.image, self.drawing, self.polarity = image, drawing, polarity
+        self.shared, self.avoid = shared, avoid
         self.weights, self.max_line_length, self.isef_b = weights, max_line_length, isef_b
         # A second phase with the region force alone (sub-pixel refinement).
         self.with_refinement = refine and weights.get("intensity", 0) > 0 and len(weights) > 1
@@ -303,15 +333,17 @@ class _FeatureWindow:
     def _compute(self, window) -> None:
         sub = self.image[window]
         origin = np.array([window[0].start, window[1].start], dtype=float)
-        feats = compute_features(sub, b=self.isef_b)
-        if not feats.edges.any() and np.ptp(feats.intensity) <= 1e-12:
+        if self.shared is not None:
+            edges, intensity = self.shared.edges[window], self.shared.intensity[window]
+        else:
+            edges, intensity = compute_features(sub, b=self.isef_b).edges, _light_intensity(sub)
+        if not edges.any() and np.ptp(intensity) <= 1e-12:
             if sub.shape != self.image.shape:  # nothing here: look at the whole image
                 return self._compute(self._whole_image)
             raise ValueError("image is constant: there is no object border to segment")
-        # The region force needs the border where it is: a light denoising,
-        # not the strong ISEF smoothing used for edge detection.
-        intensity = cv2.GaussianBlur(normalized_intensity(sub), (0, 0), 1.0, borderType=cv2.BORDER_REFLECT)
-        signed, edges, self.polarity = region_features(intensity, feats, self.drawing - origin, self.polarity)
+        avoid = None if self.avoid is None else self.avoid[window]
+        signed, edges, self.polarity = region_features(intensity, edges, self.drawing - origin, self.polarity,
+                                                       avoid)
         distance = _distance_with_image_border(edges, window, self.image.shape)
         field = ForceField.from_features(edges, distance, signed, self.weights, max_length=self.max_line_length)
         self.fields = [field]
@@ -516,6 +548,8 @@ def iter_segment(
     isef_b: float = 0.7,
     refine: bool = True,
     history_every: int = 5,
+    features: FrameFeatures | None = None,
+    avoid=None,
 ):
     """:func:`segment` as a generator: one :class:`SegmentationProgress` per time step.
 
@@ -551,9 +585,14 @@ def iter_segment(
             f"eigenproblem at every remesh (seconds to minutes each); use integrator='newmark' (the same "
             f"equation, sparse) or at most n_nodes={MODAL_MAX_NODES}"
         )
+    for name, given in (("features", features), ("avoid", avoid)):
+        if given is not None and np.shape(getattr(given, "edges", given)) != image.shape:
+            raise ValueError(f"{name} must be of the image's shape {image.shape}, got "
+                             f"{np.shape(getattr(given, 'edges', given))}")
     features = _FeatureWindow(image, drawing, init, polarity={"bright": 1, "dark": -1}.get(polarity),
                               weights=weights, max_line_length=max_line_length, isef_b=isef_b,
-                              refine=refine and reference == "incremental")
+                              refine=refine and reference == "incremental", shared=features,
+                              avoid=None if avoid is None else np.asarray(avoid, dtype=bool))
     t_features = time.perf_counter()
 
     body = _ElasticBody(
@@ -729,6 +768,12 @@ def segment(image, init, *, callback=None, **options) -> SegmentationResult:
         and a contour that came to rest.
     history_every : int, optional
         Keep one contour in ``history`` every this many steps.
+    features : FrameFeatures, optional
+        The image's feature images, computed once (``FrameFeatures.of(image)``)
+        for several objects of one image (tracking); ``isef_b`` is then theirs.
+    avoid : (H, W) array of bool, optional
+        Pixels of other objects, counted as background whatever they look like:
+        the contour does not enter them.
     callback : callable, optional
         ``callback(step, contour)`` after each step; return ``False`` to stop.
 
