@@ -960,12 +960,13 @@ class SyntheticMovie:
                 f"outline={self.outlines.shape[1]} material points)")
 
 
-def _cell_outline(theta, t, n_frames, center, radius, drift, spin, waves):
-    """Material points at body angles ``theta`` at time ``t``: radius
-    modulated by standing waves whose amplitudes change slowly, rotated by
+def _cell_outline(theta, t, n_frames, center, radius, drift, spin, waves, elongation=0.35):
+    """Material points at body angles ``theta`` at time ``t``: an elongated
+    body (so that its turning shows in its outline) whose radius is
+    modulated by standing waves with slowly changing amplitudes, rotated by
     ``spin * t`` and carried by ``drift * t``."""
     phase = 2 * np.pi * t / n_frames
-    r = np.full_like(theta, radius)
+    r = radius / np.sqrt((np.cos(theta) / (1 + elongation)) ** 2 + (np.sin(theta) / (1 - elongation / 2)) ** 2)
     for k, amp, p, speed in waves:
         r += radius * amp * np.sin(speed * phase + p) * np.cos(k * theta + p)
     angle = theta + spin * t
@@ -978,11 +979,13 @@ def deforming_cell(n_frames: int = 30, shape=(160, 160), *, n_points: int = 720,
     """A cell that drifts, turns slowly and protrudes and retracts, with known node motion.
 
     The membrane is a closed curve of ``n_points`` material points: at body
-    angle ``theta`` its radius is ``R (1 + sum_k a_k sin(w_k t + p_k) cos(k theta + p_k))``
-    (standing waves of orders 2 to 5 whose amplitudes, up to 6 % of ``R``,
-    rise and fall over the movie), the body turns by 0.4 degrees and drifts
+    angle ``theta`` its radius is that of an ellipse of axes ``1.35 R`` and
+    ``0.82 R`` plus ``R sum_k a_k sin(w_k t + p_k) cos(k theta + p_k)``
+    (standing waves of orders 3 to 5 whose amplitudes, up to 5 % of ``R``,
+    rise and fall over the movie); the body turns by 0.4 degrees and drifts
     by about 0.4 px per frame. Each material point keeps its body angle, so
-    the truth of correspondences and of normal velocity is known exactly.
+    the truth of correspondences and of normal velocity is known exactly,
+    and the body is elongated so that its turning shows in its outline.
 
     Parameters
     ----------
@@ -1010,7 +1013,7 @@ def deforming_cell(n_frames: int = 30, shape=(160, 160), *, n_points: int = 720,
     drift = np.array([0.4, 0.24]) * min(shape) / 160  # px per frame
     center = np.array(shape, float) / 2 - drift * (n_frames - 1) / 2  # mid-movie at the centre
     spin = np.deg2rad(0.4)
-    waves = [(k, rng.uniform(0.02, 0.06), rng.uniform(0, 2 * np.pi), rng.uniform(0.5, 1.5)) for k in (2, 3, 4, 5)]
+    waves = [(k, rng.uniform(0.02, 0.05), rng.uniform(0, 2 * np.pi), rng.uniform(0.5, 1.5)) for k in (3, 4, 5)]
     theta = np.linspace(0, 2 * np.pi, int(n_points), endpoint=False)
     outlines = np.stack([_cell_outline(theta, t, n_frames, center, radius, drift, spin, waves)
                          for t in range(n_frames)])

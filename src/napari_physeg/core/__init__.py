@@ -1,9 +1,10 @@
 """The physics core of napari-physeg: numpy, scipy, scikit-image and OpenCV only.
 
-Scripts, notebooks, batch jobs and the napari widgets all go through three
+Scripts, notebooks, batch jobs and the napari widgets all go through four
 calls: :func:`segment` (a rough contour onto an object's border),
-:func:`match` (node correspondences by modal analysis) and :func:`simulate`
-(the deformation of one contour into another).
+:func:`match` (node correspondences by modal analysis), :func:`simulate`
+(the deformation of one contour into another) and :func:`track` (objects
+followed through a time-lapse, with membrane maps).
 """
 
 from .dynamics import DivergenceError
@@ -11,6 +12,7 @@ from .matching import Matching, MatchingCancelled, match
 from .materials import MATERIALS, Material, get_material
 from .segmentation import SegmentationProgress, SegmentationResult, iter_segment, segment
 from .simulation import SimulationResult, simulate
+from .tracking import LEFT, LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, track
 
 __all__ = [
     "segment",
@@ -26,4 +28,11 @@ __all__ = [
     "MATERIALS",
     "get_material",
     "DivergenceError",
+    "track",
+    "iter_track",
+    "TrackingResult",
+    "TrackingProgress",
+    "TRACKED",
+    "LOST",
+    "LEFT",
 ]

@@ -662,7 +662,7 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
           sigma_factor: float = 1.0, material: str | Material = "rubber", curvature_weight: float = 8.0,
           arclength_weight: float = 0.0, refine: bool | None = None, sign_correction: bool = True,
           order_penalty: float = 5.0, n_starts: int = 4, gap_cost: float | None = None,
-          detail: bool | None = None, callback=None) -> Matching:
+          detail: bool | None = None, displacement_weight: float = 0.0, callback=None) -> Matching:
     """Match the nodes of contour ``a`` to those of contour ``b`` by modal analysis.
 
     Parameters
@@ -735,6 +735,14 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
         0.1), where it raised the 1000-node articulated hands of the
         benchmark from 0.72 / 0.90 to 0.90 / 0.96 accuracy; on rough
         contours curvature at one node spacing is noise.
+    displacement_weight : float, optional
+        For two contours in one frame of reference (consecutive frames of a
+        movie): add ``displacement_weight x median_i(min_j C_ij) x (d_ij / s)^2``
+        to the cost, ``d_ij`` the distance between the nodes and ``s`` the
+        node spacing of ``a``. Modes and curvature are blind to where the
+        shapes are, so a near-circular cell that turned a little could be
+        matched a quarter turn off; this term (default 0: invariant matching)
+        keeps each node near where it was.
     callback : callable, optional
         ``callback(fraction)`` with the fraction of the work done (0 to 1,
         increasing) after each stage and each start of the ``order`` search;
@@ -781,6 +789,7 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
     b = _check_nodes(b, "b")
     curvature_weight = _check_weight(curvature_weight, "curvature_weight")
     arclength_weight = _check_weight(arclength_weight, "arclength_weight")
+    displacement_weight = _check_weight(displacement_weight, "displacement_weight")
     n_modes = _check_count(n_modes, "n_modes", 1, True)
     model_nodes = _check_count(model_nodes, "model_nodes", 8, True)
     n_starts = _check_count(n_starts, "n_starts", 1, False)
@@ -819,6 +828,9 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
         kb = curvature_signature(B, scales)
         C = C + curvature_weight * _pairwise_sq(ka, kb) / ka.shape[1]
 
+    if displacement_weight > 0:
+        spacing = perimeter_a / na
+        C = C + displacement_weight * float(np.median(C.min(axis=1))) * _pairwise_sq(A, B) / spacing**2
     if detail is None:
         detail = (method == "order" and min(na, nb) >= _DETAIL_MIN_NODES
                   and max(roughness(A), roughness(B)) < _DETAIL_ROUGHNESS)

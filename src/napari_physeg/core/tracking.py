@@ -1,0 +1,524 @@
+"""Following objects through a time-lapse (the paper's future work).
+
+:func:`track` segments every object of a movie frame by frame, each frame
+starting from the previous result moved by the motion predicted from the
+frames before, so the physical contour needs only a few steps. The feature
+images of a frame are computed once and shared by all its objects, and each
+object counts the others' pixels as background: objects repel each other
+and never overlap.
+
+Once the contours are known, consecutive contours of an object are matched
+node to node by the order-preserving modal matching of :func:`.match`, as
+QuimP's ECMM maps each membrane point onto the next outline. That gives each
+node its origin on the previous contour, its normal displacement
+(protrusion > 0, retraction < 0) and an arc position whose origin is carried
+from frame to frame by the correspondences; with the curvature these make
+the membrane maps (arc position x time) of QuimP's Q-Analysis and of
+MorphoDynamics (:meth:`TrackingResult.membrane_map`).
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .contour import as_contour, outward_normals, perimeter, remove_loops, resample, signed_area
+from .dynamics import DivergenceError
+from .matching import match
+from .segmentation import FrameFeatures, segment
+
+__all__ = ["track", "iter_track", "TrackingResult", "TrackingProgress", "TRACKED", "LOST", "LEFT"]
+
+TRACKED = "tracked"
+LOST = "lost"
+LEFT = "left the field of view"
+
+#: A frame's contour whose area changed by more than this factor from the
+#: previous frame's is not the same object: the object is lost.
+MAX_AREA_CHANGE = 2.0
+
+#: Consecutive contours share a frame of reference: the matching cost keeps
+#: each node near where it was (see match's ``displacement_weight``).
+DISPLACEMENT_WEIGHT = 1.0
+
+#: An object cut by the image's side with less than this fraction of its
+#: area when last seen whole has left the field of view.
+LEFT_FRACTION = 0.3
+
+
+@dataclass(frozen=True)
+class TrackingProgress:
+    """What :func:`iter_track` yields after each object of each frame.
+
+    Attributes
+    ----------
+    frame, object : int
+        The frame and the object just done.
+    contour : ndarray or None
+        Its contour there (None when lost or gone).
+    status : str
+        :data:`TRACKED`, :data:`LOST` or :data:`LEFT`.
+    done, total : int
+        Object-frames done and to do.
+    """
+
+    frame: int
+    object: int
+    contour: np.ndarray | None
+    status: str
+    done: int
+    total: int
+
+
+@dataclass(frozen=True, eq=False)
+class TrackingResult:
+    """What :func:`track` returns. Lists are indexed ``[object][frame]``.
+
+    Attributes
+    ----------
+    contours : list of list of (N, 2) ndarray or None
+        Object ``k``'s contour at frame ``t`` (positively oriented), None
+        where it is lost or gone (never a garbage contour).
+    status : list of list of str
+        :data:`TRACKED`, :data:`LOST` or :data:`LEFT` (``"left the field of
+        view"``).
+    origin : list of list of (N, 2) ndarray or None
+        Where each node of frame ``t`` came from on frame ``t - 1``'s contour
+        (NaN at the first frame and after a gap).
+    normal_velocity : list of list of (N,) ndarray or None
+        Each node's displacement from its origin along its outward normal,
+        px/frame (protrusion > 0, retraction < 0; NaN where ``origin`` is).
+    curvature : list of list of (N,) ndarray or None
+        Signed curvature at each node (1/px; > 0 where the contour is convex).
+    arc : list of list of (N,) ndarray or None
+        Arc position of each node in [0, 1), from an origin carried from
+        frame to frame by the correspondences, along the contour's direction.
+    start : int
+        The frame the initial contours were drawn on.
+    stop_reason : str
+        ``"completed"`` or ``"cancelled"``.
+    timings : dict
+        Seconds spent on ``"segmentation"``, ``"correspondence"`` and ``"total"``.
+    """
+
+    contours: list
+    status: list
+    origin: list
+    normal_velocity: list
+    curvature: list
+    arc: list
+    start: int
+    stop_reason: str
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def n_objects(self) -> int:
+        return len(self.contours)
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.contours[0]) if self.contours else 0
+
+    def centroids(self, k: int) -> np.ndarray:
+        """``(T, 2)`` area centroids of object ``k`` (NaN where it has no contour)."""
+        return np.array([_centroid(c) if c is not None else (np.nan, np.nan) for c in self.contours[k]])
+
+    def membrane_map(self, k: int, quantity: str = "normal_velocity", n_arc: int = 100) -> np.ndarray:
+        """Object ``k``'s ``quantity`` as an image, arc position x time.
+
+        Parameters
+        ----------
+        k : int
+            The object.
+        quantity : {"normal_velocity", "curvature"}
+        n_arc : int
+            Columns: arc positions ``0, 1/n_arc, ...`` from the carried origin.
+
+        Returns
+        -------
+        ndarray, shape (T, n_arc)
+            Rows are frames (NaN where the object has no value), as QuimP's
+            motility and convexity maps and MorphoDynamics' maps.
+        """
+        values = {"normal_velocity": self.normal_velocity, "curvature": self.curvature}
+        if quantity not in values:
+            raise ValueError(f"quantity must be 'normal_velocity' or 'curvature', got {quantity!r}")
+        grid = np.arange(int(n_arc)) / int(n_arc)
+        out = np.full((self.n_frames, int(n_arc)), np.nan)
+        for t, (v, s) in enumerate(zip(values[quantity][k], self.arc[k])):
+            if v is not None and np.isfinite(v).any():
+                order = np.argsort(s)
+                ok = np.isfinite(v[order])
+                out[t] = np.interp(grid, s[order][ok], v[order][ok], period=1.0)
+        return out
+
+    def table(self):
+        """A tidy pandas DataFrame, one row per node per frame per object.
+
+        Columns: object, frame, node, row, col, arc, normal_velocity,
+        curvature, status. Frames where an object is lost or gone have one row
+        with NaN coordinates and its status. Needs pandas (napari brings it).
+        """
+        import pandas as pd
+
+        parts = []
+        for k in range(self.n_objects):
+            for t in range(self.n_frames):
+                c = self.contours[k][t]
+                if c is None:
+                    parts.append(pd.DataFrame(dict(object=[k], frame=[t], node=[-1], row=[np.nan], col=[np.nan],
+                                                   arc=[np.nan], normal_velocity=[np.nan], curvature=[np.nan],
+                                                   status=[self.status[k][t]])))
+                    continue
+                n = len(c)
+                parts.append(pd.DataFrame(dict(
+                    object=np.full(n, k), frame=np.full(n, t), node=np.arange(n), row=c[:, 0], col=c[:, 1],
+                    arc=self.arc[k][t], normal_velocity=self.normal_velocity[k][t],
+                    curvature=self.curvature[k][t], status=[self.status[k][t]] * n)))
+        return pd.concat(parts, ignore_index=True)
+
+
+def _centroid(contour: np.ndarray) -> np.ndarray:
+    r, c = contour[:, 0], contour[:, 1]
+    r1, c1 = np.roll(r, -1), np.roll(c, -1)
+    cross = r * c1 - r1 * c
+    area = 0.5 * cross.sum()
+    if abs(area) < 1e-12:
+        return contour.mean(0)
+    return np.array([((r + r1) * cross).sum(), ((c + c1) * cross).sum()]) / (6 * area)
+
+
+def _oriented(contour: np.ndarray) -> np.ndarray:
+    return contour if signed_area(contour) > 0 else contour[::-1].copy()
+
+
+def _check_frames(frames):
+    shape = getattr(frames, "shape", None)
+    if shape is None:
+        frames = np.asarray(frames)
+        shape = frames.shape
+    if len(shape) != 3:
+        raise ValueError(f"frames must be a (T, H, W) stack of 2D frames, got shape {tuple(shape)}; "
+                         "for one image use segment()")
+    if shape[0] < 1 or min(shape[1:]) < 3:
+        raise ValueError(f"frames of shape {tuple(shape)} hold no image to track in")
+    return frames, int(shape[0]), tuple(int(s) for s in shape[1:])
+
+
+def _check_inits(inits, frame_shape):
+    arr = inits if isinstance(inits, np.ndarray) else None
+    if arr is not None and arr.ndim == 2:
+        inits = [arr]
+    out = [as_contour(c, name=f"inits[{k}]") for k, c in enumerate(inits)]
+    if not out:
+        raise ValueError("inits is empty: give one (N, 2) contour per object to track")
+    for k, c in enumerate(out):
+        if np.all((c < 0) | (c > np.array(frame_shape) - 1)):
+            raise ValueError(f"inits[{k}] lies wholly outside the frames ({frame_shape}); "
+                             "check that contours and frames use the same (row, col) coordinates")
+    return out
+
+
+def _grown(contour: np.ndarray, by: float) -> np.ndarray:
+    """``contour`` offset outward by ``by`` px (loops that the offset makes in
+    concave bends cut): a drawing around the object, as a user's."""
+    nodes = resample(contour, spacing=1.5)
+    return remove_loops(nodes + by * outward_normals(nodes))
+
+
+def _next_init(history: list[np.ndarray]) -> np.ndarray:
+    """The previous contour moved by the centroid's last displacement and
+    grown by a margin: the next frame's starting contour."""
+    prev = history[-1]
+    shift = _centroid(prev) - _centroid(history[-2]) if len(history) > 1 else 0.0
+    radius = np.sqrt(abs(signed_area(prev)) / np.pi)
+    return _grown(prev + shift, float(np.clip(0.2 * radius, 3.0, 8.0)))
+
+
+def _mask(contour: np.ndarray, shape) -> np.ndarray:
+    from .contour import polygon_mask
+
+    return polygon_mask(contour, shape)
+
+
+def _judge(contour, previous, whole_area, shape) -> str:
+    """Is ``contour`` the object seen on ``previous``, or has it gone?"""
+    area, prev_area = abs(signed_area(contour)), abs(signed_area(previous))
+    touches = np.any((contour <= 0.0) | (contour >= np.array(shape) - 1.0))
+    if touches and area < LEFT_FRACTION * whole_area:
+        return LEFT
+    if not (prev_area / MAX_AREA_CHANGE <= area <= MAX_AREA_CHANGE * prev_area):
+        return LOST
+    return TRACKED
+
+
+def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_options: dict | None = None,
+               match_options: dict | None = None):
+    """:func:`track` as a generator: one :class:`TrackingProgress` per object and frame.
+
+    Takes the parameters of :func:`track` (but ``callback``) and returns (as
+    ``StopIteration.value``) its :class:`TrackingResult`. Send ``True`` to stop:
+    the frames done are kept and the result says ``stop_reason="cancelled"``.
+    """
+    t_start = time.perf_counter()
+    frames, n_frames, frame_shape = _check_frames(frames)
+    inits = _check_inits(inits, frame_shape)
+    if not 0 <= int(start) < n_frames:
+        raise ValueError(f"start must be a frame index in [0, {n_frames - 1}], got {start!r}")
+    start = int(start)
+    options = dict(segment_options or {})
+    options.setdefault("max_steps", int(max_steps))
+    n_obj = len(inits)
+    contours = [[None] * n_frames for _ in range(n_obj)]
+    status = [[None] * n_frames for _ in range(n_obj)]
+    total, done, stop_reason = n_obj * n_frames, 0, "completed"
+    polarity = ["auto"] * n_obj
+    whole_area = [abs(signed_area(c)) for c in inits]
+    # Forward from the start frame, then backward from it.
+    for frame_order in (range(start, n_frames), range(start - 1, -1, -1)):
+        step = 1 if frame_order.step > 0 else -1
+        for t in frame_order:
+            image = np.asarray(frames[t], dtype=np.float64)  # one frame at a time (dask, zarr)
+            shared = FrameFeatures.of(image, options.get("isef_b", 0.7))
+            for k in range(n_obj):
+                contour, status[k][t] = _one_object(image, shared, t, k, start, step, inits, contours, status,
+                                                    polarity, whole_area, options)
+                contours[k][t] = contour
+                done += 1
+                stop = yield TrackingProgress(t, k, contour, status[k][t], done, total)
+                if stop:
+                    stop_reason = "cancelled"
+                    break
+            if stop_reason == "cancelled":
+                break
+        if stop_reason == "cancelled":
+            break
+    t_segmented = time.perf_counter()
+    analysis = _correspondences(contours, start, match_options or {})
+    t_end = time.perf_counter()
+    status = [[s if s is not None else "not processed" for s in row] for row in status]
+    return TrackingResult(
+        contours=contours, status=status, **analysis, start=start, stop_reason=stop_reason,
+        timings={"segmentation": t_segmented - t_start, "correspondence": t_end - t_segmented,
+                 "total": t_end - t_start})
+
+
+def _one_object(image, shared, t, k, start, step, inits, contours, status, polarity, whole_area, options):
+    """Segment object ``k`` on frame ``t``; its contour (or None) and status."""
+    if t != start:
+        before = status[k][t - step]
+        if before != TRACKED:  # lost or gone: stays so (no re-detection)
+            return None, before
+        # The two frames before this one, in the direction of travel.
+        history = [c for c in (contours[k][t - 2 * step] if 0 <= t - 2 * step < len(contours[k]) else None,
+                               contours[k][t - step]) if c is not None]
+        init = _next_init(history)
+    else:
+        init = inits[k]
+    others = [contours[j][t] if contours[j][t] is not None else contours[j][t - step] if t != start else inits[j]
+              for j in range(len(inits)) if j != k]
+    avoid = np.zeros(image.shape, bool)
+    for c in others:
+        if c is not None:
+            avoid |= _mask(c, image.shape)
+    try:
+        with warnings.catch_warnings():
+            if t != start:  # a contour predicted partly beyond the image is expected
+                warnings.filterwarnings("ignore", message=".*lie outside the image", category=UserWarning)
+            res = segment(image, init, features=shared, avoid=avoid if avoid.any() else None,
+                          polarity=polarity[k], **options)
+    except (ValueError, DivergenceError):
+        touches = np.any((init <= 0) | (init >= np.array(image.shape) - 1))
+        return None, LEFT if t != start and touches else LOST
+    if not res.converged:
+        return None, LOST
+    contour = _oriented(res.contour)
+    if t == start:
+        polarity[k] = "bright" if res.polarity > 0 else "dark"
+        whole_area[k] = abs(signed_area(contour))
+        return contour, TRACKED
+    verdict = _judge(contour, contours[k][t - step], whole_area[k], image.shape)
+    if verdict == TRACKED and not np.any((contour <= 0.0) | (contour >= np.array(image.shape) - 1.0)):
+        whole_area[k] = abs(signed_area(contour))
+    return (contour if verdict == TRACKED else None), verdict
+
+
+def _correspondences(contours, start, match_options) -> dict:
+    """Origins, normal velocities, curvature and carried arc positions."""
+    n_obj, n_frames = len(contours), len(contours[0])
+    out = {name: [[None] * n_frames for _ in range(n_obj)] for name in ("origin", "normal_velocity", "curvature", "arc")}
+    for k in range(n_obj):
+        for t in range(n_frames):
+            c = contours[k][t]
+            if c is None:
+                continue
+            out["curvature"][k][t] = curvature(c)
+            prev = contours[k][t - 1] if t > 0 else None
+            if prev is None:
+                out["origin"][k][t] = np.full(c.shape, np.nan)
+                out["normal_velocity"][k][t] = np.full(len(c), np.nan)
+                continue
+            origin = node_origins(c, prev, **match_options)
+            out["origin"][k][t] = origin
+            out["normal_velocity"][k][t] = ((c - origin) * outward_normals(c)).sum(1)
+        _carry_arc_origin(contours[k], out["origin"][k], out["arc"][k], start)
+    return out
+
+
+def node_origins(contour: np.ndarray, previous: np.ndarray, **match_options) -> np.ndarray:
+    """Where each node of ``contour`` came from on ``previous``.
+
+    The rigid part of the motion (rotation and translation, by iterative
+    closest points) is found first and undone; then the nodes are matched by
+    the order-preserving modal matching (every node of ``contour`` gets a
+    partner), with a cost on their remaining displacement, as the two
+    contours share a frame of reference. Each origin is the point of
+    ``previous``, next to the partner, closest to where the rigid motion puts
+    the node back: so a turning cell's nodes keep their place along its
+    membrane, and the normal displacement is not rounded to the node spacing.
+    """
+    rotation, shift = _rigid_motion(contour, previous)
+    back = contour @ rotation.T + shift
+    options = {"displacement_weight": DISPLACEMENT_WEIGHT, **match_options}
+    pairs = match(back, previous, method="order", **options).pairs
+    partner = np.full(len(contour), -1)
+    partner[pairs[:, 0]] = pairs[:, 1]
+    missing = partner < 0
+    if missing.any():  # not expected with method="order": nearest node instead
+        partner[missing] = np.argmin(((back[missing, None] - previous[None]) ** 2).sum(-1), axis=1)
+    m = len(previous)
+    origin, best = previous[partner].copy(), np.full(len(contour), np.inf)
+    for step in (-2, -1, 0, 1):
+        a, b = previous[(partner + step) % m], previous[(partner + step + 1) % m]
+        point = _closest_on_segments(back, a, b)
+        dist = np.hypot(*(point - back).T)
+        closer = dist < best
+        origin[closer], best[closer] = point[closer], dist[closer]
+    return origin
+
+
+def _closest_on_segments(points, a, b):
+    d = b - a
+    u = np.clip(((points - a) * d).sum(1) / np.maximum((d * d).sum(1), 1e-12), 0.0, 1.0)
+    return a + u[:, None] * d
+
+
+def _rigid_motion(source: np.ndarray, target: np.ndarray, iterations: int = 20):
+    """Rotation ``R`` and shift ``T`` with ``source @ R.T + T`` closest to the
+    curve ``target`` (iterative closest points, Kabsch's rotation)."""
+    dense = resample(target, spacing=0.5)
+    tree = cKDTree(dense)
+    rotation, shift = np.eye(2), dense.mean(0) - source.mean(0)
+    centred = source - source.mean(0)
+    for _ in range(iterations):
+        matched = dense[tree.query(source @ rotation.T + shift)[1]]
+        u, _, vt = np.linalg.svd(centred.T @ (matched - matched.mean(0)))
+        flip = np.diag([1.0, np.sign(np.linalg.det(vt.T @ u.T))])
+        new_rotation = vt.T @ flip @ u.T
+        new_shift = matched.mean(0) - source.mean(0) @ new_rotation.T
+        done = np.abs(new_rotation - rotation).max() < 1e-6 and np.abs(new_shift - shift).max() < 1e-4
+        rotation, shift = new_rotation, new_shift
+        if done:
+            break
+    return rotation, shift
+
+
+def curvature(contour: np.ndarray) -> np.ndarray:
+    """Signed curvature at each node (1/px): the turning angle over the mean
+    of the two adjacent edge lengths, > 0 where a positively oriented
+    contour is convex."""
+    before = contour - np.roll(contour, 1, axis=0)
+    after = np.roll(contour, -1, axis=0) - contour
+    cross = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
+    turn = np.arctan2(cross, (before * after).sum(1))
+    length = 0.5 * (np.hypot(*before.T) + np.hypot(*after.T))
+    sign = 1.0 if signed_area(contour) > 0 else -1.0
+    return sign * turn / np.maximum(length, 1e-12)
+
+
+def _carry_arc_origin(contours, origins, arcs, start) -> None:
+    """Arc positions from an origin point that follows the correspondences:
+    node 0 on the start frame, then frame to frame in both directions."""
+    n = len(contours)
+    if contours[start] is None:
+        return
+    anchor = {start: contours[start][0]}
+    for t in range(start + 1, n):  # forward: the node whose origin is nearest the last anchor
+        if contours[t] is None or t - 1 not in anchor or origins[t] is None:
+            break
+        i = np.argmin(((origins[t] - anchor[t - 1]) ** 2).sum(1))
+        anchor[t] = contours[t][i]
+    for t in range(start - 1, -1, -1):  # backward: the origin of the node nearest the anchor after
+        if contours[t] is None or t + 1 not in anchor or origins[t + 1] is None:
+            break
+        i = np.argmin(((contours[t + 1] - anchor[t + 1]) ** 2).sum(1))
+        anchor[t] = origins[t + 1][i]
+    for t, point in anchor.items():
+        arcs[t] = _arc_from(contours[t], point)
+
+
+def _arc_from(contour: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """Arc position of each node in [0, 1), counted from the node nearest ``point``."""
+    first = int(np.argmin(((contour - point) ** 2).sum(1)))
+    seg = np.hypot(*(np.roll(contour, -1, axis=0) - contour).T)
+    s = np.concatenate([[0.0], np.cumsum(seg)[:-1]])
+    return ((s - s[first]) / max(perimeter(contour), 1e-12)) % 1.0
+
+
+def track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_options: dict | None = None,
+          match_options: dict | None = None, callback=None) -> TrackingResult:
+    """Follow objects through a time-lapse with physical contours.
+
+    Parameters
+    ----------
+    frames : (T, H, W) array_like
+        The movie: a numpy array, or a lazy dask or zarr array read one frame
+        at a time.
+    inits : (N, 2) array_like or sequence of them
+        One contour per object, drawn on frame ``start`` (around or inside the
+        object, as for :func:`segment`).
+    start : int, optional
+        The frame the contours were drawn on; tracking runs forward from it
+        to the last frame, then backward from it to the first.
+    max_steps : int, optional
+        Time steps per object and frame (each frame starts from the previous
+        result, so a few dozen are usually enough).
+    segment_options : dict, optional
+        Further options of :func:`segment` (material, stiffness, ...).
+    match_options : dict, optional
+        Options of :func:`match` for the node correspondences between frames.
+    callback : callable, optional
+        ``callback(progress)`` with a :class:`TrackingProgress` after each
+        object and frame; return ``False`` to stop (what was done is kept).
+
+    Returns
+    -------
+    TrackingResult
+
+    Raises
+    ------
+    ValueError
+        For frames that are not a (T, H, W) stack, no or bad contours, or a
+        start frame outside the movie; before any frame is read.
+
+    Examples
+    --------
+    >>> from napari_physeg import data
+    >>> movie = data.deforming_cell(n_frames=5)
+    >>> tr = track(movie.frames, movie.init)
+    >>> tr.status[0]
+    ['tracked', 'tracked', 'tracked', 'tracked', 'tracked']
+    """
+    run = iter_track(frames, inits, start=start, max_steps=max_steps, segment_options=segment_options,
+                     match_options=match_options)
+    stop = False
+    try:
+        while True:
+            progress = run.send(True if stop else None)
+            stop = callback is not None and callback(progress) is False
+    except StopIteration as done:
+        return done.value

@@ -1,0 +1,206 @@
+"""track(): objects followed through a movie, with known answers."""
+
+import numpy as np
+import pytest
+
+from napari_physeg import data
+from napari_physeg.core import LEFT, LOST, TRACKED, iter_track, match, track
+from napari_physeg.core.contour import polygon_mask, signed_area
+from napari_physeg.core.tracking import curvature, node_origins
+
+
+def iou(contour, mask):
+    found = polygon_mask(contour, mask.shape)
+    return (found & mask).sum() / (found | mask).sum()
+
+
+@pytest.fixture(scope="module")
+def movie():
+    return data.deforming_cell(n_frames=12)
+
+
+@pytest.fixture(scope="module")
+def tracked(movie):
+    return track(movie.frames, movie.init)
+
+
+def test_the_deforming_cell_is_followed_through_every_frame(movie, tracked):
+    assert tracked.status == [[TRACKED] * 12]
+    assert tracked.stop_reason == "completed"
+    for t, contour in enumerate(tracked.contours[0]):
+        assert signed_area(contour) > 0  # positively oriented
+        assert iou(contour, movie.masks[t]) > 0.98
+
+
+def test_normal_velocity_matches_the_known_membrane_motion(movie, tracked):
+    errors = []
+    for t in range(1, 12):
+        contour, velocity = tracked.contours[0][t], tracked.normal_velocity[0][t]
+        nearest = np.argmin(((contour[:, None] - movie.outlines[t][None]) ** 2).sum(-1), axis=1)
+        errors.append(np.abs(velocity - movie.normal_velocity[t][nearest]))
+    errors = np.concatenate(errors)
+    assert np.median(errors) < 0.15 and np.percentile(errors, 99) < 0.5
+    assert np.isnan(tracked.normal_velocity[0][0]).all() and np.isnan(tracked.origin[0][0]).all()
+
+
+def test_origins_follow_the_turning_body(movie, tracked):
+    """A point followed from frame 0 through the origins ends within about a
+    node spacing of where the material point went (the body turns 4.4
+    degrees, about 3 node spacings at its tips, in these 12 frames)."""
+    first = tracked.contours[0][0]
+    spacing = np.mean(np.hypot(*(np.roll(first, -1, axis=0) - first).T))
+    drift = []
+    for i in range(0, len(first), 7):
+        point = first[i]
+        material = np.argmin(((movie.outlines[0] - point) ** 2).sum(1))
+        for t in range(1, 12):
+            origins, contour = tracked.origin[0][t], tracked.contours[0][t]
+            j = np.argmin(((origins - point) ** 2).sum(1))
+            point = contour[j] + (point - origins[j])  # the node, plus the offset along the membrane
+        drift.append(np.hypot(*(point - movie.outlines[11][material])) / spacing)
+    assert np.median(drift) < 1.0 and np.max(drift) < 2.0
+
+
+def test_arc_origin_is_carried_and_maps_have_the_movie_shape(tracked):
+    for arc in tracked.arc[0]:
+        assert arc.min() >= 0 and arc.max() < 1 and np.sum(arc == 0) == 1
+    velocity_map = tracked.membrane_map(0, "normal_velocity", n_arc=50)
+    curvature_map = tracked.membrane_map(0, "curvature", n_arc=50)
+    assert velocity_map.shape == curvature_map.shape == (12, 50)
+    assert np.isnan(velocity_map[0]).all() and np.isfinite(velocity_map[1:]).all()
+    # The elongated body's tips are its most curved parts, twice per turn.
+    assert np.isfinite(curvature_map).all() and curvature_map.mean() > 0
+    with pytest.raises(ValueError, match="quantity"):
+        tracked.membrane_map(0, "speed")
+
+
+def test_tidy_table(tracked):
+    table = tracked.table()
+    assert list(table.columns) == ["object", "frame", "node", "row", "col", "arc", "normal_velocity",
+                                   "curvature", "status"]
+    assert len(table) == sum(len(c) for c in tracked.contours[0])
+    assert set(table.status) == {TRACKED}
+
+
+def test_curvature_of_a_circle_is_one_over_its_radius():
+    t = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+    circle = np.column_stack([50 + 20 * np.sin(t), 50 + 20 * np.cos(t)])
+    for contour in (circle, circle[::-1]):
+        assert np.allclose(curvature(contour), 1 / 20, rtol=1e-3)
+
+
+def test_origins_of_a_shifted_contour_are_its_nodes_shifted_back():
+    obj = data.blob()
+    contour = obj.outline[::4]
+    shifted = contour + [1.5, -0.7]
+    origin = node_origins(shifted, contour)
+    assert np.abs(origin - contour).max() < 0.1
+
+
+def test_starting_in_the_middle_tracks_both_ways(movie):
+    middle = data.deforming_cell(n_frames=12)
+    init = middle.outlines[6][::6] + 3.0 * _outward(middle.outlines[6][::6])
+    tr = track(movie.frames, init, start=6)
+    assert tr.start == 6 and tr.status == [[TRACKED] * 12]
+    assert iou(tr.contours[0][0], movie.masks[0]) > 0.98
+    assert np.isnan(tr.normal_velocity[0][0]).all() and np.isfinite(tr.normal_velocity[0][1]).all()
+    assert np.isfinite(tr.normal_velocity[0][6]).all()  # frame 6 has a previous frame, 5
+
+
+def _outward(contour):
+    from napari_physeg.core.contour import outward_normals
+
+    return outward_normals(contour)
+
+
+def _disk_movie(centres, radius=12, shape=(96, 96), noise=0.05):
+    rr, cc = np.mgrid[: shape[0], : shape[1]]
+    rng = np.random.default_rng(0)
+    frames = []
+    for frame_centres in centres:
+        image = np.full(shape, 0.2)
+        for r, c in frame_centres:
+            if r is not None:
+                image[(rr - r) ** 2 + (cc - c) ** 2 <= radius**2] = 0.8
+        frames.append(image + noise * rng.standard_normal(shape))
+    return np.stack(frames)
+
+
+def _circle(centre, radius, n=48):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.column_stack([centre[0] + radius * np.sin(t), centre[1] + radius * np.cos(t)])
+
+
+def test_touching_objects_repel_and_never_overlap():
+    """Two cells that come into contact: each keeps its own pixels."""
+    centres = [[(48, 30 + 1.5 * t), (48, 66 - 1.5 * t)] for t in range(6)]  # 36 px apart, then 21
+    frames = _disk_movie(centres, radius=10)
+    tr = track(frames, [_circle((48, 30), 14), _circle((48, 66), 14)])
+    assert tr.status == [[TRACKED] * 6, [TRACKED] * 6]
+    for t in range(6):
+        a, b = (polygon_mask(tr.contours[k][t], frames.shape[1:]) for k in (0, 1))
+        assert (a & b).sum() <= 2
+        assert abs(tr.centroids(0)[t][1] - centres[t][0][1]) < 1.5
+
+
+def test_an_object_that_vanishes_is_lost_not_returned_as_garbage():
+    centres = [[(48, 48)]] * 4 + [[(None, None)]] * 3
+    tr = track(_disk_movie(centres), _circle((48, 48), 16))
+    assert tr.status[0] == [TRACKED] * 4 + [LOST] * 3
+    assert all(c is None for c in tr.contours[0][4:])
+    table = tr.table()
+    assert (table[table.frame >= 4].status == LOST).all() and table[table.frame >= 4].row.isna().all()
+
+
+def test_an_object_that_moves_out_of_the_image_has_left_the_field_of_view():
+    centres = [[(48, 60 + 8 * t)] for t in range(7)]  # out by the right side
+    tr = track(_disk_movie(centres), _circle((48, 60), 16))
+    assert tr.status[0][:3] == [TRACKED] * 3
+    assert LEFT in tr.status[0] and tr.status[0][-1] == LEFT
+    first_left = tr.status[0].index(LEFT)
+    assert all(c is None for c in tr.contours[0][first_left:])
+
+
+def test_cancel_keeps_what_was_done(movie):
+    seen = []
+    tr = track(movie.frames, movie.init, callback=lambda p: seen.append(p.frame) or p.frame < 3)
+    assert tr.stop_reason == "cancelled" and seen == [0, 1, 2, 3]
+    assert all(c is not None for c in tr.contours[0][:4]) and all(c is None for c in tr.contours[0][4:])
+    assert tr.status[0][5] == "not processed"
+
+
+def test_generator_and_lazy_frames(movie):
+    """Frames are read one at a time: a dask array works as a numpy one."""
+    dask_array = pytest.importorskip("dask.array")
+    lazy = dask_array.from_array(movie.frames[:4], chunks=(1, 80, 80))
+    run = iter_track(lazy, movie.init)
+    states = []
+    try:
+        while True:
+            states.append(next(run))
+    except StopIteration as done:
+        res = done.value
+    assert [s.frame for s in states] == [0, 1, 2, 3] and states[-1].done == states[-1].total == 4
+    eager = track(movie.frames[:4], movie.init)
+    for a, b in zip(res.contours[0], eager.contours[0]):
+        np.testing.assert_allclose(a, b)
+
+
+@pytest.mark.parametrize("frames, inits, kwargs, message", [
+    (np.zeros((10, 10)), _circle((5, 5), 3), {}, "(T, H, W)"),
+    (np.zeros((3, 32, 32)), [], {}, "inits is empty"),
+    (np.zeros((3, 32, 32)), _circle((100, 100), 3), {}, "wholly outside"),
+    (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"start": 3}, "start"),
+])
+def test_bad_input_gets_a_clear_error(frames, inits, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        track(frames, inits, **kwargs)
+
+
+def test_displacement_weight_breaks_the_symmetry_of_round_shapes():
+    """Modes alone cannot tell which way a circle turned; in one frame of
+    reference the displacement term keeps each node near where it was."""
+    a = _circle((50, 50), 20, n=60)
+    b = np.roll(_circle((50, 50), 20.5, n=60), 7, axis=0)  # same circle, numbered from elsewhere
+    pairs = match(a, b, displacement_weight=1.0).pairs
+    assert np.hypot(*(a[pairs[:, 0]] - b[pairs[:, 1]]).T).max() < 1.5
