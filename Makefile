@@ -24,6 +24,7 @@ bench: setup
 	$(PY) benchmarks/segmentation.py
 	$(PY) benchmarks/matching.py
 	$(PY) benchmarks/real.py
+	$(PY) benchmarks/tracking.py
 
 # Build the documentation (docs/ and the API reference from the docstrings) into site/;
 # --strict makes every warning (a broken link, a bad docstring) an error.

@@ -75,3 +75,36 @@ def test_help_explains_the_command():
                          capture_output=True, text=True, check=True).stdout
     for word in ("--init", "--out", "--stiffness", "napari", "copper"):
         assert word in out
+
+
+@pytest.fixture
+def movie_files(tmp_path):
+    tifffile = pytest.importorskip("tifffile")
+    movie = data.deforming_cell(n_frames=6)
+    stack = tmp_path / "movie.tif"
+    tifffile.imwrite(stack, (movie.frames * 1000).astype(np.uint16))
+    # Drawn on frame 2 of the stack in napari: the frame is axis-0 of the CSV.
+    init = write_shapes_csv(tmp_path / "init.csv", [movie.outlines[2][::6] * 1.0 + 0], leading=[(2,)])
+    return movie, stack, init, tmp_path
+
+
+def test_track_writes_contours_per_frame_and_the_tidy_table(movie_files, capsys):
+    movie, stack, init, tmp = movie_files
+    out = tmp / "tracked"
+    assert main(["track", str(stack), "--init", str(init), "--out", str(out)]) == 0
+    shapes, frames = read_shapes_csv(out / "contours.csv", leading=True)
+    assert [f[0] for f in frames] == list(range(6))
+    for (t,), contour in zip(frames, shapes):
+        found = polygon_mask(contour, movie.masks[int(t)].shape)
+        assert (found & movie.masks[int(t)]).sum() / (found | movie.masks[int(t)]).sum() > 0.97
+    table_file = out / "tracks.parquet" if (out / "tracks.parquet").exists() else out / "tracks.csv"
+    assert table_file.exists()
+    captured = capsys.readouterr()
+    assert "object 0: 6 tracked" in captured.out and "object-frames" in captured.err
+
+
+def test_track_refuses_contours_drawn_on_several_frames(movie_files, capsys):
+    movie, stack, _, tmp = movie_files
+    init = write_shapes_csv(tmp / "two.csv", [movie.outlines[0][::6], movie.outlines[3][::6]], leading=[(0,), (3,)])
+    assert main(["track", str(stack), "--init", str(init), "--out", str(tmp / "o")]) == 2
+    assert "--start" in capsys.readouterr().err

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .contour import as_contour, outward_normals, perimeter, remove_loops, resample, signed_area
+from .contour import as_contour, outward_normals, perimeter, polygon_mask, remove_loops, resample, signed_area
 from .dynamics import DivergenceError
 from .matching import match
 from .segmentation import FrameFeatures, segment
@@ -239,10 +239,15 @@ def _next_init(history: list[np.ndarray]) -> np.ndarray:
     return _grown(prev + shift, float(np.clip(0.2 * radius, 3.0, 8.0)))
 
 
-def _mask(contour: np.ndarray, shape) -> np.ndarray:
-    from .contour import polygon_mask
-
-    return polygon_mask(contour, shape)
+def _paint(owner: np.ndarray, contour: np.ndarray, value: int) -> None:
+    """Set the pixels of ``owner`` inside ``contour`` to ``value`` (rasterised
+    in the contour's bounding box only: a frame holds many small objects)."""
+    lo = np.maximum(np.floor(contour.min(0)).astype(int), 0)
+    hi = np.minimum(np.ceil(contour.max(0)).astype(int) + 1, owner.shape)
+    if np.any(hi <= lo):
+        return
+    inside = polygon_mask(contour - lo, tuple(hi - lo))
+    owner[lo[0]:hi[0], lo[1]:hi[1]][inside] = value
 
 
 def _judge(contour, previous, whole_area, shape) -> str:
@@ -284,10 +289,20 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
         for t in frame_order:
             image = np.asarray(frames[t], dtype=np.float64)  # one frame at a time (dask, zarr)
             shared = FrameFeatures.of(image, options.get("isef_b", 0.7))
+            # Which object each pixel belongs to, as far as known: the others'
+            # contours on this frame once done, else on the frame before.
+            owner = np.full(image.shape, -1, dtype=np.int32)
+            for j in range(n_obj):
+                last = inits[j] if t == start else contours[j][t - step]
+                if last is not None:
+                    _paint(owner, last, j)
             for k in range(n_obj):
-                contour, status[k][t] = _one_object(image, shared, t, k, start, step, inits, contours, status,
-                                                    polarity, whole_area, options)
+                contour, status[k][t] = _one_object(image, shared, owner, t, k, start, step, inits, contours,
+                                                    status, polarity, whole_area, options)
                 contours[k][t] = contour
+                owner[owner == k] = -1
+                if contour is not None:
+                    _paint(owner, contour, k)
                 done += 1
                 stop = yield TrackingProgress(t, k, contour, status[k][t], done, total)
                 if stop:
@@ -307,7 +322,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                  "total": t_end - t_start})
 
 
-def _one_object(image, shared, t, k, start, step, inits, contours, status, polarity, whole_area, options):
+def _one_object(image, shared, owner, t, k, start, step, inits, contours, status, polarity, whole_area, options):
     """Segment object ``k`` on frame ``t``; its contour (or None) and status."""
     if t != start:
         before = status[k][t - step]
@@ -319,12 +334,7 @@ def _one_object(image, shared, t, k, start, step, inits, contours, status, polar
         init = _next_init(history)
     else:
         init = inits[k]
-    others = [contours[j][t] if contours[j][t] is not None else contours[j][t - step] if t != start else inits[j]
-              for j in range(len(inits)) if j != k]
-    avoid = np.zeros(image.shape, bool)
-    for c in others:
-        if c is not None:
-            avoid |= _mask(c, image.shape)
+    avoid = (owner >= 0) & (owner != k)
     try:
         with warnings.catch_warnings():
             if t != start:  # a contour predicted partly beyond the image is expected

