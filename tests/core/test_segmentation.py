@@ -404,3 +404,19 @@ def test_dark_object_in_a_grey_region_inside_a_bright_ring(radius):
     res = segment(image, np.column_stack([100 + radius * np.sin(t), 100 + radius * np.cos(t)]))
     assert res.converged and res.polarity == -1
     assert iou(res.contour, d < 30) > 0.97
+
+
+def test_a_contour_swinging_about_its_border_is_not_at_rest():
+    """The plateau looks at its whole window: a contour that swings (period 5
+    steps, 2 px) returns to where it was 15 steps before but is not at rest;
+    one that only jitters by a tenth of a pixel is."""
+    from napari_physeg.core.segmentation import PLATEAU_STEPS, _Plateau
+
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    ring = np.column_stack([np.sin(t), np.cos(t)])
+    swing, jitter = _Plateau(), _Plateau()
+    rng = np.random.default_rng(0)
+    swung = [swing.reached(50 + (20 + 2 * np.sin(2 * np.pi * k / 5)) * ring) for k in range(100)]
+    jittered = [jitter.reached(50 + (20 + 0.1 * rng.standard_normal()) * ring) for k in range(100)]
+    assert not any(swung)
+    assert jittered.index(True) == PLATEAU_STEPS

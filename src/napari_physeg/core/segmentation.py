@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections import deque
 from dataclasses import dataclass, field
 
 import cv2
@@ -48,9 +49,11 @@ class SegmentationResult:
     stop_reason : str
         ``"converged"`` (at rest, at least 70 % of the nodes on an edge or an
         object/background switch), ``"stalled"`` (at rest elsewhere: nothing
-        in reach pulls it), ``"max_steps"`` or ``"cancelled"``. At rest means
-        no node moved more than ``tol`` for ``patience`` steps, or the area and
-        centroid changed by less than 0.1 px over 25 steps.
+        in reach pulls it), ``"max_steps"`` (it kept moving: still travelling,
+        or swinging about the border) or ``"cancelled"``. At rest means no node
+        moved more than ``tol`` for ``patience`` steps, or the area per length
+        and the centroid neither drifted nor strayed by more than half a pixel
+        over 15 steps.
     history : tuple of ndarray
         Sub-sampled evolution, first the resampled initial contour, last the
         final one.
@@ -200,11 +203,12 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None):
 #: contour: it is split there (see contour.cut_pinches).
 PINCH_GAP = 0.35
 
-#: A contour whose area and centroid changed by less than this (in px of
-#: mean normal displacement) over PLATEAU_STEPS steps has come to rest, even
-#: if a few nodes still jitter.
+#: A contour whose area per length and centroid neither drifted by
+#: PLATEAU_MOTION px nor strayed by PLATEAU_JITTER px over PLATEAU_STEPS
+#: steps has come to rest, even if a few nodes still jitter (see _Plateau).
 PLATEAU_MOTION = 0.1
-PLATEAU_STEPS = 25
+PLATEAU_JITTER = 0.5
+PLATEAU_STEPS = 15
 
 #: At rest, the contour is on the object when at least this fraction of its
 #: nodes rest on a feature (an edge or an object/background switch).
@@ -231,10 +235,19 @@ def _needs_remesh(nodes: np.ndarray, spacing: float) -> bool:
 
 
 class _Plateau:
-    """Detects a contour whose shape no longer changes over many steps."""
+    """Watches the contour's area per length and centroid, step by step.
+
+    At rest (:meth:`reached`): over the last PLATEAU_STEPS steps they have not
+    drifted (the means of the window's two halves differ by less than
+    PLATEAU_MOTION px) and stayed within PLATEAU_JITTER px (a few nodes may
+    still churn where the border meets the image's side, by a fraction of a
+    pixel). A contour swinging about its border comes back to where it was,
+    so comparing two instants would take it for one at rest; the window's
+    range does not.
+    """
 
     def __init__(self):
-        self.trace = []
+        self.trace = deque(maxlen=PLATEAU_STEPS + 1)
 
     def reached(self, nodes: np.ndarray) -> bool:
         area = signed_area(nodes)
@@ -242,9 +255,10 @@ class _Plateau:
         self.trace.append((area / length, *nodes.mean(0)))
         if len(self.trace) <= PLATEAU_STEPS:
             return False
-        then = np.array(self.trace[-PLATEAU_STEPS - 1])
-        now = np.array(self.trace[-1])
-        return bool(np.abs(now - then).max() < PLATEAU_MOTION)
+        window = np.array(self.trace)
+        half = len(window) // 2
+        drift = np.abs(window[half:].mean(0) - window[:half].mean(0)).max()
+        return bool(drift < PLATEAU_MOTION and np.ptp(window, axis=0).max() < PLATEAU_JITTER)
 
 
 def _rest_reason(field: ForceField, nodes: np.ndarray) -> str:
@@ -487,6 +501,7 @@ class _RestDetector:
     def at_rest(self, moved: float, nodes: np.ndarray) -> bool:
         self.quiet = self.quiet + 1 if moved < self.tol else 0
         return self.quiet >= self.patience or self.plateau.reached(nodes)
+
 
 
 def _check_options(stiffness, reference, integrator, polarity, max_step_length, tol, max_steps, n_nodes):
