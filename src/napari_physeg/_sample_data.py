@@ -12,7 +12,7 @@ import numpy as np
 
 from . import data
 
-__all__ = ["hand_segmentation", "hand_poses", "hand_open_image", "hand_closed_image"]
+__all__ = ["hand_segmentation", "hand_poses", "hand_open_image", "hand_closed_image", "deforming_cell"]
 
 _CONTOUR_STYLE = {"shape_type": "polygon", "face_color": "transparent", "edge_width": 1.5}
 
@@ -64,3 +64,18 @@ def hand_open_image() -> list[tuple]:
 def hand_closed_image() -> list[tuple]:
     """A 256 x 256 image of the closed hand."""
     return _hand_image("closed")
+
+
+def deforming_cell() -> list[tuple]:
+    """A 30-frame movie of a cell that drifts, turns and protrudes, and a
+    contour drawn around it on frame 0.
+
+    Open the Tracking widget, stay on frame 0 and press Run.
+    """
+    movie = data.deforming_cell()
+    init = np.column_stack([np.zeros(len(movie.init[::3])), movie.init[::3]])
+    return [
+        (movie.frames.astype(np.float32), {"name": "deforming cell", "colormap": "gray"}, "image"),
+        ([init.astype(np.float32)], {"name": "contour on frame 0", "edge_color": "yellow", **_CONTOUR_STYLE},
+         "shapes"),
+    ]

@@ -1,0 +1,263 @@
+"""The Tracking widget: contours drawn on one frame of a movie, followed through it.
+
+Choose an image with a time axis (its first axis; the last two are the
+frame's rows and columns) and a Shapes layer with contours drawn on any frame,
+stand on that frame and press Run. The core's generator
+:func:`~napari_physeg.core.iter_track` runs in napari's ``thread_worker``
+(no second thread, no queue); each object and frame it yields moves the
+progress bar and, at most every ``preview_interval`` seconds, the live
+preview. Cancel sends the generator a stop: what was tracked is kept and
+becomes layers like a finished run's.
+
+The layers (:func:`tracking_layer_data`, no Qt) are what the ecosystem
+expects: one Shapes layer with a polygon per object and frame (the frame as
+leading coordinate, one colour per object), a Tracks layer with the objects'
+centroids and sub-sampled node trajectories, and per object two Image layers,
+its normal-velocity (protrusion/retraction) and curvature maps, arc position
+x time.
+"""
+
+from __future__ import annotations
+
+import time
+
+import napari
+import numpy as np
+from magicgui.widgets import ComboBox, Container, FloatSpinBox, Label, PushButton, SpinBox
+from napari.layers import Image, Layer, Shapes
+from napari.utils import progress
+from napari.utils.notifications import show_info, show_warning
+
+from ..core import LOST, MATERIALS, TRACKED, TrackingProgress, TrackingResult, iter_track
+from ._layers import image_transform_kwargs, shapes_to_image_coords, slice_index
+from ._worker import WorkerWidget
+
+__all__ = ["TrackingWidget", "tracking_layer_data", "node_trajectories"]
+
+#: Colours cycled over the tracked objects.
+OBJECT_COLOURS = ("#ff5555", "#55d4ff", "#ffd255", "#7dff7d", "#d77dff", "#ff9b4f", "#4fffd2", "#ff7dc8")
+
+
+def node_trajectories(result: TrackingResult, k: int, n_points: int = 12) -> list[np.ndarray]:
+    """``n_points`` points of object ``k``'s membrane followed through the
+    correspondences: each an ``(M, 3)`` array of ``(frame, row, col)``.
+
+    The points start evenly spaced on the start frame's contour and are
+    followed forward (each frame, the node whose origin is nearest the point
+    plus the point's offset from that origin) and backward (the origin of the
+    nearest node), as far as the object is tracked.
+    """
+    start, contours, origins = result.start, result.contours[k], result.origin[k]
+    if contours[start] is None:
+        return []
+    first = contours[start]
+    paths = []
+    for i in np.linspace(0, len(first), int(n_points), endpoint=False).astype(int):
+        path = {start: first[i]}
+        point = first[i]
+        for t in range(start + 1, len(contours)):
+            if contours[t] is None:
+                break
+            j = np.argmin(((origins[t] - point) ** 2).sum(1))
+            point = contours[t][j] + (point - origins[t][j])
+            path[t] = point
+        point = first[i]
+        for t in range(start - 1, -1, -1):
+            if contours[t] is None:
+                break
+            j = np.argmin(((contours[t + 1] - point) ** 2).sum(1))
+            point = origins[t + 1][j]
+            path[t] = point
+        paths.append(np.array([(t, *path[t]) for t in sorted(path)]))
+    return paths
+
+
+def tracking_layer_data(result: TrackingResult, transform: dict, *, name: str, n_trajectories: int = 12,
+                        n_arc: int = 100) -> list[tuple]:
+    """The output layers of a tracking run, as ``(data, meta, kind)`` tuples for ``Layer.create``.
+
+    ``transform`` are the image's layer keyword arguments
+    (:func:`~._layers.image_transform_kwargs`): the Shapes and Tracks layers
+    overlay the image; the maps are images of their own (arc x frame).
+    """
+    polygons, colours, features = [], [], {"object": [], "frame": [], "status": []}
+    for k in range(result.n_objects):
+        colour = OBJECT_COLOURS[k % len(OBJECT_COLOURS)]
+        for t, c in enumerate(result.contours[k]):
+            if c is None:
+                continue
+            polygons.append(np.column_stack([np.full(len(c), t, float), c]))
+            colours.append(colour)
+            features["object"].append(k)
+            features["frame"].append(t)
+            features["status"].append(result.status[k][t])
+    common = {key: transform[key] for key in ("scale", "translate", "rotate", "shear", "affine") if key in transform}
+    layers = [(polygons, dict(name=f"{name} contours", shape_type="polygon", edge_color=colours,
+                              face_color="transparent", edge_width=1.5, features=features,
+                              metadata={"tracking": result}, **common), "shapes")]
+    tracks = []
+    for k in range(result.n_objects):
+        centres = result.centroids(k)
+        frames = np.flatnonzero(np.isfinite(centres[:, 0]))
+        if len(frames):
+            tracks.append(np.column_stack([np.full(len(frames), len(tracks)), frames, centres[frames]]))
+        for path in node_trajectories(result, k, n_trajectories):
+            if len(path) > 1:
+                tracks.append(np.column_stack([np.full(len(path), len(tracks)), path]))
+    if tracks:
+        layers.append((np.vstack(tracks), dict(name=f"{name} tracks", tail_length=10, **common), "tracks"))
+    for k in range(result.n_objects):
+        for quantity, colormap in (("normal_velocity", "bwr"), ("curvature", "PiYG")):
+            image = result.membrane_map(k, quantity, n_arc=n_arc)
+            if not np.isfinite(image).any():
+                continue
+            lim = float(np.nanpercentile(np.abs(image), 98)) or 1.0
+            layers.append((image, dict(name=f"{name} object {k} {quantity.replace('_', ' ')} (frame x arc)",
+                                       colormap=colormap, contrast_limits=(-lim, lim), visible=False), "image"))
+    return layers
+
+
+_TIPS = {
+    "image": "An image with a time axis: its first axis is time, its last two the frame.",
+    "shapes": "Contours drawn on one frame of the movie (around or inside each object). Stand on that frame.",
+    "material": "Virtual material of the contours.",
+    "stiffness": "Stiffness constant r (N/m): rubber ~2e3, copper ~1e6.",
+    "max_steps": "Time steps per object and frame (each frame starts from the previous result).",
+    "run": "Track the contours of the current frame through the whole movie (forward, then backward).",
+    "cancel": "Stop: the frames tracked so far become layers.",
+}
+
+
+class TrackingWidget(WorkerWidget):
+    """Follow the objects of a Shapes layer through a movie (see the module's docstring)."""
+
+    def __init__(self, viewer: napari.viewer.Viewer):
+        super().__init__(viewer)
+        self.preview_interval = 0.1
+        self.last_result: TrackingResult | None = None
+        self.output_layers: list = []
+        self._preview = None
+        self._last_preview = 0.0
+        self._run_info = None
+        self._image = ComboBox(label="movie (image)", choices=self._image_choices, tooltip=_TIPS["image"])
+        self._shapes = ComboBox(label="contours (shapes)", choices=self._shapes_choices, tooltip=_TIPS["shapes"])
+        self._material = ComboBox(label="material", choices=list(MATERIALS), value="rubber", tooltip=_TIPS["material"])
+        self._stiffness = FloatSpinBox(label="r (N/m)", value=2000.0, min=1.0, max=1e10, step=100.0,
+                                       tooltip=_TIPS["stiffness"])
+        self._max_steps = SpinBox(label="steps per frame", value=300, min=10, max=10000, step=50,
+                                  tooltip=_TIPS["max_steps"])
+        self._run_btn = PushButton(text="Run", tooltip=_TIPS["run"])
+        self._cancel_btn = PushButton(text="Cancel", tooltip=_TIPS["cancel"], enabled=False)
+        self._buttons = Container(widgets=[self._run_btn, self._cancel_btn], layout="horizontal", labels=False)
+        self._status = Label(value="")
+        self.extend([self._image, self._shapes, self._material, self._stiffness, self._max_steps, self._buttons,
+                     self._status])
+        self._connect_signals()
+
+    # ------------------------------------------------------------ inputs
+    def _image_choices(self, _widget=None):
+        return [layer for layer in self.viewer.layers if isinstance(layer, Image) and layer.ndim >= 3]
+
+    def _shapes_choices(self, _widget=None):
+        return [layer for layer in self.viewer.layers
+                if isinstance(layer, Shapes) and layer.metadata.get("tracking") is None and layer is not self._preview]
+
+    def _on_layers_changed(self, event=None):
+        for combo in (self._image, self._shapes):
+            combo.reset_choices()
+
+    def _read_input(self):
+        image, shapes = self._image.value, self._shapes.value
+        if image is None:
+            raise ValueError("no movie: add an image layer with a time axis (its first axis)")
+        if shapes is None:
+            raise ValueError("no contours: add a Shapes layer and draw a contour around each object on one frame")
+        frames = image.data[0] if image.multiscale else image.data
+        if len(frames.shape) != 3:
+            raise ValueError(f"the movie {image.name!r} has shape {tuple(frames.shape)}: the Tracking widget needs "
+                             "(time, rows, cols); for a z-stack movie pick one z first")
+        point = tuple(self.viewer.dims.point)
+        sliced = shapes_to_image_coords(shapes, image, world_point=point)
+        if not sliced.contours:
+            raise ValueError(f"no contour of {shapes.name!r} lies on the current frame: go to the frame the "
+                             "contours were drawn on")
+        (start,) = slice_index(image, point, frames.shape)
+        return image, frames, [c[:, -2:] for c in sliced.contours], start
+
+    # ------------------------------------------------------------ run
+    def run(self, *_):
+        """Start tracking in napari's thread worker; returns the worker (None for bad input)."""
+        if self._running:
+            return None
+        try:
+            image, frames, contours, start = self._read_input()
+        except ValueError as err:
+            self._fail(str(err))
+            return None
+        self.last_result = None
+        self.output_layers = []
+        self._run_info = dict(transform=image_transform_kwargs(image), name=f"{image.name} tracked "
+                              f"({self._material.value})")
+        self._begin(f"Tracking {len(contours)} object(s) from frame {start}…")
+        pbar = progress(total=len(contours) * frames.shape[0], desc=f"Tracking in {image.name!r}")
+        options = dict(material=self._material.value, stiffness=float(self._stiffness.value))
+        return self._start(pbar, iter_track, frames, contours, start=start, max_steps=int(self._max_steps.value),
+                           segment_options=options)
+
+    def cancel(self, *_):
+        """Stop after the current object and frame; what was tracked is kept."""
+        if self._running and self.worker is not None:
+            self.worker.send(True)
+            self._status.value = "Cancelling…"
+
+    # ------------------------------------------------------------ worker signals (GUI thread)
+    def _on_yielded(self, update: TrackingProgress):
+        if not self._gui_alive():
+            self._on_destroyed()
+            return
+        self.n_updates += 1
+        self._advance(update.done)
+        self._status.value = f"frame {update.frame}, object {update.object}: {update.status}"
+        now = time.perf_counter()
+        if update.contour is not None and now - self._last_preview >= self.preview_interval:
+            self._last_preview = now
+            self._show_preview(update)
+
+    def _show_preview(self, update: TrackingProgress):
+        data = [np.column_stack([np.full(len(update.contour), update.frame, float), update.contour])]
+        if self._preview is None or self._preview not in self.viewer.layers:
+            transform = self._run_info["transform"]
+            common = {key: transform[key] for key in ("scale", "translate", "rotate", "shear", "affine")}
+            self._preview = self.viewer.add_shapes(data, shape_type="polygon", edge_color="#00ff00",
+                                                   face_color="transparent", name="tracking preview", **common)
+        else:
+            self._preview.data = data
+
+    def _remove_preview(self):
+        if self._preview is not None and self._preview in self.viewer.layers:
+            self.viewer.layers.remove(self._preview)
+        self._preview = None
+
+    def _on_returned(self, result: TrackingResult):
+        self.last_result = result
+        if not self._gui_alive():
+            return
+        self._remove_preview()
+        try:
+            for data, meta, kind in tracking_layer_data(result, **self._run_info):
+                self.output_layers.append(self.viewer.add_layer(Layer.create(data, meta, kind)))
+        except Exception as err:  # never a silent failure
+            self._fail(f"Could not add the tracking layers: {type(err).__name__}: {err}")
+            return
+        counts = {s: sum(row.count(s) for row in result.status) for s in (TRACKED, LOST)}
+        done = "cancelled: the frames tracked so far were kept" if result.stop_reason == "cancelled" else "done"
+        self._status.value = (f"{result.n_objects} object(s), {counts[TRACKED]} object-frames tracked, "
+                              f"{counts[LOST]} lost ({done}, {result.timings['total']:.1f} s)")
+        show_info(f"Tracking: {self._status.value}. The maps (frame x arc) are hidden image layers")
+        if counts[LOST]:
+            lost = [k for k in range(result.n_objects) if LOST in result.status[k]]
+            show_warning(f"object(s) {lost} were lost on the way: their later frames have no contour")
+
+    def _on_errored(self, err: Exception):
+        self._remove_preview()
+        self._fail(f"Tracking failed: {type(err).__name__}: {err}")

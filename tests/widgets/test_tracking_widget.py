@@ -1,0 +1,89 @@
+"""The Tracking widget end to end: a movie and contours drawn on one frame in,
+napari's thread worker over the core's generator, Shapes / Tracks / map layers out."""
+
+import numpy as np
+import pytest
+
+napari = pytest.importorskip("napari")
+
+from napari.layers import Image, Shapes, Tracks  # noqa: E402
+
+from napari_physeg import data  # noqa: E402
+from napari_physeg._sample_data import deforming_cell  # noqa: E402
+from napari_physeg._widgets.tracking import TrackingWidget, node_trajectories  # noqa: E402
+from napari_physeg.core import track  # noqa: E402
+from napari_physeg.core.contour import polygon_mask  # noqa: E402
+
+pytestmark = [
+    pytest.mark.gui,
+    pytest.mark.filterwarnings("ignore:System theme detection requires a Qt6 backend:UserWarning"),
+]
+
+RUN_TIMEOUT_MS = 60_000
+
+
+@pytest.fixture
+def movie_in_viewer(dock):
+    viewer, widget = dock(TrackingWidget)
+    for data_, meta, kind in deforming_cell():
+        viewer.add_layer(napari.layers.Layer.create(data_[:8] if kind == "image" else data_, meta, kind))
+    widget._on_layers_changed()
+    viewer.dims.set_point(0, 0)
+    return viewer, widget
+
+
+def test_round_trip_adds_contours_tracks_and_maps(movie_in_viewer, wait_done):
+    viewer, widget = movie_in_viewer
+    movie = data.deforming_cell()
+    assert widget._image.value.name == "deforming cell" and widget._shapes.value.name == "contour on frame 0"
+    worker = widget.run()
+    assert worker is not None
+    wait_done(widget)
+    result = widget.last_result
+    assert result is not None and result.status == [["tracked"] * 8]
+    shapes = [layer for layer in widget.output_layers if isinstance(layer, Shapes)]
+    tracks = [layer for layer in widget.output_layers if isinstance(layer, Tracks)]
+    maps = [layer for layer in widget.output_layers if isinstance(layer, Image)]
+    assert len(shapes) == 1 and len(tracks) == 1 and len(maps) == 2
+    polygons = shapes[0].data
+    assert len(polygons) == 8 and [int(p[0, 0]) for p in polygons] == list(range(8))
+    for t, polygon in enumerate(polygons):
+        found = polygon_mask(np.asarray(polygon[:, 1:], float), movie.masks[t].shape)
+        assert (found & movie.masks[t]).sum() / (found | movie.masks[t]).sum() > 0.97
+    assert maps[0].data.shape == (8, 100) and not maps[0].visible
+    # The centroid track, then the node trajectories, each over the 8 frames.
+    assert len(np.unique(tracks[0].data[:, 0])) == 13 and tracks[0].data[:, 1].max() == 7
+    assert "tracking preview" not in [layer.name for layer in viewer.layers]
+    assert widget.n_updates == 8 and "8 object-frames tracked" in widget._status.value
+
+
+def test_cancel_keeps_the_frames_done(movie_in_viewer, qtbot, wait_done):
+    viewer, widget = movie_in_viewer
+    worker = widget.run()
+    qtbot.waitUntil(lambda: widget.n_updates >= 2, timeout=RUN_TIMEOUT_MS)
+    widget.cancel()
+    wait_done(widget)
+    result = widget.last_result
+    assert result.stop_reason == "cancelled"
+    done = [c is not None for c in result.contours[0]]
+    assert 2 <= sum(done) < 8 and done[: sum(done)] == [True] * sum(done)
+    assert len(widget.output_layers[0].data) == sum(done)
+    assert worker is not None
+
+
+def test_contours_off_the_current_frame_are_refused(movie_in_viewer, errors):
+    viewer, widget = movie_in_viewer
+    viewer.dims.set_point(0, 5)
+    assert widget.run() is None
+    assert errors and "current frame" in errors[-1]
+
+
+def test_node_trajectories_follow_the_membrane():
+    movie = data.deforming_cell(n_frames=5)
+    tr = track(movie.frames, movie.init)
+    paths = node_trajectories(tr, 0, n_points=6)
+    assert len(paths) == 6 and all(p.shape == (5, 3) for p in paths)
+    for path in paths:  # every point stays on its frame's contour
+        for t, r, c in path:
+            contour = tr.contours[0][int(t)]
+            assert np.min(np.hypot(contour[:, 0] - r, contour[:, 1] - c)) < 2.0
