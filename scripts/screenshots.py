@@ -14,6 +14,7 @@ plugin's sample data, docks each widget, runs it as a user would (Run button
 * ``guide-simulation.png`` - the simulation widget and its result on the
   "frame" slider (a middle frame shown);
 * ``guide-simulation-frames.png`` - the canvas at every frame of the slider.
+* ``guide-tracking.png`` - the tracking widget after a run on the deforming-cell movie, at frame 20.
 """
 
 from __future__ import annotations
@@ -199,6 +200,26 @@ def matching_and_simulation(napari, app, out: Path):
         viewer.close()
 
 
+def tracking(napari, app, out: Path):
+    from napari_physeg._widgets.tracking import TrackingWidget
+
+    viewer = _viewer(napari, "napari-physeg: tracking")
+    try:
+        viewer.open_sample("napari-physeg", "deforming_cell")
+        widget = TrackingWidget(viewer)
+        viewer.window.add_dock_widget(widget, name="Tracking (time-lapse)", area="right")
+        viewer.dims.set_point(0, 0)
+        viewer.reset_view()
+        widget._run_btn.native.click()  # as a user would
+        _wait(app, widget, timeout=120.0)
+        viewer.layers["contour on frame 0"].visible = False
+        viewer.dims.set_point(0, 20)
+        viewer.layers.selection.active = widget.output_layers[0]
+        _save_window(app, viewer, out / "guide-tracking.png")
+    finally:
+        viewer.close()
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "images", help="output folder")
@@ -222,6 +243,7 @@ def main(argv=None) -> int:
     app = get_qapp()
     segmentation(napari, app, args.out)
     matching_and_simulation(napari, app, args.out)
+    tracking(napari, app, args.out)
     return 0
 
 

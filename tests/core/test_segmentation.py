@@ -5,6 +5,7 @@ import pytest
 from skimage.draw import polygon2mask
 
 from napari_physeg import data
+from napari_physeg.core._drain import drain
 from napari_physeg.core import DivergenceError, iter_segment, segment
 from napari_physeg.core.contour import segment_lengths
 
@@ -334,11 +335,7 @@ def test_iter_segment_yields_every_step_and_returns_what_segment_returns():
     obj = data.ellipse(noise=0.1)
     run = iter_segment(obj.image, obj.init_far)
     states = []
-    try:
-        while True:
-            states.append(next(run))
-    except StopIteration as done:
-        res = done.value
+    res = drain(run, states.append)
     assert [s.step for s in states] == list(range(1, res.steps + 1))
     assert {s.phase for s in states} == {"evolution", "refinement"}
     assert states[0].phase == "evolution" and states[-1].phase == "refinement"

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from napari_physeg import data
+from napari_physeg.core._drain import drain
 from napari_physeg.core import LEFT, LOST, TRACKED, iter_track, match, track
 from napari_physeg.core.contour import polygon_mask, signed_area
 from napari_physeg.core.tracking import curvature, node_origins
@@ -175,11 +176,7 @@ def test_generator_and_lazy_frames(movie):
     lazy = dask_array.from_array(movie.frames[:4], chunks=(1, 80, 80))
     run = iter_track(lazy, movie.init)
     states = []
-    try:
-        while True:
-            states.append(next(run))
-    except StopIteration as done:
-        res = done.value
+    res = drain(run, states.append)
     assert [s.frame for s in states] == [0, 1, 2, 3] and states[-1].done == states[-1].total == 4
     eager = track(movie.frames[:4], movie.init)
     for a, b in zip(res.contours[0], eager.contours[0]):

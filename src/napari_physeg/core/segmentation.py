@@ -18,6 +18,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .contour import as_contour, cut_pinches, outward_normals, perimeter, remove_loops, resample, segment_lengths, signed_area
+from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
 from .features import chamfer_distance, compute_features, normalized_intensity
@@ -107,7 +108,7 @@ def _clip_to_image(init: np.ndarray, shape) -> np.ndarray:
         warnings.warn(
             f"{outside.sum()} of {len(init)} nodes of init lie outside the image and were clipped to it",
             UserWarning,
-            stacklevel=4,  # the caller of segment() (iter_segment, then segment)
+            stacklevel=5,  # the caller of segment() (through iter_segment, drain and segment)
         )
         init = as_contour(np.clip(init, 0.0, hi), name="init (clipped to the image)")
     return init
@@ -824,11 +825,5 @@ def segment(image, init, *, callback=None, **options) -> SegmentationResult:
     >>> res.converged
     True
     """
-    run = iter_segment(image, init, **options)
-    stop = False
-    try:
-        while True:
-            progress = run.send(None) if not stop else run.send(True)
-            stop = callback is not None and callback(progress.step, progress.contour) is False
-    except StopIteration as done:
-        return done.value
+    on_progress = None if callback is None else (lambda state: callback(state.step, state.contour))
+    return drain(iter_segment(image, init, **options), on_progress)

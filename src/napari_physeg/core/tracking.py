@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ._drain import drain
 from .contour import as_contour, outward_normals, perimeter, polygon_mask, remove_loops, resample, signed_area
 from .dynamics import DivergenceError
 from .matching import match
@@ -527,10 +528,4 @@ def track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_option
     """
     run = iter_track(frames, inits, start=start, max_steps=max_steps, segment_options=segment_options,
                      match_options=match_options)
-    stop = False
-    try:
-        while True:
-            progress = run.send(True if stop else None)
-            stop = callback is not None and callback(progress) is False
-    except StopIteration as done:
-        return done.value
+    return drain(run, callback)
