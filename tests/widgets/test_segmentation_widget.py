@@ -447,12 +447,14 @@ def test_manifest_is_valid():
     pm.validate_imports()
     contrib = pm.contributions
     assert {w.display_name for w in contrib.widgets} == {
-        "Segmentation (physical contour)", "Matching (modal)", "Simulation (deformation)"}
+        "Segmentation (physical contour)", "Matching (modal)", "Simulation (deformation)", "Tracking (time-lapse)"}
     keys = {s.key: s.display_name for s in contrib.sample_data}
     assert keys["hand_segmentation"] == "Hand (segmentation)"
     assert keys["hand_poses"] == "Hand poses (matching)"
     assert {"hand_open", "hand_closed"} <= set(keys)
+    assert keys["deforming_cell"] == "Deforming cell (tracking)"
     assert [m.command for m in contrib.menus["napari/layers/segment"]] == ["napari-physeg.segmentation_widget"]
+    assert [m.command for m in contrib.menus["napari/layers/track"]] == ["napari-physeg.tracking_widget"]
     # the manifest is also visible at the top of the repository
     top = Path(__file__).resolve().parents[2] / "napari.yaml"
     src = Path(__file__).resolve().parents[2] / "src" / "napari_physeg" / "napari.yaml"
