@@ -72,3 +72,31 @@ class _no_warning:
 
     def __exit__(self, *exc):
         return False
+
+
+def _coin_c03():
+    """Coin c03 of skimage.data.coins() (the gallery's watershed truth), a dim coin
+    below the image's top side between two brighter ones."""
+    from skimage import data, filters, measure, segmentation
+
+    image = data.coins()
+    markers = np.zeros_like(image)
+    markers[image < 30] = 1
+    markers[image > 150] = 2
+    labels = measure.label(ndi.binary_fill_holes(segmentation.watershed(filters.sobel(image), markers) == 2))
+    truth = labels == labels[50, 215]
+    return image, truth
+
+
+@pytest.mark.parametrize("factor", [0.5, 1.3])
+def test_dim_coin_without_an_edge_pixel(factor):
+    """The edge detector's thresholds follow the strongest edges in view: coin
+    c03 has no edge pixel at all. Its region's outline stands in, so the
+    distance force no longer pulls the contour toward the image's top side
+    (it swung there and ran to max_steps, IoU 0.62)."""
+    image, truth = _coin_c03()
+    centre = np.argwhere(truth).mean(axis=0)
+    res = segment(image, circle(centre, factor * np.sqrt(truth.sum() / np.pi)))
+    found = polygon2mask(truth.shape, res.contour)
+    assert res.converged
+    assert (found & truth).sum() / (found | truth).sum() > 0.95

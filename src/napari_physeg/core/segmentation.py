@@ -196,6 +196,13 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None):
     interior = cv2.erode(r8, _disk(rim + 1)).view(bool)
     band = cv2.dilate(r8, _disk(gate)).view(bool) & ~interior
     edges = np.where(band, edges, 0.0)
+    # Where the edge detector found no border (its thresholds follow the
+    # strongest edges in view: a dim object among bright ones has none), the
+    # region's own outline stands in, so the distance force pulls toward the
+    # object and not toward the nearest edge found elsewhere (or the image's side).
+    outline = region & ~cv2.erode(r8, _disk(1)).view(bool)
+    near_edge = cv2.dilate((edges > 0).view(np.uint8), _disk(rim + 1)).view(bool)
+    edges[outline & ~near_edge] = 1.0
     signed[cv2.erode(r8, _disk(rim)).view(bool)] = 1.0
     return signed.astype(np.float32), edges, model.polarity
 
