@@ -87,3 +87,29 @@ def test_node_trajectories_follow_the_membrane():
         for t, r, c in path:
             contour = tr.contours[0][int(t)]
             assert np.min(np.hypot(contour[:, 0] - r, contour[:, 1] - c)) < 2.0
+
+
+def test_updates_never_re_enter_the_slot(movie_in_viewer):
+    """napari's progress bar (activity dock open) processes Qt events: an
+    update delivered inside the slot is dropped, not handled recursively."""
+    _, widget = movie_in_viewer
+    seen = []
+
+    def slot(update):
+        seen.append(update)
+        if len(seen) < 50:
+            widget._on_yielded_once(update)  # what a nested event delivery does
+
+    widget._on_yielded = slot
+    widget._on_yielded_once("first")
+    assert seen == ["first"] and widget._in_yield is False
+
+
+def test_a_run_with_the_activity_dock_open_logs_no_recursion(movie_in_viewer, wait_done, caplog):
+    viewer, widget = movie_in_viewer
+    viewer.window._status_bar._toggle_activity_dock(True)
+    widget.preview_interval = 0.0  # every update redraws the preview
+    widget.run()
+    wait_done(widget)
+    assert widget.last_result.status == [["tracked"] * 8]
+    assert not [r for r in caplog.records if "RecursionError" in r.getMessage()]

@@ -46,6 +46,7 @@ class WorkerWidget(Container):
         self._progress_value = 0
         self.n_updates = 0  # progress updates shown in the last run
         self._running = False
+        self._in_yield = False
 
     def _connect_signals(self):
         self._run_btn.changed.connect(self.run)
@@ -85,7 +86,7 @@ class WorkerWidget(Container):
         self._pbar = pbar
         worker = thread_worker(function, start_thread=False)(*args, **kwargs)
         if isinstance(worker, GeneratorWorker):  # only generators report progress
-            worker.yielded.connect(self._on_yielded)
+            worker.yielded.connect(self._on_yielded_once)
         worker.returned.connect(self._on_returned)
         worker.errored.connect(self._on_errored)
         worker.finished.connect(self._on_finished)
@@ -107,6 +108,19 @@ class WorkerWidget(Container):
         except RuntimeError:
             return False
         return True
+
+    def _on_yielded_once(self, update):
+        """``_on_yielded``, never re-entered: napari's progress bar (with the
+        activity dock open) processes Qt events, which can deliver the next
+        update inside this one; that one is dropped (the next carries newer
+        progress) instead of recursing until RecursionError."""
+        if self._in_yield:
+            return
+        self._in_yield = True
+        try:
+            self._on_yielded(update)
+        finally:
+            self._in_yield = False
 
     def _on_destroyed(self, *_):
         self._cancel.set()
