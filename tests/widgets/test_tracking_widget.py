@@ -54,7 +54,8 @@ def test_round_trip_adds_contours_tracks_and_maps(movie_in_viewer, wait_done):
     # The centroid track, then the node trajectories, each over the 8 frames.
     assert len(np.unique(tracks[0].data[:, 0])) == 13 and tracks[0].data[:, 1].max() == 7
     assert "tracking preview" not in [layer.name for layer in viewer.layers]
-    assert widget.n_updates == 8 and "8 object-frames tracked" in widget._status.value
+    # Updates delivered inside the slot are dropped (see _on_yielded_once), so at most 8.
+    assert 1 <= widget.n_updates <= 8 and "8 object-frames tracked" in widget._status.value
 
 
 def test_cancel_keeps_the_frames_done(movie_in_viewer, qtbot, wait_done):
