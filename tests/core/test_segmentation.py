@@ -418,3 +418,11 @@ def test_a_contour_swinging_about_its_border_is_not_at_rest():
     jittered = [jitter.reached(50 + (20 + 0.1 * rng.standard_normal()) * ring) for k in range(100)]
     assert not any(swung)
     assert jittered.index(True) == PLATEAU_STEPS
+
+
+def test_iter_segment_has_segment_s_options_and_refuses_unknown_ones():
+    obj = data.ellipse((64, 64))
+    with pytest.raises(TypeError, match="stifness"):
+        iter_segment(obj.image, obj.init_near, stifness=3.0)  # fails at the call, not at the first step
+    with pytest.raises(TypeError, match="callback"):
+        iter_segment(obj.image, obj.init_near, callback=print)

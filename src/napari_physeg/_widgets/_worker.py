@@ -11,6 +11,7 @@ neither leaves a thread running nor touches deleted Qt widgets.
 from __future__ import annotations
 
 import threading
+from collections import deque
 
 from magicgui.widgets import Container
 from napari.qt.threading import GeneratorWorker, thread_worker
@@ -47,6 +48,7 @@ class WorkerWidget(Container):
         self.n_updates = 0  # progress updates shown in the last run
         self._running = False
         self._in_yield = False
+        self._pending_updates = deque()
 
     def _connect_signals(self):
         self._run_btn.changed.connect(self.run)
@@ -112,13 +114,15 @@ class WorkerWidget(Container):
     def _on_yielded_once(self, update):
         """``_on_yielded``, never re-entered: napari's progress bar (with the
         activity dock open) processes Qt events, which can deliver the next
-        update inside this one; that one is dropped (the next carries newer
-        progress) instead of recursing until RecursionError."""
+        update inside this one. That one waits in a queue and is handled
+        after, in order, instead of recursing until RecursionError."""
+        self._pending_updates.append(update)
         if self._in_yield:
             return
         self._in_yield = True
         try:
-            self._on_yielded(update)
+            while self._pending_updates:
+                self._on_yielded(self._pending_updates.popleft())
         finally:
             self._in_yield = False
 

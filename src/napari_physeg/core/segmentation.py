@@ -8,6 +8,7 @@ the object it surrounds or lies inside.
 
 from __future__ import annotations
 
+import inspect
 import time
 import warnings
 from collections import deque
@@ -108,7 +109,7 @@ def _clip_to_image(init: np.ndarray, shape) -> np.ndarray:
         warnings.warn(
             f"{outside.sum()} of {len(init)} nodes of init lie outside the image and were clipped to it",
             UserWarning,
-            stacklevel=5,  # the caller of segment() (through iter_segment, drain and segment)
+            stacklevel=5,  # the caller of segment() (through _evolve, drain and segment)
         )
         init = as_contour(np.clip(init, 0.0, hi), name="init (clipped to the image)")
     return init
@@ -547,37 +548,12 @@ def _initial_nodes(init, n_nodes, sigma, sigma_factor):
     return resample(init, int(n_nodes)), spacing, sigma_used
 
 
-def iter_segment(
-    image,
-    init,
-    *,
-    material: str | Material = "rubber",
-    stiffness: float = 2000.0,
-    n_nodes: int | None = None,
-    sigma: float | None = None,
-    sigma_factor: float = 1.0,
-    forces=FORCE_NAMES,
-    weights: dict | None = None,
-    polarity: str = "auto",
-    damping_ratio: float = 1.0,
-    dt: float = 1.0,
-    reference: str = "incremental",
-    integrator: str = "newmark",
-    max_steps: int = 1000,
-    max_step_length: float = 2.0,
-    tol: float = 0.02,
-    patience: int = 5,
-    max_line_length: float = 40.0,
-    isef_b: float = 0.7,
-    refine: bool = True,
-    history_every: int = 5,
-    features: FrameFeatures | None = None,
-    avoid=None,
-):
+def iter_segment(image, init, **options):
     """:func:`segment` as a generator: one :class:`SegmentationProgress` per time step.
 
-    Takes the parameters of :func:`segment` (but ``callback``) and returns
-    (as ``StopIteration.value``) its :class:`SegmentationResult`. Send
+    Takes the parameters of :func:`segment` (but ``callback``), with its
+    defaults, and returns (as ``StopIteration.value``) its
+    :class:`SegmentationResult`. Send
     ``True`` into the generator to stop it after the current step: the result
     then has ``stop_reason="cancelled"``. Bad input raises before the first
     step. napari's ``thread_worker`` runs it as it is.
@@ -591,6 +567,43 @@ def iter_segment(
     >>> first.step, first.phase
     (1, 'evolution')
     """
+    bound = inspect.signature(segment).bind(image, init, **options)  # a misspelt option fails here
+    bound.apply_defaults()
+    arguments = dict(bound.arguments)
+    if arguments.pop("callback") is not None:
+        raise TypeError("iter_segment takes no callback: it yields its progress")
+    return _evolve(**arguments)
+
+
+def _evolve(
+    image,
+    init,
+    *,
+    material: str | Material,
+    stiffness: float,
+    n_nodes: int | None,
+    sigma: float | None,
+    sigma_factor: float,
+    forces,
+    weights: dict | None,
+    polarity: str,
+    damping_ratio: float,
+    dt: float,
+    reference: str,
+    integrator: str,
+    max_steps: int,
+    max_step_length: float,
+    tol: float,
+    patience: int,
+    max_line_length: float,
+    isef_b: float,
+    refine: bool,
+    history_every: int,
+    features: FrameFeatures | None,
+    avoid,
+):
+    """The steps of :func:`segment` (see :func:`iter_segment`); every option given."""
+
     t_start = time.perf_counter()
     image = _validate_image(image)
     init = as_contour(init, name="init")
@@ -714,7 +727,34 @@ def _remesh(body, nodes, bounds, step, stiffness) -> None:
         raise _divergence(step, stiffness) from err
 
 
-def segment(image, init, *, callback=None, **options) -> SegmentationResult:
+def segment(
+    image,
+    init,
+    *,
+    material: str | Material = "rubber",
+    stiffness: float = 2000.0,
+    n_nodes: int | None = None,
+    sigma: float | None = None,
+    sigma_factor: float = 1.0,
+    forces=FORCE_NAMES,
+    weights: dict | None = None,
+    polarity: str = "auto",
+    damping_ratio: float = 1.0,
+    dt: float = 1.0,
+    reference: str = "incremental",
+    integrator: str = "newmark",
+    max_steps: int = 1000,
+    max_step_length: float = 2.0,
+    tol: float = 0.02,
+    patience: int = 5,
+    max_line_length: float = 40.0,
+    isef_b: float = 0.7,
+    refine: bool = True,
+    history_every: int = 5,
+    features: FrameFeatures | None = None,
+    avoid=None,
+    callback=None,
+) -> SegmentationResult:
     """Segment the object around (or inside) ``init`` with a physical contour.
 
     The initial contour is resampled to evenly spaced nodes and modelled as an
@@ -832,5 +872,6 @@ def segment(image, init, *, callback=None, **options) -> SegmentationResult:
     >>> res.converged
     True
     """
+    options = {name: value for name, value in locals().items() if name not in ("image", "init", "callback")}
     on_progress = None if callback is None else (lambda state: callback(state.step, state.contour))
-    return drain(iter_segment(image, init, **options), on_progress)
+    return drain(_evolve(image, init, **options), on_progress)
