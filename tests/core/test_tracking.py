@@ -201,3 +201,10 @@ def test_displacement_weight_breaks_the_symmetry_of_round_shapes():
     b = np.roll(_circle((50, 50), 20.5, n=60), 7, axis=0)  # same circle, numbered from elsewhere
     pairs = match(a, b, displacement_weight=1.0).pairs
     assert np.hypot(*(a[pairs[:, 0]] - b[pairs[:, 1]]).T).max() < 1.5
+
+
+def test_a_frame_with_nan_pixels_is_an_error_not_a_lost_object():
+    frames = _disk_movie([[(48, 48)]] * 4)
+    frames[2, 10, 10] = np.nan
+    with pytest.raises(ValueError, match="frame 2 has NaN"):
+        track(frames, _circle((48, 48), 16))

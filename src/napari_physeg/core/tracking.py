@@ -289,6 +289,9 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
         step = 1 if frame_order.step > 0 else -1
         for t in frame_order:
             image = np.asarray(frames[t], dtype=np.float64)  # one frame at a time (dask, zarr)
+            if not np.isfinite(image).all():
+                raise ValueError(f"frame {t} has NaN or infinite pixels; fill or mask them before tracking "
+                                 "(e.g. np.nan_to_num)")
             shared = FrameFeatures.of(image, options.get("isef_b", 0.7))
             # Which object each pixel belongs to, as far as known: the others'
             # contours on this frame once done, else on the frame before.
@@ -516,7 +519,8 @@ def track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_option
     ------
     ValueError
         For frames that are not a (T, H, W) stack, no or bad contours, or a
-        start frame outside the movie; before any frame is read.
+        start frame outside the movie (before any frame is read); for a frame
+        with NaN or infinite pixels (when it is read).
 
     Examples
     --------
