@@ -46,11 +46,6 @@ def light(contour):
     return np.asarray(contour)[::3]
 
 
-def helper_threads():
-    """Threads running the core for segment_contours."""
-    return [t for t in threading.enumerate() if t.name.startswith("napari-physeg segment")]
-
-
 def shown(widget):
     """Not hidden (``visible`` is False for every widget while the viewer window is hidden)."""
     return not widget.native.isHidden()
@@ -227,17 +222,25 @@ def test_cancel_stops_the_worker(viewer_widget, wait_done, errors, monkeypatch):
     viewer, widget = viewer_widget
     viewer.open_sample("napari-physeg", "hand_segmentation")
     steps = []
-    real_segment = seg.segment
+    real_iter_segment = seg.iter_segment
 
-    def slow_segment(image, init, *, callback, **kwargs):
-        def slow_callback(step, contour):
-            steps.append(step)
-            time.sleep(0.01)
-            return callback(step, contour)
+    def slow_iter_segment(image, init, **kwargs):
+        run = real_iter_segment(image, init, **kwargs)
 
-        return real_segment(image, init, callback=slow_callback, **kwargs)
+        def slowed():
+            stop = None
+            try:
+                while True:
+                    state = run.send(stop)
+                    steps.append(state.step)
+                    time.sleep(0.01)
+                    stop = yield state
+            except StopIteration as done:
+                return done.value
 
-    monkeypatch.setattr(seg, "segment", slow_segment)
+        return slowed()
+
+    monkeypatch.setattr(seg, "iter_segment", slow_iter_segment)
     cancelled_at = []
 
     def cancel_once(update):
@@ -345,7 +348,7 @@ def test_divergence_is_reported_with_the_fix(viewer_widget, wait_done, errors, m
         raise DivergenceError("the contour diverged at step 3: lower the stiffness r (1e+09) or use a stiffer "
                               "material")
 
-    monkeypatch.setattr(seg, "segment", diverging)
+    monkeypatch.setattr(seg, "iter_segment", diverging)
     widget.run()
     wait_done(widget)
     assert len(errors) == 1 and "diverged" in errors[0] and "lower the stiffness" in errors[0]
@@ -423,14 +426,18 @@ def test_generator_yields_progress_and_can_be_cancelled(hand):
     assert outcome.cancelled and outcome.results == [] and first.step >= 1
 
 
-def test_generator_closed_early_stops_its_helper_thread(hand):
+def test_generator_runs_the_core_in_its_own_thread_and_stops_when_closed(hand):
+    """No helper thread, no queue: the core's generator runs in the worker's
+    thread; closing the generator (napari aborting the worker) stops it."""
     kwargs = segment_kwargs(hand.init_far, max_steps=100000)
     cancel = threading.Event()
+    threads_before = set(threading.enumerate())
     gen = segment_contours(hand.image, [hand.init_far], [kwargs], cancel=cancel, preview_interval=0.0)
-    next(gen)
-    assert helper_threads()
+    first, second = next(gen), next(gen)
+    assert second.step == first.step + 1  # every step, with no preview throttling
+    assert set(threading.enumerate()) == threads_before
     gen.close()  # what happens when napari aborts the worker
-    assert cancel.is_set() and not helper_threads()
+    assert cancel.is_set()
 
 
 # --------------------------------------------------------------------------
@@ -508,11 +515,11 @@ def test_closing_the_viewer_during_a_run_is_clean(make_napari_viewer, qtbot):
     viewer.open_sample("napari-physeg", "hand_segmentation")
     widget._max_steps.value = 100000
     widget._w_edges.value = 0.0  # slower to settle
-    widget.run()
-    qtbot.waitUntil(lambda: bool(helper_threads()), timeout=5_000)
+    worker = widget.run()
+    qtbot.waitUntil(lambda: widget.n_updates >= 1, timeout=5_000)
     viewer.close()
-    # the run is cancelled: the core's thread stops, no slot touches the deleted widgets
-    qtbot.waitUntil(lambda: not helper_threads(), timeout=10_000)
+    # the run is cancelled: the worker stops, no slot touches the deleted widgets
+    qtbot.waitUntil(lambda: not worker.is_running, timeout=10_000)
     assert widget._cancel.is_set()
     assert widget.last_outcome is None or not widget.last_outcome.ok
 

@@ -21,7 +21,6 @@ Three parts, from the least to the most napari-specific:
 All physics lives in :mod:`napari_physeg.core`.
 """
 
-import queue
 import threading
 import time
 from dataclasses import dataclass, field
@@ -41,7 +40,7 @@ from napari.layers import Image, Layer, Shapes
 from napari.utils import progress
 from napari.utils.notifications import show_info, show_warning
 
-from ..core import MATERIALS, DivergenceError, Material, segment
+from ..core import MATERIALS, DivergenceError, Material, iter_segment
 from ._layers import (
     contours_to_labels,
     contours_to_shapes_data,
@@ -154,11 +153,11 @@ def segment_contours(image, contours, kwargs_list, *, cancel: threading.Event | 
                      preview_interval: float = 0.05):
     """Segment each initial contour on a 2D image; a generator for a worker thread.
 
-    The core's :func:`~napari_physeg.core.segment` runs in a helper thread; its
-    callback hands the evolving contour over a queue (at most one every
-    ``preview_interval`` seconds) and returns False (stop) once ``cancel`` is
-    set.  This generator yields those updates, so a ``thread_worker`` built on
-    it emits them with its ``yielded`` signal in the GUI thread.
+    The core's :func:`~napari_physeg.core.iter_segment` runs right here, in
+    the worker's thread: no helper thread, no queue. Of its steps, at most one
+    every ``preview_interval`` seconds is yielded (so the GUI draws previews
+    at the pace it can), and once ``cancel`` is set the core is told to stop
+    after its current step.
 
     Parameters
     ----------
@@ -190,53 +189,40 @@ def segment_contours(image, contours, kwargs_list, *, cancel: threading.Event | 
     t0 = time.perf_counter()
     total = len(contours)
     results = []
-    for i, (init, kwargs) in enumerate(zip(contours, kwargs_list)):
-        if cancel.is_set():
-            return SegmentationOutcome(results, cancelled=True, seconds=time.perf_counter() - t0)
-        max_steps = int(kwargs.get("max_steps", 1000))
-        updates: queue.SimpleQueue = queue.SimpleQueue()
-        last = [-np.inf]
-
-        def callback(step, contour, _updates=updates, _last=last):
+    try:
+        for i, (init, kwargs) in enumerate(zip(contours, kwargs_list)):
             if cancel.is_set():
-                return False
-            now = time.perf_counter()
-            if now - _last[0] >= preview_interval:
-                _last[0] = now
-                _updates.put(("step", step, contour))
-            return None
-
-        def target(_init=init, _kwargs=kwargs, _updates=updates, _callback=callback):
+                return SegmentationOutcome(results, cancelled=True, seconds=time.perf_counter() - t0)
+            max_steps = int(kwargs.get("max_steps", 1000))
             try:
-                _updates.put(("done", segment(image, _init, callback=_callback, **_kwargs)))
-            except Exception as err:  # reported to the caller, never lost in this thread
-                _updates.put(("error", err))
-
-        helper = threading.Thread(target=target, name=f"napari-physeg segment {i}", daemon=True)
-        helper.start()
-        settled = False
-        try:
-            while True:
-                kind, *payload = updates.get()
-                if kind == "step":
-                    step, contour = payload
-                    yield SegmentationProgress(i, total, int(step), max_steps, contour)
-                elif kind == "done":
-                    result, settled = payload[0], True
-                    break
-                else:
-                    settled = True
-                    return SegmentationOutcome(results, error=payload[0], error_index=i,
-                                               seconds=time.perf_counter() - t0)
-        finally:
-            if not settled:  # closed early (the worker was aborted): stop the helper as well
-                cancel.set()
-            helper.join()
-        if result.stop_reason == "cancelled":
-            return SegmentationOutcome(results, cancelled=True, seconds=time.perf_counter() - t0)
-        results.append(result)
-        yield SegmentationProgress(i, total, max_steps, max_steps, result.contour, done=True)
+                result = yield from _throttled_steps(iter_segment(image, init, **kwargs), i, total, max_steps,
+                                                     cancel, preview_interval)
+            except Exception as err:  # reported to the caller, with what succeeded
+                return SegmentationOutcome(results, error=err, error_index=i, seconds=time.perf_counter() - t0)
+            if result.stop_reason == "cancelled":
+                return SegmentationOutcome(results, cancelled=True, seconds=time.perf_counter() - t0)
+            results.append(result)
+            yield SegmentationProgress(i, total, max_steps, max_steps, result.contour, done=True)
+    except GeneratorExit:  # closed early: napari aborted the worker
+        cancel.set()
+        raise
     return SegmentationOutcome(results, seconds=time.perf_counter() - t0)
+
+
+def _throttled_steps(run, index, total, max_steps, cancel, interval):
+    """Drive the core's generator ``run``, yielding a progress update at most
+    every ``interval`` seconds; return its result."""
+    last = -np.inf
+    try:
+        state = next(run)
+        while True:
+            now = time.perf_counter()
+            if now - last >= interval:
+                last = now
+                yield SegmentationProgress(index, total, state.step, max_steps, state.contour)
+            state = run.send(cancel.is_set())
+    except StopIteration as done:
+        return done.value
 
 
 # --------------------------------------------------------------------------
