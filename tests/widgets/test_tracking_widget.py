@@ -119,3 +119,21 @@ def test_a_run_with_the_activity_dock_open_logs_no_recursion(movie_in_viewer, wa
     wait_done(widget)
     assert widget.last_result.status == [["tracked"] * 8]
     assert not [r for r in caplog.records if "RecursionError" in r.getMessage()]
+
+
+def test_a_result_delivered_inside_the_slot_comes_after_the_updates(movie_in_viewer):
+    """The run's end can be delivered inside the slot too: it must not
+    overtake the updates queued before it (the progress bar would stop short)."""
+    _, widget = movie_in_viewer
+    order = []
+
+    def slot(update):
+        order.append(update)
+        if update == 0:
+            widget._on_yielded_once(1)  # queued
+            widget._on_returned_after_updates("result")  # delivered inside the slot too
+
+    widget._on_yielded = slot
+    widget._on_returned = order.append
+    widget._on_yielded_once(0)
+    assert order == [0, 1, "result"]

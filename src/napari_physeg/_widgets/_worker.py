@@ -89,7 +89,7 @@ class WorkerWidget(Container):
         worker = thread_worker(function, start_thread=False)(*args, **kwargs)
         if isinstance(worker, GeneratorWorker):  # only generators report progress
             worker.yielded.connect(self._on_yielded_once)
-        worker.returned.connect(self._on_returned)
+        worker.returned.connect(self._on_returned_after_updates)
         worker.errored.connect(self._on_errored)
         worker.finished.connect(self._on_finished)
         self.worker = worker
@@ -126,6 +126,17 @@ class WorkerWidget(Container):
         finally:
             self._in_yield = False
 
+    def _flush_updates(self):
+        """Handle the updates still queued: the run's ``returned`` and
+        ``finished`` can be delivered inside the yielded slot too, and must
+        not overtake the updates that came before them."""
+        while self._pending_updates:
+            self._on_yielded(self._pending_updates.popleft())
+
+    def _on_returned_after_updates(self, result):
+        self._flush_updates()
+        self._on_returned(result)
+
     def _on_destroyed(self, *_):
         self._cancel.set()
         if self.worker is not None:
@@ -146,6 +157,7 @@ class WorkerWidget(Container):
         self._move_pbar(self._record_progress(value))
 
     def _on_finished(self):
+        self._flush_updates()
         self._cancel.set()  # stops a helper thread of the computation too if the worker was aborted
         self.worker = None
         self._running = False
