@@ -550,3 +550,28 @@ def test_headless_scripting(qtbot, hand):
         assert len([layer for layer in viewer.layers if layer.name.startswith("initial contour segmented")]) == 2
     finally:
         viewer.close()
+
+
+def test_good_shapes_come_back_when_another_fails(viewer_widget, wait_done, errors, monkeypatch):
+    """One shape of the layer fails: the others are segmented and added all the
+    same, and the message says which failed, why, and which succeeded."""
+    viewer, widget = viewer_widget
+    viewer.open_sample("napari-physeg", "hand_segmentation")
+    shapes = viewer.layers["initial contour"]
+    shapes.add_polygons([np.asarray(shapes.data[0]) * 0.2 + 5])  # a second, small shape in the corner
+    real_iter_segment = seg.iter_segment
+
+    def failing_on_the_small_one(image, init, **kwargs):
+        if np.ptp(init[:, 0]) < 60:
+            raise ValueError("the contour collapsed to a point after 12 steps: no object border was found")
+        return real_iter_segment(image, init, **kwargs)
+
+    monkeypatch.setattr(seg, "iter_segment", failing_on_the_small_one)
+    widget.reset_choices()
+    widget.run()
+    wait_done(widget)
+    outcome = widget.last_outcome
+    assert len(outcome.results) == 1 and outcome.indices == [0] and [i for i, _ in outcome.failures] == [1]
+    (out,) = output_layers(viewer)
+    assert len(out.data) == 1 and list(out.features["shape"]) == [0]
+    assert len(errors) == 1 and "shape 1" in errors[0] and "collapsed" in errors[0] and "[0] were segmented" in errors[0]

@@ -127,15 +127,20 @@ class SegmentationOutcome:
     Attributes
     ----------
     results : list of SegmentationResult
-        One per contour segmented (fewer when cancelled or failed).
+        One per contour segmented (fewer when cancelled or some failed).
     cancelled : bool
         The run was stopped by the cancel event.
     error : Exception or None
-        The error that stopped the run, if any.
+        The first error, if a contour failed (the others were still run).
     error_index : int or None
         The contour it happened on.
     seconds : float
         Wall time of the run.
+    indices : list of int
+        Which contour (position in the run) each result is; default
+        ``0, 1, ...``.
+    failures : list of (int, Exception)
+        Every contour that failed, and why.
     """
 
     results: list
@@ -143,6 +148,12 @@ class SegmentationOutcome:
     error: Exception | None = None
     error_index: int | None = None
     seconds: float = 0.0
+    indices: list = field(default_factory=list)
+    failures: list = field(default_factory=list)
+
+    def __post_init__(self):
+        if not self.indices:
+            self.indices.extend(range(len(self.results)))
 
     @property
     def ok(self) -> bool:
@@ -188,25 +199,33 @@ def segment_contours(image, contours, kwargs_list, *, cancel: threading.Event | 
     cancel = cancel if cancel is not None else threading.Event()
     t0 = time.perf_counter()
     total = len(contours)
-    results = []
+    results, indices, failures = [], [], []
+
+    def outcome(cancelled=False):
+        first = failures[0] if failures else (None, None)
+        return SegmentationOutcome(results, cancelled=cancelled, error=first[1], error_index=first[0],
+                                   seconds=time.perf_counter() - t0, indices=indices, failures=failures)
+
     try:
         for i, (init, kwargs) in enumerate(zip(contours, kwargs_list)):
             if cancel.is_set():
-                return SegmentationOutcome(results, cancelled=True, seconds=time.perf_counter() - t0)
+                return outcome(cancelled=True)
             max_steps = int(kwargs.get("max_steps", 1000))
             try:
                 result = yield from _throttled_steps(iter_segment(image, init, **kwargs), i, total, max_steps,
                                                      cancel, preview_interval)
-            except Exception as err:  # reported to the caller, with what succeeded
-                return SegmentationOutcome(results, error=err, error_index=i, seconds=time.perf_counter() - t0)
+            except Exception as err:  # this contour failed: say why, go on with the others
+                failures.append((i, err))
+                continue
             if result.stop_reason == "cancelled":
-                return SegmentationOutcome(results, cancelled=True, seconds=time.perf_counter() - t0)
+                return outcome(cancelled=True)
             results.append(result)
+            indices.append(i)
             yield SegmentationProgress(i, total, max_steps, max_steps, result.contour, done=True)
     except GeneratorExit:  # closed early: napari aborted the worker
         cancel.set()
         raise
-    return SegmentationOutcome(results, seconds=time.perf_counter() - t0)
+    return outcome()
 
 
 def _throttled_steps(run, index, total, max_steps, cancel, interval):
@@ -424,11 +443,20 @@ def prepare_segmentation(image_layer, shapes_layer, *, world_point=None, channel
 
 
 def error_message(outcome: SegmentationOutcome, job: SegmentationJob | None = None) -> str:
-    """A user-facing message for a failed run, with what to do about it."""
-    err = outcome.error
+    """A user-facing message for a run where contours failed, with what to do
+    about it; the shapes segmented all the same are named too."""
+    failures = outcome.failures or [(outcome.error_index, outcome.error)]
+    messages = [_failure_message(i, err, job) for i, err in failures]
+    if outcome.results:
+        done = [job.shape_indices[i] if job is not None else i for i in outcome.indices]
+        messages.append(f"shape(s) {done} were segmented")
+    return "; ".join(messages)
+
+
+def _failure_message(index, err, job) -> str:
     which = ""
-    if outcome.error_index is not None:
-        k = job.shape_indices[outcome.error_index] if job is not None else outcome.error_index
+    if index is not None:
+        k = job.shape_indices[index] if job is not None else index
         which = f" of shape {k}"
     if isinstance(err, DivergenceError):
         return f"Segmentation{which} diverged: {err}"
@@ -449,7 +477,7 @@ def result_layer_data(outcome: SegmentationOutcome, job: SegmentationJob, *, lab
     name = name or f"{job.shapes_name} segmented"
     contours = [r.contour for r in outcome.results]
     features = {
-        "shape": np.asarray(job.shape_indices[: len(contours)], dtype=int),
+        "shape": np.asarray([job.shape_indices[i] for i in outcome.indices], dtype=int),
         "steps": np.asarray([r.steps for r in outcome.results], dtype=int),
         "converged": np.asarray([r.converged for r in outcome.results], dtype=bool),
         "nodes": np.asarray([len(r.contour) for r in outcome.results], dtype=int),
@@ -723,7 +751,7 @@ class SegmentationWidget(WorkerWidget):
         job = self.job
         if not self._gui_alive():
             return
-        if outcome.error is not None:
+        if outcome.error is not None and not outcome.results:
             self._fail(error_message(outcome, job))
             return
         if outcome.cancelled:
@@ -736,11 +764,13 @@ class SegmentationWidget(WorkerWidget):
         except Exception as err:  # never leave the user with a silent failure
             self._fail(f"Could not add the result layers: {type(err).__name__}: {err}")
             return
-        late = [job.shape_indices[i] for i, r in enumerate(outcome.results) if not r.converged]
+        late = [job.shape_indices[i] for i, r in zip(outcome.indices, outcome.results) if not r.converged]
         if late:
             show_warning(f"shape(s) {late} did not come to rest within max steps "
                          f"({outcome.results[0].steps}); raise 'max steps' or the stiffness r")
         self._status.value = f"Segmented {len(outcome.results)} shape(s) in {outcome.seconds:.2f} s"
+        if outcome.error is not None:  # the others were kept; say which failed and why
+            self._fail(error_message(outcome, job))
 
     def _on_errored(self, err: Exception):
         # segment_contours catches the core's errors itself; this is a last resort.
