@@ -575,3 +575,19 @@ def test_good_shapes_come_back_when_another_fails(viewer_widget, wait_done, erro
     (out,) = output_layers(viewer)
     assert len(out.data) == 1 and list(out.features["shape"]) == [0]
     assert len(errors) == 1 and "shape 1" in errors[0] and "collapsed" in errors[0] and "[0] were segmented" in errors[0]
+
+
+def test_a_shape_off_the_image_is_left_out_not_the_whole_run(viewer_widget, wait_done, errors, monkeypatch):
+    viewer, widget = viewer_widget
+    viewer.open_sample("napari-physeg", "hand_segmentation")
+    shapes = viewer.layers["initial contour"]
+    shapes.add_polygons([np.asarray(shapes.data[0]) + 1000.0])  # far beyond the image
+    warned = []
+    monkeypatch.setattr(seg, "show_warning", lambda message: warned.append(str(message)))
+    widget.reset_choices()
+    widget.run()
+    wait_done(widget)
+    assert errors == [] and widget.last_outcome.ok and len(widget.last_outcome.results) == 1
+    assert any("shape 1" in w and "left out" in w for w in warned)
+    (out,) = output_layers(viewer)
+    assert list(out.features["shape"]) == [0]

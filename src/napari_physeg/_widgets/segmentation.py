@@ -412,27 +412,32 @@ def prepare_segmentation(image_layer, shapes_layer, *, world_point=None, channel
                          f"contour on this slice, or move to a slice with one ({sliced.off_slice} shapes elsewhere)")
     h, w = plane.shape
     hi = np.array([h - 1.0, w - 1.0])
-    contours, warnings = [], []
+    contours, indices, warnings, off_image = [], [], [], []
     for k, c in zip(sliced.indices, sliced.contours):
         if not np.all(np.isfinite(c)):
             raise InputError(f"shape {k} of {shapes_layer.name!r} has non-finite coordinates (NaN); redraw it")
         lo_box, hi_box = c.min(0), c.max(0)
         if np.any(hi_box < 0) or np.any(lo_box > hi):
-            raise InputError(
+            off_image.append(
                 f"shape {k} of {shapes_layer.name!r} lies outside the image {image_layer.name!r} (rows "
                 f"{lo_box[0]:.0f}..{hi_box[0]:.0f}, cols {lo_box[1]:.0f}..{hi_box[1]:.0f}; the image has "
-                f"{h} x {w} pixels): draw it on the image, or give the two layers the same scale and translate"
-            )
+                f"{h} x {w} pixels): draw it on the image, or give the two layers the same scale and translate")
+            continue
         outside = np.any((c < 0) | (c > hi), axis=1)
         if outside.any():
+            # Passed as drawn: the part beyond the image tells the core where
+            # the background is (its copy clipped onto the image would not).
             warnings.append(f"{int(outside.sum())} of {len(c)} vertices of shape {k} lie outside the image and "
                             "were moved onto its border")
-            c = np.clip(c, 0.0, hi)
         contours.append(c)
+        indices.append(k)
+    if not contours:
+        raise InputError("; ".join(off_image))
+    warnings.extend(f"{message}; it was left out" for message in off_image)
     return SegmentationJob(
         image=plane,
         contours=contours,
-        shape_indices=list(sliced.indices),
+        shape_indices=indices,
         leading=tuple(leading),
         image_shape=shape,
         transform=image_transform_kwargs(image_layer),
