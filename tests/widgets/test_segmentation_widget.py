@@ -591,3 +591,21 @@ def test_a_shape_off_the_image_is_left_out_not_the_whole_run(viewer_widget, wait
     assert any("shape 1" in w and "left out" in w for w in warned)
     (out,) = output_layers(viewer)
     assert list(out.features["shape"]) == [0]
+
+
+def test_advice_fits_why_a_contour_did_not_reach_a_border():
+    """Raising 'max steps' helps a contour still moving, not one at rest away
+    from any border (too low a stiffness, drawn too far): each gets its own advice."""
+    from types import SimpleNamespace
+
+    from napari_physeg.core import SegmentationResult
+
+    def result(reason):
+        return SegmentationResult(contour=np.zeros((3, 2)), steps=1000 if reason == "max_steps" else 40,
+                                  converged=reason == "converged", stop_reason=reason, history=(), polarity=1)
+
+    outcome = seg.SegmentationOutcome([result("converged"), result("max_steps"), result("stalled")])
+    messages = seg.not_converged_messages(outcome, SimpleNamespace(shape_indices=[3, 5, 7]))
+    assert len(messages) == 2
+    assert "[5]" in messages[0] and "max steps" in messages[0] and "1000" in messages[0]
+    assert "[7]" in messages[1] and "max steps" not in messages[1] and "closer" in messages[1]

@@ -471,6 +471,24 @@ def _failure_message(index, err, job) -> str:
             "(e.g. the defaults: rubber, r = 2000) and report this if it persists")
 
 
+def not_converged_messages(outcome: SegmentationOutcome, job: SegmentationJob) -> list[str]:
+    """One warning per way the contours did not reach a border, with the advice that fits it."""
+    by_reason: dict = {}
+    for i, r in zip(outcome.indices, outcome.results):
+        if not r.converged:
+            by_reason.setdefault(r.stop_reason, []).append((job.shape_indices[i], r.steps))
+    messages = []
+    if "max_steps" in by_reason:
+        shapes = [k for k, _ in by_reason["max_steps"]]
+        messages.append(f"shape(s) {shapes} were still moving after {by_reason['max_steps'][0][1]} steps: raise "
+                        "'max steps' (or draw closer to the object)")
+    if "stalled" in by_reason:
+        shapes = [k for k, _ in by_reason["stalled"]]
+        messages.append(f"shape(s) {shapes} came to rest away from any border (nothing in reach pulled them "
+                        "further): draw them closer to the object's border, or raise the stiffness r")
+    return messages
+
+
 def result_layer_data(outcome: SegmentationOutcome, job: SegmentationJob, *, labels: bool = False,
                       name: str | None = None) -> list:
     """napari layer data tuples for the results of a run.
@@ -769,11 +787,12 @@ class SegmentationWidget(WorkerWidget):
         except Exception as err:  # never leave the user with a silent failure
             self._fail(f"Could not add the result layers: {type(err).__name__}: {err}")
             return
-        late = [job.shape_indices[i] for i, r in zip(outcome.indices, outcome.results) if not r.converged]
-        if late:
-            show_warning(f"shape(s) {late} did not come to rest within max steps "
-                         f"({outcome.results[0].steps}); raise 'max steps' or the stiffness r")
-        self._status.value = f"Segmented {len(outcome.results)} shape(s) in {outcome.seconds:.2f} s"
+        for message in not_converged_messages(outcome, job):
+            show_warning(message)
+        rested = sum(r.converged for r in outcome.results)
+        self._status.value = (f"Segmented {len(outcome.results)} shape(s) in {outcome.seconds:.2f} s"
+                              + ("" if rested == len(outcome.results) else
+                                 f"; {len(outcome.results) - rested} did not reach a border (see the warnings)"))
         if outcome.error is not None:  # the others were kept; say which failed and why
             self._fail(error_message(outcome, job))
 
