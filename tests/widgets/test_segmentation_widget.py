@@ -609,3 +609,27 @@ def test_advice_fits_why_a_contour_did_not_reach_a_border():
     assert len(messages) == 2
     assert "[5]" in messages[0] and "max steps" in messages[0] and "1000" in messages[0]
     assert "[7]" in messages[1] and "max steps" not in messages[1] and "closer" in messages[1]
+
+
+def test_a_points_layer_is_a_contour(viewer_widget, wait_done, errors, hand):
+    """Points clicked around the object, in order, are one initial contour."""
+    viewer, widget = viewer_widget
+    viewer.add_image(hand.image, name="hand")
+    viewer.add_points(hand.init_far[::6], name="clicked")
+    widget.reset_choices()
+    widget._shapes.value = viewer.layers["clicked"]
+    widget.run()
+    wait_done(widget)
+    assert errors == [] and widget.last_outcome.ok
+    (out,) = output_layers(viewer)
+    assert iou(out.data[0], hand.mask) >= 0.9
+
+
+def test_a_points_layer_with_too_few_points_says_so(viewer_widget, errors, hand):
+    viewer, widget = viewer_widget
+    viewer.add_image(hand.image, name="hand")
+    viewer.add_points(hand.init_far[:2], name="two clicks")
+    widget.reset_choices()
+    widget._shapes.value = viewer.layers["two clicks"]
+    assert widget.run() is None
+    assert errors and "2 point(s)" in errors[-1] and "at least 3" in errors[-1]

@@ -29,6 +29,7 @@ import numpy as np
 
 __all__ = [
     "CLOSED_SHAPE_TYPES",
+    "PointsAsPolygon",
     "SlicedShapes",
     "affine_matrix",
     "apply_affine",
@@ -257,6 +258,28 @@ class SlicedShapes:
     contours: list
     indices: list
     off_slice: int
+
+
+class PointsAsPolygon:
+    """The points of a Points layer on the current slice, seen as one polygon
+    (in the order they were added) by :func:`shapes_to_image_coords`: the
+    parts of a Shapes layer it reads (``name``, ``ndim``, ``data``,
+    ``shape_type`` and the layer's transforms)."""
+
+    def __init__(self, layer, world_point=None):
+        self.name, self.ndim = layer.name, int(layer.ndim)
+        self.data_to_world, self.world_to_data = layer.data_to_world, layer.world_to_data
+        points = np.asarray(layer.data, dtype=np.float64).reshape(-1, self.ndim)
+        if self.ndim > 2 and len(points):
+            n_world = max(self.ndim, len(world_point) if world_point is not None else 0)
+            point = np.zeros(n_world)
+            if world_point is not None and len(world_point):
+                point[n_world - len(world_point):] = np.asarray(world_point, dtype=float)
+            here = np.asarray(layer.world_to_data(point), dtype=float)[: self.ndim - 2]
+            points = points[np.all(np.abs(points[:, : self.ndim - 2] - here) < 0.5, axis=1)]
+        self.n_points = len(points)
+        self.data = [points] if len(points) >= 3 else []
+        self.shape_type = ["polygon"] * len(self.data)
 
 
 def shapes_to_image_coords(shapes_layer, image_layer, world_point=None) -> SlicedShapes:

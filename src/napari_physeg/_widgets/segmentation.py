@@ -36,7 +36,7 @@ from magicgui.widgets import (
     PushButton,
     SpinBox,
 )
-from napari.layers import Image, Layer, Shapes
+from napari.layers import Image, Layer, Points, Shapes
 from napari.utils import progress
 from napari.utils.notifications import show_info, show_warning
 
@@ -44,6 +44,7 @@ from ..core import MATERIALS, DivergenceError, Material, iter_segment
 from ._layers import (
     contours_to_labels,
     contours_to_shapes_data,
+    PointsAsPolygon,
     image_transform_kwargs,
     polygon_perimeter,
     shapes_to_image_coords,
@@ -383,6 +384,11 @@ def prepare_segmentation(image_layer, shapes_layer, *, world_point=None, channel
         raise InputError("no initial contours: add a Shapes layer (layer list: 'New shapes layer' button), draw "
                          "a polygon, ellipse or rectangle around (or inside) the object and select it in "
                          "'initial contours'")
+    if isinstance(shapes_layer, Points):
+        shapes_layer = PointsAsPolygon(shapes_layer, world_point)
+        if not shapes_layer.data:
+            raise InputError(f"the Points layer {shapes_layer.name!r} has {shapes_layer.n_points} point(s) on this "
+                             "slice: a contour needs at least 3; click them around (or inside) the object, in order")
     if len(shapes_layer.data) == 0:
         raise InputError(f"the Shapes layer {shapes_layer.name!r} is empty: draw a polygon, lasso, ellipse or "
                          "rectangle around (or inside) the object to segment, then press Run again")
@@ -530,7 +536,8 @@ _TIPS = {
     "image": "Image layer to segment. On a stack (e.g. T, Y, X) the current 2D slice is segmented.",
     "channel": "Which channel of an RGB image to segment: red, green, blue, or grey (the luminance).",
     "shapes": "Shapes layer with the initial contours: polygons, lassos, ellipses, rectangles or paths drawn "
-              "around (or inside) the objects. Each shape on the current slice is segmented.",
+              "around (or inside) the objects. Each shape on the current slice is segmented. A Points layer "
+              "works too: its points on the current slice, in the order clicked, are one contour.",
     "material": "Virtual material of the contour. Soft materials (rubber, soft tissue) move fast and follow "
                 "details; stiff metals (aluminium, copper, steel) keep the contour smooth and need a larger "
                 "stiffness r. Picking a preset sets a suggested r.",
@@ -651,7 +658,7 @@ class SegmentationWidget(WorkerWidget):
 
     def _shapes_choices(self, _widget=None):
         return [(layer.name, layer) for layer in self.viewer.layers
-                if isinstance(layer, Shapes) and not layer.metadata.get(PREVIEW_KEY)]
+                if isinstance(layer, (Shapes, Points)) and not layer.metadata.get(PREVIEW_KEY)]
 
     def _on_layers_changed(self, event=None):
         try:
