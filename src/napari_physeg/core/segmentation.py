@@ -440,18 +440,19 @@ class _ElasticBody:
             self._update_caps(move, normals)
             reach = np.linalg.norm(move, axis=1)
             return move * np.minimum(1.0, self.cap / np.maximum(reach, 1e-12))[:, None]
-        proposal = self._displacement(G @ self.sim.trial(G @ f)) + self.rest - self.nodes
-        self._update_caps(proposal, normals)
+        move = self._displacement(G @ self.sim.trial(G @ f)) + self.rest - self.nodes
+        self._update_caps(move, normals)
         # Forces on nodes that would move more than their cap are scaled down
         # before the step is taken, so the integrator's state stays consistent.
-        for _ in range(2):
-            move = self._displacement(G @ self.sim.trial(G @ f)) + self.rest - self.nodes
+        for attempt in range(2):
             reach = np.linalg.norm(move, axis=1)
             over = reach > self.cap
             if not over.any():
                 break
             scale = np.where(over, self.cap / np.maximum(reach, 1e-12), 1.0)
             f = f * np.concatenate([scale, scale])
+            if attempt == 0:
+                move = self._displacement(G @ self.sim.trial(G @ f)) + self.rest - self.nodes
         return self._displacement(G @ self.sim.step(G @ f)) + self.rest - self.nodes
 
     def _update_caps(self, move, normals) -> None:
@@ -471,7 +472,7 @@ class _ElasticBody:
         nearest = cKDTree(old).query(nodes)[1]
         cap, last_sign = self.cap[nearest], self.last_sign[nearest]
         self.nodes = self.rest = nodes
-        if len(nodes) >= 3 and abs(signed_area(nodes)) >= 1.0:
+        if not self.collapsed:
             self._build()
         self.cap, self.last_sign = cap, last_sign
 
@@ -510,7 +511,6 @@ class _RestDetector:
     def at_rest(self, moved: float, nodes: np.ndarray) -> bool:
         self.quiet = self.quiet + 1 if moved < self.tol else 0
         return self.quiet >= self.patience or self.plateau.reached(nodes)
-
 
 
 def _check_options(stiffness, reference, integrator, polarity, max_step_length, tol, max_steps, n_nodes):
