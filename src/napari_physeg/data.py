@@ -34,7 +34,7 @@ import numpy as np
 from scipy import ndimage as ndi
 from scipy.interpolate import CubicSpline
 
-from .core.contour import polygon_mask, resample, signed_area
+from .core.contour import polygon_mask, positively_oriented, resample
 
 __all__ = [
     "SyntheticObject",
@@ -102,14 +102,6 @@ class SyntheticObject:
 # --------------------------------------------------------------------------
 # Contour helpers
 # --------------------------------------------------------------------------
-
-
-def _orient(contour: np.ndarray) -> np.ndarray:
-    """Return ``contour`` positively oriented (shoelace with rows first > 0)."""
-    contour = np.asarray(contour, dtype=np.float64)
-    if signed_area(contour) < 0:
-        contour = contour[::-1]
-    return np.ascontiguousarray(contour)
 
 
 def _open_closed(contour: np.ndarray) -> np.ndarray:
@@ -181,7 +173,7 @@ def _contour_of(field: np.ndarray, level: float = 0.5) -> np.ndarray:
     if not contours:
         raise RuntimeError("no contour found")
     longest = max(contours, key=len)
-    return _orient(_open_closed(longest))
+    return positively_oriented(_open_closed(longest))
 
 
 def _coverage_outline(coverage: np.ndarray) -> np.ndarray:
@@ -205,7 +197,7 @@ def _init_near(mask: np.ndarray, distance: float = _NEAR_DISTANCE,
     field = ndi.gaussian_filter(field, 1.0)
     contour = _resample_closed(_contour_of(field, rounding), spacing=1.0)
     smooth = ndi.gaussian_filter1d(contour, 2.0, axis=0, mode="wrap")
-    return _orient(_resample_closed(smooth, spacing=1.0))
+    return positively_oriented(_resample_closed(smooth, spacing=1.0))
 
 
 def _enclosing_ellipse(outline: np.ndarray, shape, margin: float = _FAR_MARGIN,
@@ -232,7 +224,7 @@ def _enclosing_ellipse(outline: np.ndarray, shape, margin: float = _FAR_MARGIN,
                                                                     * (axes[0] + 3 * axes[1]))))), 16)
     t = np.linspace(0.0, 2 * np.pi, 8 * n, endpoint=False)
     dense = centre + np.column_stack([axes[0] * np.cos(t), axes[1] * np.sin(t)])
-    return _orient(_resample_closed(dense, n))
+    return positively_oriented(_resample_closed(dense, n))
 
 
 def _render(coverage: np.ndarray, *, bright: bool, contrast: float, noise: float,
@@ -348,7 +340,7 @@ def ellipse(shape=(256, 256), *, center=None, axes=None, angle: float = 0.0, bri
         r0 + a * np.cos(t) * ca + b * np.sin(t) * sa,
         c0 + a * np.cos(t) * sa - b * np.sin(t) * ca,
     ])
-    outline = _orient(_resample_closed(dense, max(int(round(perim)), 8)))
+    outline = positively_oriented(_resample_closed(dense, max(int(round(perim)), 8)))
     if not _clean_mask(coverage).any():
         raise ValueError("the ellipse covers no pixel centre")
     name = f"ellipse-{'bright' if bright else 'dark'}"

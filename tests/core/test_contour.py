@@ -109,3 +109,15 @@ def test_remove_loops_cuts_a_pinched_loop_and_a_twist():
     # a simple contour is left alone
     circle = _circle(50)
     assert np.array_equal(remove_loops(circle), circle)
+
+
+def test_positively_oriented_reverses_only_clockwise_contours():
+    from napari_physeg.core.contour import positively_oriented
+
+    t = np.linspace(0, 2 * np.pi, 20, endpoint=False)
+    ccw = np.column_stack([np.sin(t), np.cos(t)])
+    if signed_area(ccw) < 0:
+        ccw = ccw[::-1]
+    np.testing.assert_array_equal(positively_oriented(ccw), ccw)
+    np.testing.assert_array_equal(positively_oriented(ccw[::-1]), ccw)
+    assert positively_oriented(ccw[::-1].astype(np.float32)).dtype == np.float64

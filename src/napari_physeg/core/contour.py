@@ -79,6 +79,15 @@ def signed_area(contour: np.ndarray) -> float:
     return 0.5 * float(r[:-1] @ c[1:] - r[1:] @ c[:-1] + r[-1] * c[0] - r[0] * c[-1])
 
 
+def positively_oriented(contour) -> np.ndarray:
+    """``contour`` as float64 nodes running counter-clockwise in the (row, col)
+    frame (positive :func:`signed_area`), reversed if need be."""
+    contour = np.asarray(contour, dtype=np.float64)
+    if signed_area(contour) < 0:
+        contour = contour[::-1]
+    return np.ascontiguousarray(contour)
+
+
 def segment_lengths(contour: np.ndarray) -> np.ndarray:
     """Length of each edge ``i -> i+1`` (the last edge closes the contour)."""
     edge = np.diff(contour, axis=0, append=contour[:1])

@@ -27,7 +27,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._drain import drain
-from .contour import as_contour, outward_normals, perimeter, polygon_mask, remove_loops, resample, signed_area
+from .contour import (as_contour, outward_normals, perimeter, polygon_mask, positively_oriented, remove_loops,
+                      resample, signed_area)
 from .dynamics import DivergenceError
 from .matching import match
 from .segmentation import FrameFeatures, segment
@@ -193,10 +194,6 @@ def _centroid(contour: np.ndarray) -> np.ndarray:
     return np.array([((r + r1) * cross).sum(), ((c + c1) * cross).sum()]) / (6 * area)
 
 
-def _oriented(contour: np.ndarray) -> np.ndarray:
-    return contour if signed_area(contour) > 0 else contour[::-1].copy()
-
-
 def _check_frames(frames):
     shape = getattr(frames, "shape", None)
     if shape is None:
@@ -350,7 +347,7 @@ def _one_object(image, shared, owner, t, k, start, step, inits, contours, status
         return None, LEFT if t != start and touches else LOST
     if not res.converged:
         return None, LOST
-    contour = _oriented(res.contour)
+    contour = positively_oriented(res.contour)
     if t == start:
         polarity[k] = "bright" if res.polarity > 0 else "dark"
         whole_area[k] = abs(signed_area(contour))
