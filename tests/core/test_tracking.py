@@ -188,6 +188,9 @@ def test_generator_and_lazy_frames(movie):
     (np.zeros((3, 32, 32)), [], {}, "inits is empty"),
     (np.zeros((3, 32, 32)), _circle((100, 100), 3), {}, "wholly outside"),
     (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"start": 3}, "start"),
+    (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"segment_options": {"material": "rubbr"}}, "rubbr"),
+    (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"segment_options": {"stiffness": -1.0}}, "stiffness"),
+    (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"segment_options": {"avoid": None}}, "avoid"),
 ])
 def test_bad_input_gets_a_clear_error(frames, inits, kwargs, message):
     with pytest.raises(ValueError, match=message):
@@ -208,3 +211,14 @@ def test_a_frame_with_nan_pixels_is_an_error_not_a_lost_object():
     frames[2, 10, 10] = np.nan
     with pytest.raises(ValueError, match="frame 2 has NaN"):
         track(frames, _circle((48, 48), 16))
+
+
+def test_a_misspelt_segment_option_fails_before_any_frame():
+    with pytest.raises(TypeError, match="stifness"):
+        track(np.zeros((3, 32, 32)), _circle((16, 16), 5), segment_options={"stifness": 1.0})
+
+
+def test_polarity_can_be_given_for_all_objects():
+    frames = _disk_movie([[(48, 48)]] * 3)
+    tr = track(frames, _circle((48, 48), 16), segment_options={"polarity": "bright"})
+    assert tr.status[0] == [TRACKED] * 3

@@ -513,7 +513,11 @@ class _RestDetector:
         return self.quiet >= self.patience or self.plateau.reached(nodes)
 
 
-def _check_options(stiffness, reference, integrator, polarity, max_step_length, tol, max_steps, n_nodes):
+def _checked_options(material, forces, weights, stiffness, reference, integrator, polarity, max_step_length, tol,
+                     max_steps, n_nodes):
+    """The material and the force weights, once every option is checked (ValueError naming the bad one)."""
+    material = get_material(material)
+    weights = normalize_weights(forces, weights)
     if not (np.isfinite(stiffness) and stiffness > 0):
         raise ValueError(f"stiffness r must be a positive number, got {stiffness!r}")
     if reference not in ("incremental", "total"):
@@ -526,6 +530,16 @@ def _check_options(stiffness, reference, integrator, polarity, max_step_length, 
         raise ValueError("max_step_length and tol must be positive and max_steps non-negative")
     if n_nodes is not None and int(n_nodes) < 3:
         raise ValueError(f"n_nodes must be at least 3, got {n_nodes!r}")
+    return material, weights
+
+
+def check_segment_options(**options) -> None:
+    """Raise the error :func:`segment` would raise for these options, before
+    any image is read: for callers that segment many times (:func:`~.tracking.track`)."""
+    bound = inspect.signature(segment).bind(None, None, **options)  # a misspelt option: TypeError
+    bound.apply_defaults()
+    names = inspect.signature(_checked_options).parameters
+    _checked_options(**{name: bound.arguments[name] for name in names})
 
 
 #: integrator="modal" solves a dense generalized eigenproblem of 2M x 2M at
@@ -607,9 +621,8 @@ def _evolve(
     t_start = time.perf_counter()
     image = _validate_image(image)
     init = as_contour(init, name="init")
-    material = get_material(material)
-    weights = normalize_weights(forces, weights)
-    _check_options(stiffness, reference, integrator, polarity, max_step_length, tol, max_steps, n_nodes)
+    material, weights = _checked_options(material, forces, weights, stiffness, reference, integrator, polarity,
+                                         max_step_length, tol, max_steps, n_nodes)
     # The drawing as the user made it (partly beyond the image, maybe) tells
     # the object from its background; the clipped one starts the contour.
     drawing = init

@@ -31,7 +31,7 @@ from .contour import (as_contour, outward_normals, perimeter, polygon_mask, posi
                       resample, signed_area)
 from .dynamics import DivergenceError
 from .matching import match
-from .segmentation import FrameFeatures, segment
+from .segmentation import FrameFeatures, check_segment_options, segment
 
 __all__ = ["track", "iter_track", "TrackingResult", "TrackingProgress", "TRACKED", "LOST", "LEFT"]
 
@@ -248,11 +248,15 @@ def _paint(owner: np.ndarray, contour: np.ndarray, value: int) -> None:
     owner[lo[0]:hi[0], lo[1]:hi[1]][inside] = value
 
 
+def _touches_side(contour: np.ndarray, shape) -> bool:
+    """Whether a node of ``contour`` lies on (or beyond) the image's side."""
+    return bool(np.any((contour <= 0.0) | (contour >= np.array(shape) - 1.0)))
+
+
 def _judge(contour, previous, whole_area, shape) -> str:
     """Is ``contour`` the object seen on ``previous``, or has it gone?"""
     area, prev_area = abs(signed_area(contour)), abs(signed_area(previous))
-    touches = np.any((contour <= 0.0) | (contour >= np.array(shape) - 1.0))
-    if touches and area < LEFT_FRACTION * whole_area:
+    if _touches_side(contour, shape) and area < LEFT_FRACTION * whole_area:
         return LEFT
     if not (prev_area / MAX_AREA_CHANGE <= area <= MAX_AREA_CHANGE * prev_area):
         return LOST
@@ -275,11 +279,16 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
     start = int(start)
     options = dict(segment_options or {})
     options.setdefault("max_steps", int(max_steps))
+    taken = sorted({"features", "avoid", "callback"} & set(options))
+    if taken:
+        raise ValueError(f"segment_options cannot set {taken}: track() sets them for each object and frame")
+    # Checked once here: a bad option must not pass, frame after frame, for a lost object.
+    check_segment_options(**options)
+    polarity = [options.pop("polarity", "auto")] * len(inits)  # then each object's, from its first frame
     n_obj = len(inits)
     contours = [[None] * n_frames for _ in range(n_obj)]
     status = [[None] * n_frames for _ in range(n_obj)]
     total, done, stop_reason = n_obj * n_frames, 0, "completed"
-    polarity = ["auto"] * n_obj
     whole_area = [abs(signed_area(c)) for c in inits]
     # Forward from the start frame, then backward from it.
     for frame_order in (range(start, n_frames), range(start - 1, -1, -1)):
@@ -343,8 +352,7 @@ def _one_object(image, shared, owner, t, k, start, step, inits, contours, status
             res = segment(image, init, features=shared, avoid=avoid if avoid.any() else None,
                           polarity=polarity[k], **options)
     except (ValueError, DivergenceError):
-        touches = np.any((init <= 0) | (init >= np.array(image.shape) - 1))
-        return None, LEFT if t != start and touches else LOST
+        return None, LEFT if t != start and _touches_side(init, image.shape) else LOST
     if not res.converged:
         return None, LOST
     contour = positively_oriented(res.contour)
@@ -353,7 +361,7 @@ def _one_object(image, shared, owner, t, k, start, step, inits, contours, status
         whole_area[k] = abs(signed_area(contour))
         return contour, TRACKED
     verdict = _judge(contour, contours[k][t - step], whole_area[k], image.shape)
-    if verdict == TRACKED and not np.any((contour <= 0.0) | (contour >= np.array(image.shape) - 1.0)):
+    if verdict == TRACKED and not _touches_side(contour, image.shape):
         whole_area[k] = abs(signed_area(contour))
     return (contour if verdict == TRACKED else None), verdict
 
@@ -518,9 +526,12 @@ def track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_option
     Raises
     ------
     ValueError
-        For frames that are not a (T, H, W) stack, no or bad contours, or a
-        start frame outside the movie (before any frame is read); for a frame
-        with NaN or infinite pixels (when it is read).
+        For frames that are not a (T, H, W) stack, no or bad contours, a
+        start frame outside the movie or a bad ``segment_options`` value
+        (before any frame is read); for a frame with NaN or infinite pixels
+        (when it is read).
+    TypeError
+        For an option :func:`segment` does not have in ``segment_options``.
 
     Examples
     --------
