@@ -90,7 +90,10 @@ def positively_oriented(contour) -> np.ndarray:
 
 def segment_lengths(contour: np.ndarray) -> np.ndarray:
     """Length of each edge ``i -> i+1`` (the last edge closes the contour)."""
-    edge = np.diff(contour, axis=0, append=contour[:1])
+    # Written out rather than np.diff(append=...): this runs every time step.
+    edge = np.empty_like(contour, dtype=np.float64)
+    edge[:-1] = contour[1:] - contour[:-1]
+    edge[-1] = contour[0] - contour[-1]
     return np.hypot(edge[:, 0], edge[:, 1])
 
 
