@@ -284,7 +284,7 @@ def test_headless_segment_match_simulate(qtbot, mock_app_model):
         segw.run()
         qtbot.waitUntil(lambda: not segw.is_running, timeout=30_000)
         assert segw.last_outcome.ok
-        segmented = viewer.layers["initial contour segmented"]
+        segmented = viewer.layers["initial contour segmented (rubber)"]
         hand = data.hand()
         ok_nodes = outline_distance(segmented.data[0], hand.outline)
         assert np.median(ok_nodes) < 2.0  # on the open hand's outline
@@ -306,7 +306,7 @@ def test_headless_segment_match_simulate(qtbot, mock_app_model):
         outcome = simw.last_outcome
         assert outcome.ok and outcome.matching is mlayer.metadata["matching"]
         (out,) = sim_layers(viewer)
-        assert out.name == "initial contour segmented → hand closed outline simulation"
+        assert out.name == "initial contour segmented (rubber) → hand closed outline simulation"
         assert out.ndim == 3 and len(out.data) == simw._n_frames.value
         closed = viewer.layers["hand closed outline"].data[0]
         assert outline_distance(out.data[-1][:, 1:], closed).mean() < 1.5

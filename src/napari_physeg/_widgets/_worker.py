@@ -24,8 +24,8 @@ class WorkerWidget(Container):
     """A magicgui ``Container`` that runs its computation in a background worker.
 
     A subclass builds its controls, among them ``_run_btn``, ``_status`` (a
-    Label) and, if its computation can be stopped, ``_cancel_btn``; then it
-    calls :meth:`_connect_signals`. Its ``run`` reads the input, then calls
+    Label) and, if its computation can be stopped, ``_cancel_btn``; it lays
+    them out with :meth:`_lay_out` and calls :meth:`_connect_signals`. Its ``run`` reads the input, then calls
     :meth:`_begin` and :meth:`_start`; it handles the results in
     ``_on_returned`` and ``_on_errored`` and, for a generator, the updates in
     ``_on_yielded``. The widget's ``_on_layers_changed`` is called when the
@@ -50,6 +50,49 @@ class WorkerWidget(Container):
         self._in_yield = False
         self._pending_updates = deque()
 
+    def _lay_out(self, controls, advanced=(), footer=()):
+        """``controls``, then a collapsed "Advanced" section holding ``advanced``,
+        in a scroll area (so that every widget docked fits a laptop screen);
+        below it, always in view, Run and Cancel, ``footer`` and the status.
+
+        napari docks a magicgui widget's ``native`` widget, which for a
+        ``scrollable`` Container is the scrolled content, not the scroll area
+        (magicgui#431): so the scroll area is placed inside this Container.
+        """
+        from qtpy.QtCore import Qt
+        from qtpy.QtWidgets import QFrame, QScrollArea
+        from superqt import QCollapsible
+
+        self._controls = Container(widgets=list(controls), labels=True)
+        self._advanced = Container(widgets=list(advanced), labels=True)
+        self.advanced_section = None
+        if advanced:
+            self.advanced_section = QCollapsible("Advanced")
+            self.advanced_section.addWidget(self._advanced.native)
+            self._controls.native.layout().addWidget(self.advanced_section)
+        self._controls.native.layout().addStretch(1)
+        self.scroll_area = QScrollArea()
+        self.scroll_area.setWidgetResizable(True)
+        self.scroll_area.setFrameShape(QFrame.Shape.NoFrame)
+        self.scroll_area.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        self.scroll_area.setWidget(self._controls.native)
+        buttons = [self._run_btn] + ([self._cancel_btn] if self._cancel_btn is not None else [])
+        self._buttons = Container(widgets=buttons, layout="horizontal", labels=False)
+        self.extend([self._buttons, *footer, self._status])
+        self.native.layout().insertWidget(0, self.scroll_area, 1)
+        self._status.native.setWordWrap(True)  # long reports must not widen the dock
+
+    def controls(self) -> list:
+        """The parameter widgets: those in the scroll area, then the Advanced ones."""
+        return [*self._controls, *self._advanced]
+
+    def reset_choices(self, *_):
+        """Refresh every layer choice, in the scroll area and the Advanced section too."""
+        super().reset_choices()
+        for part in (getattr(self, "_controls", None), getattr(self, "_advanced", None)):
+            if part is not None:
+                part.reset_choices()
+
     def _connect_signals(self):
         self._run_btn.changed.connect(self.run)
         if self._cancel_btn is not None:
@@ -68,7 +111,8 @@ class WorkerWidget(Container):
         return self._running
 
     def _fail(self, message: str):
-        self._status.value = "Error (see notification)"
+        """Say what went wrong, in full, in the widget (and as a notification)."""
+        self._status.value = message
         show_error(message)
 
     # ------------------------------------------------------------ run

@@ -15,6 +15,7 @@ __all__ = [
     "perimeter",
     "segment_lengths",
     "resample",
+    "nodes_for_spacing",
     "outward_normals",
     "mean_nearest_neighbour_distance",
     "polygon_mask",
@@ -100,6 +101,14 @@ def segment_lengths(contour: np.ndarray) -> np.ndarray:
 def perimeter(contour: np.ndarray) -> float:
     """Length of the closed polyline."""
     return float(segment_lengths(contour).sum())
+
+
+def nodes_for_spacing(contour, spacing: float) -> int:
+    """How many evenly spaced nodes lie ``spacing`` px apart on the closed
+    ``contour`` (at least 3): what "node spacing" means everywhere."""
+    if not (np.isfinite(spacing) and spacing > 0):
+        raise ValueError(f"node spacing must be a positive number of pixels, got {spacing!r}")
+    return max(int(round(perimeter(np.asarray(contour, dtype=np.float64)) / float(spacing))), 3)
 
 
 def resample(contour: np.ndarray, n_nodes: int | None = None, *, spacing: float | None = None) -> np.ndarray:

@@ -18,7 +18,8 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .contour import as_contour, cut_pinches, outward_normals, perimeter, remove_loops, resample, segment_lengths, signed_area
+from .contour import (as_contour, cut_pinches, nodes_for_spacing, outward_normals, perimeter, remove_loops, resample,
+                      segment_lengths, signed_area)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
@@ -29,6 +30,12 @@ from .region import _disk, drawing_levels, object_region, objectness
 from .subpixel import polish
 
 __all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "FrameFeatures", "region_features"]
+
+#: With ``n_nodes=None`` the nodes are DEFAULT_NODE_SPACING px apart, and
+#: at least MIN_NODES and at most MAX_DEFAULT_NODES of them.
+DEFAULT_NODE_SPACING = 3.0
+MIN_NODES = 24
+MAX_DEFAULT_NODES = 1000
 
 #: Nodes are redistributed (and the element rebuilt) when an edge of the
 #: contour grows past this many target spacings (see also PINCH_GAP).
@@ -594,7 +601,7 @@ def _initial_nodes(init, n_nodes, sigma, sigma_factor):
     """Evenly spaced nodes on ``init``, their spacing and the element's sigma."""
     length = perimeter(init)
     if n_nodes is None:
-        n_nodes = int(np.clip(round(length / 3.0), 24, 1000))
+        n_nodes = int(np.clip(nodes_for_spacing(init, DEFAULT_NODE_SPACING), MIN_NODES, MAX_DEFAULT_NODES))
     spacing = length / int(n_nodes)
     sigma_used = float(sigma) if sigma is not None else sigma_factor * spacing
     if not (np.isfinite(sigma_used) and 0 < sigma_used <= 2.0 * spacing):
