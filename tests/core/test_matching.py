@@ -395,17 +395,62 @@ def test_matching_invariant_to_similarity_transforms(a, tr, which):
 
 
 def test_callback_reports_progress_and_stops_the_matching():
-    from napari_physeg.core import MatchingCancelled
-
     a, b, _ = data.hand_pair(500, 500, pose_a="spread", pose_b="closed")
     seen = []
     m = match(a, b, callback=seen.append)
-    assert m.detail_refined
+    assert m.detail_refined and m.stop_reason == "completed"
     # features, each start of the first search, refinement, detail pass
     assert len(seen) >= 4 and seen == sorted(seen) and seen[-1] == 1.0 and 0 < seen[0] < 0.5
     calls = []
-    with pytest.raises(MatchingCancelled, match="cancelled"):
-        match(a, b, callback=lambda f: calls.append(f) or len(calls) < 2)
+    stopped = match(a, b, callback=lambda f: calls.append(f) or len(calls) < 2)
     assert len(calls) == 2  # stopped at once
+    assert stopped.stop_reason == "cancelled"
+    assert stopped.pairs.shape == (0, 2) and len(stopped.unmatched) == len(a)
     with pytest.raises(ValueError, match="^callback must be callable"):
         match(a, b, callback=3)
+
+
+def test_iter_match_yields_progress_and_returns_what_match_returns():
+    from napari_physeg.core import MatchingProgress, iter_match
+
+    a, b, _ = data.hand_pair(120, 110, pose_a="open", pose_b="closed")
+    run = iter_match(a, b, method="order", n_starts=3)
+    states = []
+    with pytest.raises(StopIteration) as done:
+        while True:
+            states.append(next(run))
+    result = done.value.value
+    assert all(isinstance(s, MatchingProgress) for s in states)
+    assert [s.phase for s in states] == ["features", "search", "search", "search", "refinement"]
+    fractions = [s.fraction for s in states]
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0
+    plain = match(a, b, n_starts=3)
+    assert np.array_equal(result.pairs, plain.pairs) and result.stop_reason == "completed"
+
+
+def test_iter_match_stops_when_sent_true_and_keeps_the_finished_search():
+    from napari_physeg.core import iter_match
+
+    a, b, _ = data.hand_pair(120, 110, pose_a="open", pose_b="closed")
+    run = iter_match(a, b)
+    state = next(run)
+    while state.phase != "refinement":
+        state = run.send(None)
+    # The refinement has finished: stopping now keeps its pairs.
+    with pytest.raises(StopIteration) as done:
+        run.send(True)
+    result = done.value.value
+    assert result.stop_reason == "cancelled" and len(result.pairs) == len(a)
+
+
+def test_iter_match_checks_its_options_at_the_call():
+    from napari_physeg.core import iter_match
+
+    with pytest.raises(TypeError, match="methd"):
+        iter_match(HAND, HAND, methd="order")
+    with pytest.raises(ValueError, match="^method must be one of"):
+        iter_match(HAND, HAND, method="nearest")  # before the first next()
+    with pytest.raises(TypeError, match="callback"):
+        iter_match(HAND, HAND, callback=print)
+    with pytest.raises(TypeError, match="methd"):
+        match(HAND, HAND, methd="order")

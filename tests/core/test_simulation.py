@@ -154,3 +154,52 @@ def test_matching_is_computed_when_omitted():
     a, b, _ = data.hand_pair(40, 38)
     sim = simulate(a, b)
     assert sim.converged and _outline_distance(sim.frames[-1], b).mean() <= 1.0
+
+
+def test_iter_simulate_yields_every_step_and_returns_the_result():
+    from napari_physeg.core import SimulationProgress, iter_simulate
+
+    a, b, truth = data.hand_pair(67, 66)
+    m = _truth_matching(a, b, truth)
+    run = iter_simulate(a, b, m, n_frames=4)
+    states = []
+    with pytest.raises(StopIteration) as done:
+        while True:
+            states.append(next(run))
+    sim = done.value.value
+    assert all(isinstance(s, SimulationProgress) for s in states)
+    assert [s.step for s in states] == list(range(1, sim.steps + 1))
+    assert sim.stop_reason == "converged" and sim.converged
+    assert np.allclose(states[-1].shape, sim.frames[-1])
+    assert np.allclose(sim.frames, simulate(a, b, m, n_frames=4).frames)
+
+
+def test_cancel_says_cancelled_and_keeps_the_frames_so_far():
+    from napari_physeg.core import iter_simulate
+
+    a, b, truth = data.hand_pair(67, 66)
+    m = _truth_matching(a, b, truth)
+    sim = simulate(a, b, m, callback=lambda step, shape: step < 3)
+    assert sim.stop_reason == "cancelled" and not sim.converged and sim.steps == 3
+    assert sim.frames.shape[1:] == (67, 2) and np.array_equal(sim.frames[0], a)
+    run = iter_simulate(a, b)  # the matching is computed first: its progress is yielded too
+    next(run)
+    with pytest.raises(StopIteration) as done:
+        run.send(True)
+    assert done.value.value.stop_reason == "cancelled"
+
+
+def test_max_steps_is_a_stop_reason():
+    a, b, truth = data.hand_pair(67, 66)
+    sim = simulate(a, b, _truth_matching(a, b, truth), max_steps=2)
+    assert sim.stop_reason == "max_steps" and not sim.converged and sim.steps == 2
+
+
+def test_iter_simulate_checks_its_options_at_the_call():
+    from napari_physeg.core import iter_simulate
+
+    a, b, truth = data.hand_pair(67, 66)
+    with pytest.raises(TypeError, match="n_frame"):
+        iter_simulate(a, b, n_frame=3)
+    with pytest.raises(ValueError, match="^q must be"):
+        iter_simulate(a, b, q=-1.0)

@@ -8,10 +8,10 @@ followed through a time-lapse, with membrane maps).
 """
 
 from .dynamics import DivergenceError
-from .matching import Matching, MatchingCancelled, match
+from .matching import Matching, MatchingCancelled, MatchingProgress, iter_match, match
 from .materials import MATERIALS, Material, get_material
 from .segmentation import SegmentationProgress, SegmentationResult, iter_segment, segment
-from .simulation import SimulationResult, simulate
+from .simulation import SimulationProgress, SimulationResult, iter_simulate, simulate
 from .tracking import LEFT, LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, track
 
 __all__ = [
@@ -20,10 +20,14 @@ __all__ = [
     "SegmentationResult",
     "SegmentationProgress",
     "match",
+    "iter_match",
     "Matching",
+    "MatchingProgress",
     "MatchingCancelled",
     "simulate",
+    "iter_simulate",
     "SimulationResult",
+    "SimulationProgress",
     "Material",
     "MATERIALS",
     "get_material",

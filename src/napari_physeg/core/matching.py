@@ -39,12 +39,14 @@ The measured effect of each stage is in ``docs/benchmarks.md`` (section
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
+from ._drain import drain
 from .contour import segment_lengths, signed_area
 from .materials import Material
 from .modes import MAX_AUTO_MODES, ModalBasis, _check_nodes, _modal_raw, select_modes, truncate
@@ -52,7 +54,9 @@ from .modes import MAX_AUTO_MODES, ModalBasis, _check_nodes, _modal_raw, select_
 __all__ = [
     "Matching",
     "MatchingCancelled",
+    "MatchingProgress",
     "match",
+    "iter_match",
     "modal_affinity",
     "curvature_signature",
     "roughness",
@@ -91,22 +95,12 @@ _ISOTROPIC = 0.8
 
 
 class MatchingCancelled(RuntimeError):
-    """Raised by :func:`match` when its ``callback`` returns False."""
+    """Kept importable for older callers; no longer raised.
 
-
-def _reporter(callback):
-    """``report(fraction)``: pass the progress to ``callback`` and raise
-    :class:`MatchingCancelled` when it returns False."""
-    if callback is None:
-        return lambda fraction: None
-    if not callable(callback):
-        raise ValueError(f"callback must be callable or None, got {callback!r}")
-
-    def report(fraction):
-        if callback(float(fraction)) is False:
-            raise MatchingCancelled("matching cancelled")
-
-    return report
+    A cancelled matching (``callback`` returned False, or ``True`` sent into
+    :func:`iter_match`) returns a :class:`Matching` with
+    ``stop_reason="cancelled"``, as every other result of the core does.
+    """
 
 
 @dataclass(frozen=True, eq=False)
@@ -145,6 +139,10 @@ class Matching:
         Whether the refinement pass ran.
     detail_refined : bool
         Whether the detail pass ran (see :func:`match`).
+    stop_reason : str
+        ``"completed"``, or ``"cancelled"`` when stopped by ``callback`` or
+        :func:`iter_match`: the pairs are then those of the last finished
+        search (none before the first one finished).
     total_cost : float
         Objective of the final search (for ``order`` including the repeat,
         skip and gap penalties).
@@ -167,6 +165,7 @@ class Matching:
     basis_a: ModalBasis = field(repr=False)
     basis_b: ModalBasis = field(repr=False)
     detail_refined: bool = False
+    stop_reason: str = "completed"
 
     @property
     def partner(self) -> np.ndarray:
@@ -179,7 +178,7 @@ class Matching:
         na, nb = self.affinity.shape
         return (f"Matching(method={self.method!r}, {len(self.pairs)} pairs, {na} x {nb} nodes, "
                 f"{len(self.unmatched)} unmatched in a, {len(self.unmatched_b)} unmatched in b, "
-                f"n_modes={self.n_modes}, refined={self.refined})")
+                f"n_modes={self.n_modes}, refined={self.refined}, stop_reason={self.stop_reason!r})")
 
 
 # --------------------------------------------------------------------------
@@ -489,16 +488,14 @@ def _start_candidates(scores: np.ndarray, n: int, separation: int = 1) -> list[i
     return chosen
 
 
-def _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window, on_start=None):
+def _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window):
     """Run the DP around each candidate start node of ``b`` (free within
-    ``window`` nodes); return the best (part, total). ``on_start(k, n)`` is
-    called after the k-th of n starts."""
+    ``window`` nodes), yielding after each start the fraction of the starts
+    done; return the best (part, total)."""
     na, nb = C.shape
     window = int(min(window, max((nb - 1) // 2, 0)))
     best = (None, np.inf)
     for k, s in enumerate(starts):
-        if k and on_start is not None:
-            on_start(k, len(starts))
         cols = (s - window + np.arange(nb + 2 * window)) % nb
         Cs = C[:, cols]
         if arc_weight > 0:
@@ -510,11 +507,13 @@ def _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window, on_star
         part, total = _order_dp(Cs, nb, window, penalty, penalty, gap)
         if total < best[1]:
             best = (np.where(part >= 0, cols[np.maximum(part, 0)], -1), total)
+        yield (k + 1) / len(starts)
     return best
 
 
-def _search(method, C, t_a, t_b, *, arc_weight, n_starts, gap, penalty, start=None, on_start=None):
-    """One pass of the chosen search on cost ``C``; returns (partners, total)."""
+def _iter_search(method, C, t_a, t_b, *, arc_weight, n_starts, gap, penalty, start=None):
+    """One pass of the chosen search on cost ``C``: a generator that yields
+    the fraction of the pass done and returns (partners, total)."""
     na, nb = C.shape
     if method == "local":
         part = _local(C)
@@ -526,9 +525,15 @@ def _search(method, C, t_a, t_b, *, arc_weight, n_starts, gap, penalty, start=No
             starts = _start_candidates(_diagonal_scores(C), n_starts, 2 * window + 1)
         else:
             starts = [start]
-        return _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window, on_start)
+        return (yield from _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window))
     ok = part >= 0
+    yield 1.0
     return part, float(C[ok, part[ok]].sum())
+
+
+def _search(method, C, t_a, t_b, **options):
+    """:func:`_iter_search` run to its end."""
+    return drain(_iter_search(method, C, t_a, t_b, **options))
 
 
 # --------------------------------------------------------------------------
@@ -746,8 +751,8 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
     callback : callable, optional
         ``callback(fraction)`` with the fraction of the work done (0 to 1,
         increasing) after each stage and each start of the ``order`` search;
-        return False to stop: :func:`match` then raises
-        :class:`MatchingCancelled`.
+        return False to stop: the result then has ``stop_reason="cancelled"``
+        (see :func:`iter_match`).
 
     Returns
     -------
@@ -759,8 +764,6 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
         For an unknown ``method``, a contour with fewer than 3 nodes, NaN or
         infinite coordinates, identical nodes or all nodes on a line, or an
         invalid option; raised before any heavy work.
-    MatchingCancelled
-        When ``callback`` returned False.
 
     Notes
     -----
@@ -784,80 +787,193 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
     >>> m.pairs.shape
     (67, 2)
     """
+    options = {name: value for name, value in locals().items() if name not in ("a", "b", "callback")}
+    if callback is not None and not callable(callback):
+        raise ValueError(f"callback must be callable or None, got {callback!r}")
+    on_progress = None if callback is None else (lambda state: callback(state.fraction))
+    return drain(_run(_prepare(a, b, **options)), on_progress)
+
+
+def iter_match(a, b, **options):
+    """:func:`match` as a generator: it yields :class:`MatchingProgress` after
+    each stage of the work and returns (as ``StopIteration.value``) the
+    :class:`Matching`.
+
+    Takes the parameters of :func:`match` (but ``callback``), with its
+    defaults. Bad input raises at the call, before any heavy work. Send
+    ``True`` into the generator to stop it: the result then has
+    ``stop_reason="cancelled"`` and the pairs of the last finished search
+    (none when the first search had not finished). napari's
+    ``thread_worker`` runs it as it is.
+
+    Examples
+    --------
+    >>> from napari_physeg.data import hand_pair
+    >>> a, b, truth = hand_pair(67, 66)
+    >>> run = iter_match(a, b)
+    >>> next(run).phase
+    'features'
+    """
+    bound = inspect.signature(match).bind(a, b, **options)  # a misspelt option fails here
+    bound.apply_defaults()
+    arguments = dict(bound.arguments)
+    if arguments.pop("callback") is not None:
+        raise TypeError("iter_match takes no callback: it yields its progress")
+    return _run(_prepare(**arguments))
+
+
+@dataclass(frozen=True, eq=False)
+class _Job:
+    """Validated input of one matching: both contours positively oriented."""
+
+    A: np.ndarray
+    B: np.ndarray
+    pa: np.ndarray  # caller's index of each node of A
+    pb: np.ndarray
+    method: str
+    n_modes: int | None
+    model_nodes: int | None
+    sigma_factor: float
+    material: object
+    curvature_weight: float
+    arclength_weight: float
+    displacement_weight: float
+    refine: bool
+    detail: bool | None
+    sign_correction: bool
+    order_penalty: float
+    n_starts: int
+    gap: float
+
+
+def _prepare(a, b, *, method, n_modes, model_nodes, sigma_factor, material, curvature_weight, arclength_weight,
+             refine, sign_correction, order_penalty, n_starts, gap_cost, detail, displacement_weight) -> _Job:
+    """Check every argument of :func:`match` (cheap: before any heavy work)."""
     method = _check_method(method)
     a = _check_nodes(a, "a")
     b = _check_nodes(b, "b")
-    curvature_weight = _check_weight(curvature_weight, "curvature_weight")
-    arclength_weight = _check_weight(arclength_weight, "arclength_weight")
-    displacement_weight = _check_weight(displacement_weight, "displacement_weight")
-    n_modes = _check_count(n_modes, "n_modes", 1, True)
-    model_nodes = _check_count(model_nodes, "model_nodes", 8, True)
-    n_starts = _check_count(n_starts, "n_starts", 1, False)
-    gap = np.inf if gap_cost is None else _check_weight(gap_cost, "gap_cost")
-    order_penalty = _check_weight(order_penalty, "order_penalty")
     if _check_weight(sigma_factor, "sigma_factor") == 0:
         raise ValueError(f"sigma_factor must be a positive number, got {sigma_factor!r}")
-    if refine is None:
-        refine = method == "order"
-    report = _reporter(callback)
     if detail is not None and not isinstance(detail, (bool, np.bool_)):
         raise ValueError(f"detail must be True, False or None, got {detail!r}")
     if detail and method != "order":
         raise ValueError(f"the detail pass is part of method='order', not {method!r}")
-
     # Orient both contours alike (positively); indices are mapped back at the end.
     pa, pb = _ccw_permutation(a), _ccw_permutation(b)
-    A, B = a[pa], b[pb]
+    return _Job(
+        A=a[pa], B=b[pb], pa=pa, pb=pb, method=method,
+        n_modes=_check_count(n_modes, "n_modes", 1, True),
+        model_nodes=_check_count(model_nodes, "model_nodes", 8, True),
+        sigma_factor=float(sigma_factor), material=material,
+        curvature_weight=_check_weight(curvature_weight, "curvature_weight"),
+        arclength_weight=_check_weight(arclength_weight, "arclength_weight"),
+        displacement_weight=_check_weight(displacement_weight, "displacement_weight"),
+        refine=method == "order" if refine is None else bool(refine),
+        detail=detail, sign_correction=bool(sign_correction),
+        order_penalty=_check_weight(order_penalty, "order_penalty"),
+        n_starts=_check_count(n_starts, "n_starts", 1, False),
+        gap=np.inf if gap_cost is None else _check_weight(gap_cost, "gap_cost"),
+    )
+
+
+@dataclass(frozen=True)
+class MatchingProgress:
+    """What :func:`iter_match` yields after each stage.
+
+    Attributes
+    ----------
+    fraction : float
+        Fraction of the work done, 0 to 1, increasing.
+    phase : str
+        The stage just finished: ``"features"``, ``"search"`` (after each
+        start of the first search), ``"refinement"`` or ``"detail"``.
+    """
+
+    fraction: float
+    phase: str
+
+
+def _scaled(run, lo: float, hi: float, phase: str):
+    """Re-yield the fractions of a sub-generator as :class:`MatchingProgress`
+    between ``lo`` and ``hi``; return the sub-generator's value and whether a
+    stop was sent."""
+    try:
+        fraction = next(run)
+        while True:
+            if (yield MatchingProgress(float(lo + (hi - lo) * fraction), phase)):
+                run.close()
+                return None, True
+            fraction = run.send(None)
+    except StopIteration as done:
+        return done.value, False
+
+
+def _run(job: _Job):
+    """The stages of :func:`match`, as a generator (see :func:`iter_match`)."""
+    A, B, method = job.A, job.B, job.method
     na, nb = len(A), len(B)
     t_a, perimeter_a = _arc_positions(A)
     t_b, perimeter_b = _arc_positions(B)
 
     # Modal features with a cut common to both spectra, sign-corrected.
-    basis_a, basis_b, k = _joint_bases(A, B, n_modes, model_nodes, sigma_factor, material)
+    basis_a, basis_b, k = _joint_bases(A, B, job.n_modes, job.model_nodes, job.sigma_factor, job.material)
     fa, fb = _features(basis_a, k), _features(basis_b, k)
-    if sign_correction:
+    if job.sign_correction:
         search_frame = max(basis_a.anisotropy, basis_b.anisotropy) > _ISOTROPIC
         fb, signs, theta = _correct(fa, fb, search_frame)
     else:
         signs, theta = np.ones(k), 0.0
     Z = _pairwise_sq(fa.reshape(na, -1), fb.reshape(nb, -1))
     C = Z / k
-    if curvature_weight > 0:
+    if job.curvature_weight > 0:
         scales = tuple(sorted({max(sc, 1.0 / min(na, nb)) for sc in _CURVATURE_SCALES}))
         ka = curvature_signature(A, scales)
         kb = curvature_signature(B, scales)
-        C = C + curvature_weight * _pairwise_sq(ka, kb) / ka.shape[1]
-
-    if displacement_weight > 0:
+        C = C + job.curvature_weight * _pairwise_sq(ka, kb) / ka.shape[1]
+    if job.displacement_weight > 0:
         spacing = perimeter_a / na
-        C = C + displacement_weight * float(np.median(C.min(axis=1))) * _pairwise_sq(A, B) / spacing**2
+        C = C + job.displacement_weight * float(np.median(C.min(axis=1))) * _pairwise_sq(A, B) / spacing**2
+    detail = job.detail
     if detail is None:
         detail = (method == "order" and min(na, nb) >= _DETAIL_MIN_NODES
                   and max(roughness(A), roughness(B)) < _DETAIL_ROUGHNESS)
     # Progress: the features, then the searches (the first, with its several
     # starts, about three times the work of each later one).
-    work = np.cumsum([1.0, 3.0, 1.0 if refine else 0.0, 1.0 if detail else 0.0])
+    work = np.cumsum([1.0, 3.0, 1.0 if job.refine else 0.0, 1.0 if detail else 0.0])
     work /= work[-1]
-    report(work[0])
 
-    penalty = order_penalty * float(np.median(C.min(axis=1))) + 1e-6 * float(np.median(C))
-    opts = dict(arc_weight=arclength_weight, n_starts=n_starts, gap=gap, penalty=penalty)
-    part, total = _search(method, C, t_a, t_b, **opts,
-                          on_start=lambda k, n: report(work[0] + (work[1] - work[0]) * k / n))
-    report(work[1])
+    def result(part, total, final, stop_reason):
+        return _result(job, part, total, final, Z, k, signs, theta, basis_a, basis_b, bool(detail), stop_reason)
+
+    empty = np.full(na, -1, dtype=np.intp)
+    if (yield MatchingProgress(float(work[0]), "features")):
+        return result(empty, np.inf, C, "cancelled")
+    penalty = job.order_penalty * float(np.median(C.min(axis=1))) + 1e-6 * float(np.median(C))
+    opts = dict(arc_weight=job.arclength_weight, n_starts=job.n_starts, gap=job.gap, penalty=penalty)
+    found, stopped = yield from _scaled(_iter_search(method, C, t_a, t_b, **opts), work[0], work[1], "search")
+    if stopped:
+        return result(empty, np.inf, C, "cancelled")
+    part, total = found
     final = C
-    if refine:
+    if job.refine:
         final = C + _drift_cost(part, t_a, t_b, _REFINE_WIDTH, _DRIFT_WEIGHT * penalty)
         start = int(part[0]) if part[0] >= 0 else None
         part, total = _search(method, final, t_a, t_b, start=start, **opts)
-        report(work[2])
+        if (yield MatchingProgress(float(work[2]), "refinement")):
+            return result(part, total, final, "cancelled")
     if detail:
         part, total = _detail_pass(A, B, part, t_a, t_b, perimeter_a, perimeter_b, opts)
-        report(work[3])
+        if (yield MatchingProgress(float(work[3]), "detail")):
+            return result(part, total, final, "cancelled")
+    return result(part, total, final, "completed")
 
-    # Back to the caller's node numbering.
+
+def _result(job, part, total, final, Z, k, signs, theta, basis_a, basis_b, detail, stop_reason) -> Matching:
+    """The :class:`Matching` in the caller's node numbering."""
+    pa, pb = job.pa, job.pb
+    na, nb = len(pa), len(pb)
     ia = np.flatnonzero(part >= 0)
-    pairs = np.column_stack([pa[ia], pb[part[ia]]]).astype(np.intp)
+    pairs = np.column_stack([pa[ia], pb[part[ia]]]).astype(np.intp).reshape(-1, 2)
     cost = final[ia, part[ia]]
     order = np.argsort(pairs[:, 0], kind="stable")
     pairs, cost = pairs[order], cost[order]
@@ -870,15 +986,16 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
         affinity=affinity,
         unmatched=np.setdiff1d(np.arange(na), pairs[:, 0]).astype(np.intp),
         cost=cost,
-        method=method,
+        method=job.method,
         cost_matrix=cost_matrix,
         unmatched_b=np.setdiff1d(np.arange(nb), pairs[:, 1]).astype(np.intp),
         n_modes=int(k),
         signs=signs,
         frame_rotation=float(theta),
-        refined=bool(refine),
+        refined=bool(job.refine),
         total_cost=float(total),
         basis_a=basis_a,
         basis_b=basis_b,
-        detail_refined=bool(detail),
+        detail_refined=detail,
+        stop_reason=stop_reason,
     )

@@ -24,6 +24,7 @@ are taken at even intervals of the path travelled.
 
 from __future__ import annotations
 
+import inspect
 import time
 from dataclasses import dataclass, field
 
@@ -31,6 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
+from ._drain import drain
 from .contour import as_contour, segment_lengths
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import (
@@ -42,7 +44,7 @@ from .element import (
 )
 from .materials import Material, get_material
 
-__all__ = ["simulate", "SimulationResult", "node_targets"]
+__all__ = ["simulate", "iter_simulate", "SimulationResult", "SimulationProgress", "node_targets"]
 
 #: Up to this many nodes the simulation uses exact mode superposition (dense
 #: eigenproblem); above it, Newmark's method on the sparse system.
@@ -67,6 +69,10 @@ class SimulationResult:
         Time steps taken.
     converged : bool
         True when the contour came to rest (within ``tol`` of its equilibrium).
+    stop_reason : str
+        ``"converged"`` (came to rest), ``"max_steps"`` (still moving after
+        ``max_steps``) or ``"cancelled"`` (the frames then end where it was
+        stopped).
     rest : ndarray, shape (Na, 2)
         The equilibrium shape (where the contour comes to rest).
     timings : dict
@@ -80,6 +86,23 @@ class SimulationResult:
     converged: bool
     rest: np.ndarray
     timings: dict = field(default_factory=dict)
+    stop_reason: str = "converged"
+
+
+@dataclass(frozen=True)
+class SimulationProgress:
+    """What :func:`iter_simulate` yields after every time step.
+
+    Attributes
+    ----------
+    step : int
+        Time steps taken so far.
+    shape : ndarray, shape (Na, 2)
+        The current nodes ``(row, col)``.
+    """
+
+    step: int
+    shape: np.ndarray
 
 
 def _orientation_step(pairs: np.ndarray, nb: int) -> int:
@@ -194,7 +217,8 @@ def simulate(
     tol : float, optional
         At rest when no node is farther than ``tol`` px from the equilibrium.
     callback : callable, optional
-        ``callback(step, shape)`` after each step; return ``False`` to stop.
+        ``callback(step, shape)`` after each step; return ``False`` to stop
+        (the result then has ``stop_reason="cancelled"``).
 
     Returns
     -------
@@ -215,7 +239,48 @@ def simulate(
     >>> sim.frames.shape
     (6, 67, 2)
     """
-    t_start = time.perf_counter()
+    options = {name: value for name, value in locals().items() if name not in ("a", "b", "matching", "callback")}
+    if callback is not None and not callable(callback):
+        raise ValueError(f"callback must be callable or None, got {callback!r}")
+
+    def on_progress(state):
+        # The matching computed when none is given reports as MatchingProgress: not a step.
+        if callback is not None and isinstance(state, SimulationProgress):
+            return callback(state.step, state.shape)
+
+    return drain(_run(*_prepare(a, b, matching, **options)), on_progress)
+
+
+def iter_simulate(a, b, matching=None, **options):
+    """:func:`simulate` as a generator: one :class:`SimulationProgress` per time step.
+
+    Takes the parameters of :func:`simulate` (but ``callback``), with its
+    defaults, and returns (as ``StopIteration.value``) its
+    :class:`SimulationResult`. When ``matching`` is omitted it is computed
+    first with :func:`~.matching.match`'s defaults, and the generator yields
+    that matching's :class:`~.matching.MatchingProgress` meanwhile. Send
+    ``True`` into the generator to stop it: the result then has
+    ``stop_reason="cancelled"``. Bad input raises at the call.
+
+    Examples
+    --------
+    >>> from napari_physeg import data
+    >>> from napari_physeg.core import match
+    >>> a, b, _ = data.hand_pair(67, 66)
+    >>> run = iter_simulate(a, b, match(a, b))
+    >>> next(run).step
+    1
+    """
+    bound = inspect.signature(simulate).bind(a, b, matching, **options)  # a misspelt option fails here
+    bound.apply_defaults()
+    arguments = dict(bound.arguments)
+    if arguments.pop("callback") is not None:
+        raise TypeError("iter_simulate takes no callback: it yields its progress")
+    return _run(*_prepare(**arguments))
+
+
+def _prepare(a, b, matching, *, q, material, n_frames, sigma_factor, damping_ratio, max_steps, tol):
+    """Check every argument of :func:`simulate` (before any heavy work)."""
     a = as_contour(a, name="a")
     b = as_contour(b, name="b")
     material = get_material(material)
@@ -223,10 +288,24 @@ def simulate(
         raise ValueError(f"q must be a positive number, got {q!r}")
     if int(n_frames) < 2:
         raise ValueError(f"n_frames must be at least 2 (first and last), got {n_frames!r}")
-    if matching is None:
-        from .matching import match
+    if matching is not None:
+        _check_matching(matching, len(a), len(b))
+    return a, b, matching, dict(q=float(q), material=material, n_frames=int(n_frames), sigma_factor=sigma_factor,
+                                damping_ratio=damping_ratio, max_steps=int(max_steps), tol=tol)
 
-        matching = match(a, b)
+
+def _run(a, b, matching, options):
+    """The steps of :func:`simulate`, as a generator (see :func:`iter_simulate`)."""
+    t_start = time.perf_counter()
+    q, material, n_frames = options["q"], options["material"], options["n_frames"]
+    sigma_factor, damping_ratio = options["sigma_factor"], options["damping_ratio"]
+    max_steps, tol = options["max_steps"], options["tol"]
+    if matching is None:
+        from .matching import iter_match
+
+        matching = yield from iter_match(a, b)
+        if matching.stop_reason == "cancelled":
+            return _cancelled_before_start(a, t_start)
     pairs, affinity = _check_matching(matching, len(a), len(b))
     targets = node_targets(a, b, pairs, affinity)
 
@@ -263,7 +342,7 @@ def simulate(
     at_rest = a + np.column_stack([U_rest[:m], U_rest[m:]])
     X = a.copy()
     path = [X.copy()]
-    converged = False
+    stop_reason = "max_steps"
     steps = 0
     for steps in range(1, int(max_steps) + 1):
         try:
@@ -274,10 +353,11 @@ def simulate(
         if not np.all(np.isfinite(X)):
             raise DivergenceError(f"the simulation diverged at step {steps}")
         path.append(X.copy())
-        if callback is not None and callback(steps, X.copy()) is False:
+        if (yield SimulationProgress(steps, X.copy())):
+            stop_reason = "cancelled"
             break
         if np.abs(at_rest - X).max() < tol:
-            converged = True
+            stop_reason = "converged"
             break
     path = np.asarray(path)
     # Frames at even intervals of the path travelled (mean node displacement),
@@ -297,7 +377,16 @@ def simulate(
         targets=targets,
         times=times,
         steps=steps,
-        converged=converged,
+        converged=stop_reason == "converged",
         rest=at_rest,
         timings={"model": t_model - t_start, "evolution": t_end - t_model, "total": t_end - t_start},
+        stop_reason=stop_reason,
     )
+
+
+def _cancelled_before_start(a: np.ndarray, t_start: float) -> SimulationResult:
+    """The result of a run cancelled while its matching was computed: ``a`` alone."""
+    elapsed = time.perf_counter() - t_start
+    return SimulationResult(frames=a[None].copy(), targets=np.full_like(a, np.nan), times=np.zeros(1), steps=0,
+                            converged=False, rest=a.copy(), stop_reason="cancelled",
+                            timings={"model": 0.0, "evolution": 0.0, "total": elapsed})
