@@ -11,13 +11,16 @@ neither leaves a thread running nor touches deleted Qt widgets.
 from __future__ import annotations
 
 import threading
+import time
 from collections import deque
+
+import numpy as np
 
 from magicgui.widgets import Container
 from napari.qt.threading import GeneratorWorker, thread_worker
 from napari.utils.notifications import show_error
 
-__all__ = ["WorkerWidget", "run_to_completion"]
+__all__ = ["WorkerWidget", "ask_save_path", "relay", "run_to_completion"]
 
 
 class WorkerWidget(Container):
@@ -32,7 +35,8 @@ class WorkerWidget(Container):
     viewer's layers change.
 
     A computation that can be cancelled takes ``cancel=self._cancel`` (a
-    ``threading.Event``) and returns early once it is set.
+    ``threading.Event``) and returns early once it is set: it runs the core's
+    generators through :func:`relay`, which tells them to stop.
     """
 
     #: Widgets whose computation cannot be stopped have no Cancel button.
@@ -214,6 +218,37 @@ class WorkerWidget(Container):
                 self._cancel_btn.enabled = False
         except RuntimeError:  # the viewer or this widget was closed during the run
             pass
+
+
+def ask_save_path(widget, title: str, suggestion: str) -> str:
+    """A file name from Qt's save dialog ("" when the user cancels)."""
+    from qtpy.QtWidgets import QFileDialog
+
+    path, _ = QFileDialog.getSaveFileName(widget.native, title, suggestion, "CSV files (*.csv)")
+    return path
+
+
+def relay(run, cancel: threading.Event, interval: float = 0.0, wrap=None):
+    """Drive the core's generator ``run`` (``iter_segment``, ``iter_match``,
+    ``iter_simulate``) in this thread, the worker's: no helper thread, no queue.
+
+    Yields its states, ``wrap(state)`` if given, at most one every ``interval``
+    seconds (so that the GUI draws previews at the pace it can); once
+    ``cancel`` is set the core is sent ``True`` (stop) after its current step,
+    and its result then says ``stop_reason="cancelled"``. Returns the core's
+    result; the core's errors propagate.
+    """
+    last = -np.inf
+    try:
+        state = next(run)
+        while True:
+            now = time.perf_counter()
+            if now - last >= interval:
+                last = now
+                yield state if wrap is None else wrap(state)
+            state = run.send(cancel.is_set())
+    except StopIteration as done:
+        return done.value
 
 
 def run_to_completion(generator, on_progress=None):

@@ -60,7 +60,7 @@ from ._layers import (
     shapes_to_image_coords,
     slice_index,
 )
-from ._worker import WorkerWidget, run_to_completion
+from ._worker import WorkerWidget, relay, run_to_completion
 
 __all__ = [
     "InputError",
@@ -205,8 +205,9 @@ def segment_contours(image, contours, kwargs_list, *, cancel: threading.Event | 
                 return outcome(cancelled=True)
             max_steps = int(kwargs.get("max_steps", 1000))
             try:
-                result = yield from _throttled_steps(iter_segment(image, init, **kwargs), i, total, max_steps,
-                                                     cancel, preview_interval)
+                result = yield from relay(
+                    iter_segment(image, init, **kwargs), cancel, preview_interval,
+                    wrap=lambda state, i=i: SegmentationProgress(i, total, state.step, max_steps, state.contour))
             except Exception as err:  # this contour failed: say why, go on with the others
                 failures.append((i, err))
                 continue
@@ -219,22 +220,6 @@ def segment_contours(image, contours, kwargs_list, *, cancel: threading.Event | 
         cancel.set()
         raise
     return outcome()
-
-
-def _throttled_steps(run, index, total, max_steps, cancel, interval):
-    """Drive the core's generator ``run``, yielding a progress update at most
-    every ``interval`` seconds; return its result."""
-    last = -np.inf
-    try:
-        state = next(run)
-        while True:
-            now = time.perf_counter()
-            if now - last >= interval:
-                last = now
-                yield SegmentationProgress(index, total, state.step, max_steps, state.contour)
-            state = run.send(cancel.is_set())
-    except StopIteration as done:
-        return done.value
 
 
 # --------------------------------------------------------------------------

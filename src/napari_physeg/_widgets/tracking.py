@@ -31,7 +31,7 @@ from napari.utils.notifications import show_info, show_warning
 from ..core import LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, segment, track
 from ._inputs import PHYSICS_TIPS, PREVIEW_COLOR, PREVIEW_KEY, PhysicsControls, core_default, image_layer_choices
 from ._layers import image_transform_kwargs, shapes_to_image_coords, slice_index
-from ._worker import WorkerWidget
+from ._worker import WorkerWidget, relay
 
 __all__ = ["TrackingWidget", "tracking_layer_data", "node_trajectories"]
 
@@ -199,14 +199,9 @@ class TrackingWidget(WorkerWidget):
         self._run_info = dict(transform=image_transform_kwargs(image), name=f"{image.name} tracked ({material})")
         self._begin(f"Tracking {len(contours)} object(s) from frame {start}…")
         pbar = progress(total=len(contours) * frames.shape[0], desc=f"Tracking in {image.name!r}")
-        return self._start(pbar, iter_track, frames, contours, start=start, max_steps=int(self._max_steps.value),
-                           segment_options=options)
-
-    def cancel(self, *_):
-        """Stop after the current object and frame; what was tracked is kept."""
-        if self._running and self.worker is not None:
-            self.worker.send(True)
-            self._status.value = "Cancelling…"
+        # Cancel stops after the current object and frame; what was tracked is kept.
+        run = iter_track(frames, contours, start=start, max_steps=int(self._max_steps.value), segment_options=options)
+        return self._start(pbar, relay, run, self._cancel)
 
     # ------------------------------------------------------------ worker signals (GUI thread)
     def _on_yielded(self, update: TrackingProgress):

@@ -16,6 +16,7 @@ __all__ = [
     "segment_lengths",
     "resample",
     "nodes_for_spacing",
+    "crosses_itself",
     "outward_normals",
     "mean_nearest_neighbour_distance",
     "polygon_mask",
@@ -258,3 +259,8 @@ def cut_pinches(contour: np.ndarray, gap: float, max_cuts: int = 100) -> np.ndar
         inner, outer = contour[i: j + 1], np.vstack([contour[j:], contour[: i + 1]])
         contour = inner if abs(signed_area(inner)) >= abs(signed_area(outer)) else outer
     return contour
+
+
+def crosses_itself(contour) -> bool:
+    """Whether two non-adjacent edges of the closed ``contour`` cross (it is not a simple polygon)."""
+    return len(_crossing_pairs(np.asarray(contour, dtype=np.float64))) > 0
