@@ -105,10 +105,11 @@ def test_sample_hand_end_to_end(viewer_widget, wait_done, errors, monkeypatch, r
 
     assert errors == []
     assert widget.last_outcome.ok
-    # live preview: updates arrived while the preview layer was shown, then it was removed
+    # live preview: updates arrived while the preview layer was shown, then it
+    # became the result (removing a layer costs a full gc.collect() in napari)
     assert len(seen) >= 2 and all(shown for _, shown in seen) and widget.n_updates >= 2
     assert any(not u.done for u, _ in seen) and seen[-1][0].done
-    assert preview not in viewer.layers and widget.preview_layer is None
+    assert widget.preview_layer is None and output_layers(viewer) == [preview]
     assert not any(layer.metadata.get(PREVIEW_KEY) for layer in viewer.layers)
     # progress: reported through napari's progress bar, which is closed at the end
     (pbar,) = bars
@@ -662,3 +663,63 @@ def test_a_points_layer_with_too_few_points_says_so(viewer_widget, errors, hand)
     widget._shapes.value = viewer.layers["two clicks"]
     assert widget.run() is None
     assert errors and "2 point(s)" in errors[-1] and "at least 3" in errors[-1]
+
+
+# --------------------------------------------------------------------------
+# A long run in a live GUI
+# --------------------------------------------------------------------------
+
+
+def test_a_long_run_keeps_the_gui_live_and_keeps_the_good_shapes(viewer_widget, wait_done, errors, caplog,
+                                                                  monkeypatch):
+    """A multi-second segmentation (a ~600-node contour around the cameraman)
+    with napari's activity dock open: no RecursionError raised or logged, a
+    10 ms GUI timer is never held up for more than 200 ms, and the good shape
+    comes back although another shape of the layer fails."""
+    import time
+
+    from qtpy.QtCore import QTimer
+    from skimage import data as skdata
+
+    viewer, widget = viewer_widget
+    viewer.window._status_bar._toggle_activity_dock(True)
+    viewer.add_image(skdata.camera(), name="camera")
+    t = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+    around_the_man = np.c_[260 + 200 * np.sin(t), 250 + 130 * np.cos(t)]
+    small = np.c_[60 + 15 * np.sin(t), 100 + 15 * np.cos(t)]
+    viewer.add_shapes([around_the_man, small], shape_type="polygon", name="drawn")
+    widget.reset_choices()
+    widget._image.value, widget._shapes.value = viewer.layers["camera"], viewer.layers["drawn"]
+    widget.physics._spacing.value = 1.75  # ~600 nodes
+    real_iter_segment = seg.iter_segment
+
+    def failing_on_the_small_one(image, init, **kwargs):
+        if np.ptp(init[:, 0]) < 60:
+            raise ValueError("the contour collapsed to a point after 12 steps: no object border was found")
+        return real_iter_segment(image, init, **kwargs)
+
+    monkeypatch.setattr(seg, "iter_segment", failing_on_the_small_one)
+    gaps, last = [], [time.perf_counter()]
+
+    def tick():
+        now = time.perf_counter()
+        gaps.append(now - last[0])
+        last[0] = now
+
+    timer = QTimer()
+    timer.setInterval(10)
+    timer.timeout.connect(tick)
+    timer.start()
+    started = time.perf_counter()
+    widget.run()
+    wait_done(widget, timeout=120_000)
+    timer.stop()
+    seconds = time.perf_counter() - started
+    outcome = widget.last_outcome
+    assert seconds > 2.0 and widget.n_updates > 20  # a long run, previewed live
+    assert max(gaps) < 0.2, f"the GUI was held up for {max(gaps):.3f} s"
+    assert not [r for r in caplog.records if "RecursionError" in r.getMessage()]
+    assert len(outcome.results) == 1 and outcome.indices == [0] and len(outcome.results[0].contour) > 500
+    (out,) = output_layers(viewer)
+    assert list(out.features["shape"]) == [0]
+    assert len(errors) == 1 and "shape 1" in errors[0]

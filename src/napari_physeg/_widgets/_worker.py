@@ -10,6 +10,7 @@ neither leaves a thread running nor touches deleted Qt widgets.
 
 from __future__ import annotations
 
+import functools
 import threading
 import time
 from collections import deque
@@ -19,6 +20,7 @@ import numpy as np
 from magicgui.widgets import Container
 from napari.qt.threading import GeneratorWorker, thread_worker
 from napari.utils.notifications import show_error
+from threadpoolctl import threadpool_limits
 
 __all__ = ["WorkerWidget", "ask_save_path", "relay", "run_to_completion"]
 
@@ -51,8 +53,8 @@ class WorkerWidget(Container):
         self._progress_value = 0
         self.n_updates = 0  # progress updates shown in the last run
         self._running = False
-        self._in_yield = False
-        self._pending_updates = deque()
+        self._delivering = False
+        self._pending = deque()  # worker signals waiting for the one before to be handled
 
     def _lay_out(self, controls, advanced=(), footer=()):
         """``controls``, then a collapsed "Advanced" section holding ``advanced``,
@@ -97,6 +99,31 @@ class WorkerWidget(Container):
             if part is not None:
                 part.reset_choices()
 
+    def _add_result(self, data, meta: dict, kind: str, preview=None):
+        """Add a result layer; a Shapes result takes over the run's ``preview`` layer, if any.
+
+        napari runs a full ``gc.collect()`` whenever a layer is removed (a
+        third of a second in a busy viewer, with the GUI frozen), so the
+        preview is not removed and replaced: it becomes the result, with its
+        data, style, features, metadata and name.
+        """
+        from napari.layers import Layer
+
+        if kind != "shapes" or preview is None or preview not in self.viewer.layers:
+            return self.viewer.add_layer(Layer.create(data, meta, kind))
+        from napari.utils.colormaps.standardize_color import transform_color
+
+        shape_type = meta.get("shape_type", "polygon")
+        preview.data = (data, [shape_type] * len(data) if isinstance(shape_type, str) else shape_type)
+        for key in ("edge_color", "face_color"):
+            if key in meta:  # one colour, or one per shape
+                colours = transform_color(meta[key])
+                setattr(preview, key, colours[0] if len(colours) == 1 else colours)
+        for key in ("edge_width", "features", "metadata", "name"):
+            if key in meta:
+                setattr(preview, key, meta[key])
+        return preview
+
     def _connect_signals(self):
         self._run_btn.changed.connect(self.run)
         if self._cancel_btn is not None:
@@ -134,12 +161,12 @@ class WorkerWidget(Container):
     def _start(self, pbar, function, *args, **kwargs):
         """Run ``function(*args, **kwargs)`` in a worker that ``pbar`` reports on; return the worker."""
         self._pbar = pbar
-        worker = thread_worker(function, start_thread=False)(*args, **kwargs)
+        worker = thread_worker(_with_one_blas_thread(function), start_thread=False)(*args, **kwargs)
         if isinstance(worker, GeneratorWorker):  # only generators report progress
             worker.yielded.connect(self._on_yielded_once)
-        worker.returned.connect(self._on_returned_after_updates)
-        worker.errored.connect(self._on_errored)
-        worker.finished.connect(self._on_finished)
+        worker.returned.connect(self._on_returned_in_order)
+        worker.errored.connect(self._on_errored_in_order)
+        worker.finished.connect(self._on_finished_in_order)
         self.worker = worker
         worker.start()
         return worker
@@ -159,31 +186,35 @@ class WorkerWidget(Container):
             return False
         return True
 
-    def _on_yielded_once(self, update):
-        """``_on_yielded``, never re-entered: napari's progress bar (with the
-        activity dock open) processes Qt events, which can deliver the next
-        update inside this one. That one waits in a queue and is handled
-        after, in order, instead of recursing until RecursionError."""
-        self._pending_updates.append(update)
-        if self._in_yield:
+    def _deliver(self, slot, *args):
+        """Run the worker's signal handlers one at a time, in the order the
+        signals came. napari's progress bar (with the activity dock open)
+        processes Qt events, so the next update, the run's result or its end
+        can be delivered inside a handler; it waits here and runs after,
+        instead of recursing (until RecursionError) or overtaking the updates
+        before it (the end of a run handled before its result)."""
+        self._pending.append((slot, args))
+        if self._delivering:
             return
-        self._in_yield = True
+        self._delivering = True
         try:
-            while self._pending_updates:
-                self._on_yielded(self._pending_updates.popleft())
+            while self._pending:
+                slot, args = self._pending.popleft()
+                slot(*args)
         finally:
-            self._in_yield = False
+            self._delivering = False
 
-    def _flush_updates(self):
-        """Handle the updates still queued: the run's ``returned`` and
-        ``finished`` can be delivered inside the yielded slot too, and must
-        not overtake the updates that came before them."""
-        while self._pending_updates:
-            self._on_yielded(self._pending_updates.popleft())
+    def _on_yielded_once(self, update):
+        self._deliver(self._on_yielded, update)
 
-    def _on_returned_after_updates(self, result):
-        self._flush_updates()
-        self._on_returned(result)
+    def _on_returned_in_order(self, result):
+        self._deliver(self._on_returned, result)
+
+    def _on_errored_in_order(self, err):
+        self._deliver(self._on_errored, err)
+
+    def _on_finished_in_order(self):
+        self._deliver(self._on_finished)
 
     def _on_destroyed(self, *_):
         self._cancel.set()
@@ -205,7 +236,6 @@ class WorkerWidget(Container):
         self._move_pbar(self._record_progress(value))
 
     def _on_finished(self):
-        self._flush_updates()
         self._cancel.set()  # stops a helper thread of the computation too if the worker was aborted
         self.worker = None
         self._running = False
@@ -218,6 +248,24 @@ class WorkerWidget(Container):
                 self._cancel_btn.enabled = False
         except RuntimeError:  # the viewer or this widget was closed during the run
             pass
+
+
+def _with_one_blas_thread(generator_function):
+    """``generator_function`` run with BLAS/LAPACK limited to one thread.
+
+    The core's dense problems are small (at most a few hundred unknowns):
+    OpenBLAS's threads only spin against the GUI thread and the worker, and
+    a LAPACK call holds the GIL meanwhile. On a busy 2-core machine a
+    128 x 128 eigenproblem took 0.5 s instead of 2 ms, and the GUI froze
+    that long.
+    """
+
+    @functools.wraps(generator_function)
+    def run(*args, **kwargs):
+        with threadpool_limits(limits=1, user_api="blas"):
+            return (yield from generator_function(*args, **kwargs))
+
+    return run
 
 
 def ask_save_path(widget, title: str, suggestion: str) -> str:

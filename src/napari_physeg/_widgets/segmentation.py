@@ -691,9 +691,10 @@ class SegmentationWidget(WorkerWidget):
             show_info("Segmentation cancelled: no layer added")
             return
         try:
+            preview, self.preview_layer = self.preview_layer, None
             for data, meta, kind in result_layer_data(outcome, job, labels=self._labels.value,
                                                       name=self._result_name):
-                self.viewer.add_layer(Layer.create(data, meta, kind))
+                self._add_result(data, meta, kind, preview)
         except Exception as err:  # never leave the user with a silent failure
             self._fail(f"Could not add the result layers: {type(err).__name__}: {err}")
             return

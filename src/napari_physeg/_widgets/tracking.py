@@ -24,7 +24,7 @@ import time
 import napari
 import numpy as np
 from magicgui.widgets import ComboBox, Label, PushButton, SpinBox
-from napari.layers import Layer, Shapes
+from napari.layers import Shapes
 from napari.utils import progress
 from napari.utils.notifications import show_info, show_warning
 
@@ -236,10 +236,10 @@ class TrackingWidget(WorkerWidget):
         self.last_result = result
         if not self._gui_alive():
             return
-        self._remove_preview()
+        preview, self._preview = self._preview, None
         try:
             for data, meta, kind in tracking_layer_data(result, **self._run_info):
-                self.output_layers.append(self.viewer.add_layer(Layer.create(data, meta, kind)))
+                self.output_layers.append(self._add_result(data, meta, kind, preview))
         except Exception as err:  # never a silent failure
             self._fail(f"Could not add the tracking layers: {type(err).__name__}: {err}")
             return
