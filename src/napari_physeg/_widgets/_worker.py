@@ -25,6 +25,10 @@ from threadpoolctl import threadpool_limits
 __all__ = ["WorkerWidget", "ask_save_path", "relay", "run_to_completion"]
 
 
+#: Least height of a widget's scroll area (px): a row or two of controls.
+SCROLL_MIN_HEIGHT = 40
+
+
 class WorkerWidget(Container):
     """A magicgui ``Container`` that runs its computation in a background worker.
 
@@ -56,10 +60,10 @@ class WorkerWidget(Container):
         self._delivering = False
         self._pending = deque()  # worker signals waiting for the one before to be handled
 
-    def _lay_out(self, controls, advanced=(), footer=()):
+    def _lay_out(self, controls, advanced=(), buttons=()):
         """``controls``, then a collapsed "Advanced" section holding ``advanced``,
         in a scroll area (so that every widget docked fits a laptop screen);
-        below it, always in view, Run and Cancel, ``footer`` and the status.
+        below it, always in view, Run, Cancel and ``buttons`` in a row, and the status.
 
         napari docks a magicgui widget's ``native`` widget, which for a
         ``scrollable`` Container is the scrolled content, not the scroll area
@@ -82,10 +86,16 @@ class WorkerWidget(Container):
         self.scroll_area.setFrameShape(QFrame.Shape.NoFrame)
         self.scroll_area.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         self.scroll_area.setWidget(self._controls.native)
-        buttons = [self._run_btn] + ([self._cancel_btn] if self._cancel_btn is not None else [])
+        # Compact footer: with all four widgets docked on a 1366 x 768 screen
+        # each gets ~150 px; the scroll area takes what is left.
+        self.scroll_area.setMinimumHeight(SCROLL_MIN_HEIGHT)
+        buttons = [self._run_btn] + ([self._cancel_btn] if self._cancel_btn is not None else []) + list(buttons)
         self._buttons = Container(widgets=buttons, layout="horizontal", labels=False)
-        self.extend([self._buttons, *footer, self._status])
+        self._buttons.margins = (0, 0, 0, 0)
+        self.margins = (4, 2, 4, 2)
+        self.extend([self._buttons, self._status])
         self.native.layout().insertWidget(0, self.scroll_area, 1)
+        self.native.layout().setSpacing(2)
         self._status.native.setWordWrap(True)  # long reports must not widen the dock
 
     def controls(self) -> list:

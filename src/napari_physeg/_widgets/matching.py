@@ -320,11 +320,11 @@ class MatchingWidget(WorkerWidget):
                                 tooltip=_TIPS["output"])
         self._run_btn = PushButton(text="Run", tooltip=_TIPS["run"])
         self._cancel_btn = PushButton(text="Cancel", tooltip=_TIPS["cancel"], enabled=False)
-        self._export_btn = PushButton(text="Save pairs as CSV…", tooltip=_TIPS["export"], enabled=False)
+        self._export_btn = PushButton(text="Save CSV…", tooltip=_TIPS["export"], enabled=False)
         self._legend = Label(value=cost_legend_html(), tooltip=_TIPS["legend"])
         self._status = Label(value="")
-        self._lay_out([self._layer_a, self._index_a, self._layer_b, self._index_b, self._method, self._output],
-                      advanced=[self._n_modes], footer=[self._export_btn, self._legend])
+        self._lay_out([self._layer_a, self._index_a, self._layer_b, self._index_b, self._method, self._output,
+                       self._legend], advanced=[self._n_modes], buttons=[self._export_btn])
         self._export_btn.changed.connect(self._ask_export)
         self._set_item_tooltips()
         self._connect_signals()

@@ -386,11 +386,11 @@ class SimulationWidget(WorkerWidget):
         self._tracks = CheckBox(text="also add node Tracks layer", value=False, tooltip=_TIPS["tracks"])
         self._run_btn = PushButton(text="Run", tooltip=_TIPS["run"])
         self._cancel_btn = PushButton(text="Cancel", tooltip=_TIPS["cancel"], enabled=False)
-        self._export_btn = PushButton(text="Save frames as CSV…", tooltip=_TIPS["export"], enabled=False)
+        self._export_btn = PushButton(text="Save CSV…", tooltip=_TIPS["export"], enabled=False)
         self._status = Label(value="")
         self._lay_out([self._layer_a, self._index_a, self._layer_b, self._index_b, self._matching, self._method,
                        self._matching_info, self._q, self._material, self._n_frames],
-                      advanced=[self._max_steps, self._tracks], footer=[self._export_btn])
+                      advanced=[self._max_steps, self._tracks], buttons=[self._export_btn])
         self._matching_info.native.setWordWrap(True)
         for w in (self._matching, self._method):
             w.changed.connect(self._show_matching_info)
