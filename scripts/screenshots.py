@@ -15,6 +15,8 @@ plugin's sample data, docks each widget, runs it as a user would (Run button
   "frame" slider (a middle frame shown);
 * ``guide-simulation-frames.png`` - the canvas at every frame of the slider.
 * ``guide-tracking.png`` - the tracking widget after a run on the deforming-cell movie, at frame 20.
+* ``guide-docked.png`` - all four widgets docked in a 1366 x 768 window (a laptop screen), after a
+  segmentation of the hand.
 """
 
 from __future__ import annotations
@@ -220,6 +222,30 @@ def tracking(napari, app, out: Path):
         viewer.close()
 
 
+def docked(napari, app, out: Path):
+    from napari_physeg._widgets.matching import MatchingWidget
+    from napari_physeg._widgets.segmentation import SegmentationWidget
+    from napari_physeg._widgets.simulation import SimulationWidget
+    from napari_physeg._widgets.tracking import TrackingWidget
+
+    viewer = napari.Viewer(title="napari-physeg: every widget docked", show=True)
+    try:
+        viewer.window._qt_window.resize(1366, 768)
+        viewer.open_sample("napari-physeg", "hand_segmentation")
+        widgets = {}
+        for cls, name in ((SegmentationWidget, "Segmentation (physical contour)"), (MatchingWidget, "Matching (modal)"),
+                          (SimulationWidget, "Simulation (deformation)"), (TrackingWidget, "Tracking (time-lapse)")):
+            widgets[name] = cls(viewer)
+            viewer.window.add_dock_widget(widgets[name], name=name, area="right")
+        viewer.reset_view()
+        segment = widgets["Segmentation (physical contour)"]
+        segment._run_btn.native.click()
+        _wait(app, segment)
+        _save_window(app, viewer, out / "guide-docked.png")
+    finally:
+        viewer.close()
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "images", help="output folder")
@@ -244,6 +270,7 @@ def main(argv=None) -> int:
     segmentation(napari, app, args.out)
     matching_and_simulation(napari, app, args.out)
     tracking(napari, app, args.out)
+    docked(napari, app, args.out)
     return 0
 
 

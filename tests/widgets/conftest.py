@@ -105,32 +105,12 @@ def wait_done(qtbot, request):
 
 
 @pytest.fixture
-def record_progress(monkeypatch):
-    """``record_progress(module)`` -> list of the napari progress bars that widget module opens from then on.
+def record_progress():
+    """``record_progress(widget)`` -> the list of values the widget's progress bar shows from then on."""
 
-    Each bar keeps its ``updates`` and whether it ``was_closed``.
-    """
-    import napari
-
-    def record(module):
-        bars = []
-
-        class RecordingProgress(napari.utils.progress):
-            def __init__(self, *args, **kwargs):
-                super().__init__(*args, **kwargs)
-                self.updates = []
-                self.was_closed = False
-                bars.append(self)
-
-            def update(self, n=1):
-                self.updates.append(n)
-                return super().update(n)
-
-            def close(self):
-                self.was_closed = True
-                return super().close()
-
-        monkeypatch.setattr(module, "progress", RecordingProgress)
-        return bars
+    def record(widget):
+        values = []
+        widget.progress_bar.changed.connect(values.append)
+        return values
 
     return record

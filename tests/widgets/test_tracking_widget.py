@@ -54,17 +54,18 @@ def test_round_trip_adds_contours_tracks_and_maps(movie_in_viewer, wait_done):
     for t, polygon in enumerate(polygons):
         found = polygon_mask(np.asarray(polygon[:, 1:], float), movie.masks[t].shape)
         assert (found & movie.masks[t]).sum() / (found | movie.masks[t]).sum() > 0.97
-    assert maps[0].data.shape == (8, 100) and not maps[0].visible
+    assert maps[0].data.shape == (1, 8, 100) and not maps[0].visible  # object x frame x arc
     # The centroid track, then the node trajectories, each over the 8 frames.
     assert len(np.unique(tracks[0].data[:, 0])) == 13 and tracks[0].data[:, 1].max() == 7
     assert "tracking preview" not in [layer.name for layer in viewer.layers]
-    assert widget.n_updates == 8 and "8 object-frames tracked" in widget._status.value
+    # updates are shown at the pace the GUI affords; the status counts them all
+    assert 1 <= widget.n_updates <= 8 and "8 object-frames tracked" in widget._status.value
 
 
 def test_cancel_keeps_the_frames_done(dock, qtbot, wait_done):
     viewer, widget = _dock_movie(dock, 30)  # long enough for the cancel to land before the end
     worker = widget.run()
-    qtbot.waitUntil(lambda: widget.n_updates >= 2, timeout=RUN_TIMEOUT_MS)
+    qtbot.waitUntil(lambda: widget.n_received >= 2, timeout=RUN_TIMEOUT_MS)
     widget.cancel()
     wait_done(widget)
     result = widget.last_result

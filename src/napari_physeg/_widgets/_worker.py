@@ -17,7 +17,7 @@ from collections import deque
 
 import numpy as np
 
-from magicgui.widgets import Container
+from magicgui.widgets import Container, ProgressBar
 from napari.qt.threading import GeneratorWorker, thread_worker
 from napari.utils.notifications import show_error
 from threadpoolctl import threadpool_limits
@@ -25,6 +25,10 @@ from threadpoolctl import threadpool_limits
 __all__ = ["WorkerWidget", "ask_save_path", "relay", "run_to_completion"]
 
 
+#: At most this share of a run's time goes to showing its updates (previews, progress).
+PREVIEW_SHARE = 0.1
+#: GUI time (s) since the last update shown below which the next is always shown.
+CHEAP_DRAW = 0.01
 #: Least height of a widget's scroll area (px): a row or two of controls.
 SCROLL_MIN_HEIGHT = 40
 
@@ -53,11 +57,12 @@ class WorkerWidget(Container):
         self.viewer = viewer
         self.worker = None
         self._cancel = threading.Event()
-        self._pbar = None
         self._progress_value = 0
         self.n_updates = 0  # progress updates shown in the last run
+        self.n_received = 0  # and received (some are not shown when the GUI is busy)
         self._running = False
         self._delivering = False
+        self._last_draw = None  # (wall, GUI thread CPU) seconds when an update was last shown
         self._pending = deque()  # worker signals waiting for the one before to be handled
 
     def _lay_out(self, controls, advanced=(), buttons=()):
@@ -93,7 +98,8 @@ class WorkerWidget(Container):
         self._buttons = Container(widgets=buttons, layout="horizontal", labels=False)
         self._buttons.margins = (0, 0, 0, 0)
         self.margins = (4, 2, 4, 2)
-        self.extend([self._buttons, self._status])
+        self.progress_bar = ProgressBar(value=0, min=0, max=1, visible=False)
+        self.extend([self._buttons, self.progress_bar, self._status])
         self.native.layout().insertWidget(0, self.scroll_area, 1)
         self.native.layout().setSpacing(2)
         self._status.native.setWordWrap(True)  # long reports must not widen the dock
@@ -166,11 +172,21 @@ class WorkerWidget(Container):
             self._cancel_btn.enabled = True
         self._status.value = status
         self._progress_value = 0
-        self.n_updates = 0
+        self._last_draw = None
+        self.n_updates = self.n_received = 0
 
-    def _start(self, pbar, function, *args, **kwargs):
-        """Run ``function(*args, **kwargs)`` in a worker that ``pbar`` reports on; return the worker."""
-        self._pbar = pbar
+    def _start(self, total: int, function, *args, **kwargs):
+        """Run ``function(*args, **kwargs)`` in a worker whose progress goes
+        from 0 to ``total`` on the widget's progress bar; return the worker.
+
+        The widget's own bar, not napari's activity dock: napari's animates a
+        busy indicator in the status bar for as long as it is open, and the
+        main window's repaints at ~30 Hz held the GIL longer than the run
+        itself (a 3 s segmentation took 7.7 s in the GUI on software OpenGL).
+        """
+        self.progress_bar.max = max(int(total), 1)
+        self.progress_bar.value = 0
+        self.progress_bar.visible = True
         worker = thread_worker(_with_one_blas_thread(function), start_thread=False)(*args, **kwargs)
         if isinstance(worker, GeneratorWorker):  # only generators report progress
             worker.yielded.connect(self._on_yielded_once)
@@ -215,7 +231,31 @@ class WorkerWidget(Container):
             self._delivering = False
 
     def _on_yielded_once(self, update):
-        self._deliver(self._on_yielded, update)
+        self._deliver(self._draw_if_due, update)
+
+    def _draw_if_due(self, update):
+        """Show an update (``_on_yielded``) when the GUI can afford it.
+
+        Drawing a preview and moving the progress bar repaint the window,
+        which takes tens of milliseconds (more with software OpenGL), in the
+        GUI thread and holding the GIL the worker needs. An update is shown
+        only while the GUI thread has used at most PREVIEW_SHARE of the time
+        since the last one shown (its CPU time: the last drawing, its repaint,
+        everything); the others are dropped (each supersedes the last),
+        unless :meth:`_must_show` says otherwise.
+        """
+        self.n_received += 1
+        now, cpu = time.perf_counter(), time.thread_time()
+        if self._last_draw is not None and not self._must_show(update):
+            wall, used = now - self._last_draw[0], cpu - self._last_draw[1]
+            if used > max(PREVIEW_SHARE * wall, CHEAP_DRAW):
+                return
+        self._last_draw = (now, cpu)
+        self._on_yielded(update)
+
+    def _must_show(self, update) -> bool:
+        """Whether ``update`` is shown even when the GUI is busy (a subclass may say so)."""
+        return False
 
     def _on_returned_in_order(self, result):
         self._deliver(self._on_returned, result)
@@ -237,22 +277,17 @@ class WorkerWidget(Container):
         self._progress_value = max(value, self._progress_value)
         return delta
 
-    def _move_pbar(self, delta: int):
-        if self._pbar is not None and delta:
-            self._pbar.update(delta)
-
     def _advance(self, value: int):
         """Move the progress bar forward to ``value`` (never back)."""
-        self._move_pbar(self._record_progress(value))
+        if self._record_progress(value):
+            self.progress_bar.value = min(self._progress_value, self.progress_bar.max)
 
     def _on_finished(self):
         self._cancel.set()  # stops a helper thread of the computation too if the worker was aborted
         self.worker = None
         self._running = False
-        pbar, self._pbar = self._pbar, None
-        if pbar is not None:
-            pbar.close()
         try:
+            self.progress_bar.visible = False
             self._run_btn.enabled = True
             if self._cancel_btn is not None:
                 self._cancel_btn.enabled = False

@@ -31,7 +31,6 @@ import napari
 import numpy as np
 from magicgui.widgets import ComboBox, Label, PushButton, SpinBox
 from napari.layers import Layer
-from napari.utils import progress
 from napari.utils.colormaps import Colormap
 from napari.utils.notifications import show_info
 
@@ -380,8 +379,8 @@ class MatchingWidget(WorkerWidget):
         self.output_layer = None
         self._export_btn.enabled = False
         self._begin(f"Matching {len(pair.a)} to {len(pair.b)} nodes…")
-        pbar = progress(total=100, desc=f"Matching {pair.a_label!r} to {pair.b_label!r}")
-        return self._start(pbar, match_contours, pair.a, pair.b, **self.parameters(), cancel=self._cancel)
+        total = 100
+        return self._start(total, match_contours, pair.a, pair.b, **self.parameters(), cancel=self._cancel)
 
     # ------------------------------------------------------------ worker signals (GUI thread)
     def _on_yielded(self, state):

@@ -36,7 +36,6 @@ from magicgui.widgets import (
     SpinBox,
 )
 from napari.layers import Image, Layer, Points, Shapes
-from napari.utils import progress
 from napari.utils.notifications import show_info, show_warning
 
 from ..core import DivergenceError, iter_segment, segment
@@ -651,22 +650,21 @@ class SegmentationWidget(WorkerWidget):
         if active is not None:  # keep the user's selection (and layer controls) while previewing
             self.viewer.layers.selection.active = active
         max_steps = kwargs_list[0]["max_steps"]
-        pbar = progress(total=len(job.contours) * max_steps, desc=f"Segmenting {job.shapes_name!r}")
-        return self._start(pbar, segment_contours, job.image, job.contours, kwargs_list, cancel=self._cancel,
+        total = len(job.contours) * max_steps
+        return self._start(total, segment_contours, job.image, job.contours, kwargs_list, cancel=self._cancel,
                            preview_interval=self.preview_interval)
 
     # ------------------------------------------------------------ worker signals (GUI thread)
+    def _must_show(self, update: SegmentationProgress) -> bool:
+        return update.done  # a contour's final state
+
     def _on_yielded(self, update: SegmentationProgress):
         if not self._gui_alive():
             self._on_destroyed()
             return
-        # Updating napari's progress bar or a layer may process pending Qt
-        # events, so this slot can be re-entered with the next update: record
-        # the state first, and drop updates older than one already shown.
         value = update.index * update.max_steps + min(update.step, update.max_steps)
         if value <= self._progress_value and not update.done:
-            return
-        delta = self._record_progress(value)
+            return  # older than one already shown
         self.n_updates += 1
         if not update.done:
             self._status.value = f"Shape {update.index + 1}/{update.total}: step {update.step}"
@@ -676,7 +674,7 @@ class SegmentationWidget(WorkerWidget):
             if update.index < len(polys):
                 polys[update.index] = contours_to_shapes_data([update.contour], self.job.leading, closed=True)[0]
                 layer.data = polys
-        self._move_pbar(delta)
+        self._advance(value)
 
     def _on_returned(self, outcome: SegmentationOutcome):
         self.last_outcome = outcome

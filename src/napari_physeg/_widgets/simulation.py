@@ -33,7 +33,6 @@ import napari
 import numpy as np
 from magicgui.widgets import CheckBox, ComboBox, FloatSpinBox, Label, PushButton, SpinBox
 from napari.layers import Layer
-from napari.utils import progress
 from napari.utils.notifications import show_info, show_warning
 
 from ..core import MATERIALS, DivergenceError, iter_match, iter_simulate, match, simulate
@@ -474,8 +473,8 @@ class SimulationWidget(WorkerWidget):
         self._begin("Simulating…" if matching is not None else f"Matching ({method}), then simulating…")
         params = self.parameters()
         self._max_steps_run = params["max_steps"]
-        pbar = progress(total=self._max_steps_run, desc=f"Simulating {pair.a_label!r} → {pair.b_label!r}")
-        return self._start(pbar, simulate_contours, pair.a, pair.b, matching, params, cancel=self._cancel,
+        total = self._max_steps_run
+        return self._start(total, simulate_contours, pair.a, pair.b, matching, params, cancel=self._cancel,
                            preview_interval=self.preview_interval, method=method)
 
     # ------------------------------------------------------------ worker signals (GUI thread)
