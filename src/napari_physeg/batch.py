@@ -41,7 +41,7 @@ import numpy as np
 
 from .io import atomic_path, open_stack, parse_frames, read_shapes_csv, write_shapes_csv, write_table
 
-__all__ = ["segment_files", "track_files", "default_workers", "segment_options_for"]
+__all__ = ["segment_files", "track_files", "track_file", "check_writable", "default_workers", "segment_options_for"]
 
 #: Status of a row whose task (or object) failed; the ``error`` column says why.
 FAILED = "failed"
@@ -172,31 +172,12 @@ def _segment_task(task: _Task, tmp: Path) -> list[dict]:
 
 
 def _track_task(task: _Task, tmp: Path) -> list[dict]:
-    from .core import LEFT, LOST, TRACKED, track
+    from .core import LEFT, LOST, TRACKED
 
     t0 = time.perf_counter()
-    with open_stack(task.path, channel=task.channel) as stack:
-        frames = parse_frames(task.frames, len(stack)) if task.frames is not None else list(range(len(stack)))
-        start = frames[0] if task.start is None else task.start
-        if start not in frames:
-            raise ValueError(f"the contours are drawn on frame {start}, which is not among the frames chosen")
-        movie = stack if len(frames) == len(stack) and frames == sorted(frames) else stack[frames]
-        options = {"max_steps": task.max_steps} if task.max_steps is not None else {}
-        tr = track(movie, [np.asarray(c) for c in task.inits], start=frames.index(start),
-                   segment_options=segment_options_for(_mean_contour(task.inits), task.options,
-                                                       task.node_spacing) if task.inits else task.options,
-                   match_options=dict(task.match_options), **options)
-    shapes, leading = [], []
-    for k in range(tr.n_objects):
-        for t, c in enumerate(tr.contours[k]):
-            if c is not None:
-                shapes.append(c)
-                leading.append((frames[t],))
-    if shapes:
-        write_shapes_csv(tmp / "contours.csv", shapes, leading=leading)
-    table = tr.table()
-    table["frame"] = np.asarray(frames)[table["frame"].to_numpy()]
-    written = write_table(table, tmp / "tracks")
+    tr, frames, written = track_file(task.path, task.inits, tmp, frames=task.frames, start=task.start,
+                                     channel=task.channel, node_spacing=task.node_spacing, max_steps=task.max_steps,
+                                     match_options=task.match_options, **task.options)
     seconds = time.perf_counter() - t0
     rows = []
     for k in range(tr.n_objects):
@@ -204,8 +185,67 @@ def _track_task(task: _Task, tmp: Path) -> list[dict]:
         rows.append({"input": task.path, "object": k, "status": OK, "error": "", "frames": tr.n_frames,
                      "tracked": counts[TRACKED], "lost": counts[LOST], "left": counts[LEFT],
                      "last_status": tr.status[k][-1], "seconds": seconds / tr.n_objects,
-                     "contours": "contours.csv" if shapes else "", "tracks": written[-1].name})
+                     "contours": written[0].name if written[0].exists() else "", "tracks": written[-1].name})
     return rows
+
+
+def track_file(path, inits, folder, *, frames: str | None = None, start: int | None = None,
+               channel: int | None = None, node_spacing: float | None = None, max_steps: int | None = None,
+               match_options: dict | None = None, callback=None, **segment_options):
+    """Track contours through one movie and write the results in ``folder``.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``(frames, rows, cols)`` TIFF stack or zarr array, read one frame at a time.
+    inits : sequence of (N, 2) array_like
+        The contours drawn on frame ``start``.
+    folder : Path
+        Existing folder for ``contours.csv`` (napari shapes CSV, one polygon
+        per object and frame, the frame as axis-0) and ``tracks.csv`` (and
+        ``tracks.parquet`` with pyarrow): :meth:`~napari_physeg.core.TrackingResult.table`
+        with the frames numbered as in the stack.
+    frames, start, channel, node_spacing, max_steps, match_options, **segment_options
+        As for :func:`track_files`.
+    callback : callable, optional
+        Passed to :func:`~napari_physeg.core.track`.
+
+    Returns
+    -------
+    result : TrackingResult
+        Its frame ``t`` is the stack's frame ``frames[t]``.
+    frames : list of int
+    written : list of Path
+        ``contours.csv`` (absent when no object was found on any frame), then the tables.
+    """
+    from .core import track
+
+    folder = Path(folder)
+    with open_stack(path, channel=channel) as stack:
+        chosen = parse_frames(frames, len(stack)) if frames is not None else list(range(len(stack)))
+        start = chosen[0] if start is None else int(start)
+        if start not in chosen:
+            raise ValueError(f"the contours are drawn on frame {start}, which is not among the frames chosen "
+                             f"({frames}): include it, or give the frame they are drawn on (--start)")
+        movie = stack if chosen == list(range(len(stack))) else stack[chosen]
+        options = {"max_steps": max_steps} if max_steps is not None else {}
+        inits = [np.asarray(c, dtype=np.float64) for c in inits]
+        tr = track(movie, inits, start=chosen.index(start), callback=callback,
+                   segment_options=segment_options_for(_mean_contour(inits), segment_options, node_spacing),
+                   match_options=dict(match_options or {}), **options)
+    shapes, leading = [], []
+    for k in range(tr.n_objects):
+        for t, c in enumerate(tr.contours[k]):
+            if c is not None:
+                shapes.append(c)
+                leading.append((chosen[t],))
+    written = [folder / "contours.csv"]
+    if shapes:
+        write_shapes_csv(written[0], shapes, leading=leading)
+    table = tr.table()
+    table["frame"] = np.asarray(chosen)[table["frame"].to_numpy()]
+    written += write_table(table, folder / "tracks")
+    return tr, chosen, written
 
 
 def _mean_contour(inits):
@@ -213,6 +253,8 @@ def _mean_contour(inits):
     contour of mean perimeter stands for them all."""
     from .core.contour import perimeter
 
+    if len(inits) == 1:
+        return inits[0]
     lengths = [perimeter(np.asarray(c, float)) for c in inits]
     return inits[int(np.argmin(np.abs(np.asarray(lengths) - np.mean(lengths))))]
 
@@ -421,6 +463,8 @@ def _prepare_out(out: Path, settings: dict, inits, overwrite: bool) -> None:
     with ``overwrite``)."""
     settings = json.loads(json.dumps({**settings, "inits": _digest(inits)}, default=str))
     saved = out / _SETTINGS
+    if out.exists() and any(out.iterdir()) and not saved.exists():
+        raise ValueError(f"{out} is not empty and holds no batch results: choose another output folder")
     if overwrite:
         shutil.rmtree(out / _RESULTS, ignore_errors=True)
         for name in (_SETTINGS, f"{_SUMMARY}.csv", f"{_SUMMARY}.parquet"):
@@ -432,8 +476,6 @@ def _prepare_out(out: Path, settings: dict, inits, overwrite: bool) -> None:
             changed = sorted(k for k in set(before) | set(settings) if before.get(k) != settings.get(k))
             raise ValueError(f"{out} holds results made with other settings ({', '.join(changed)}): "
                              "choose another output folder, or pass --overwrite to replace them")
-    elif out.exists() and any(out.iterdir()):
-        raise ValueError(f"{out} is not empty and holds no batch results: choose another output folder")
     (out / _RESULTS).mkdir(parents=True, exist_ok=True)
     with atomic_path(saved) as tmp:
         tmp.write_text(json.dumps(settings, indent=1))

@@ -137,7 +137,8 @@ def atomic_path(path):
     ends without error (and removed when it fails): a reader, or a batch run
     that resumes, never sees half a file."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    # The suffix kept last: writers that choose the format by it still do.
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=path.parent)
     os.close(fd)
     try:
         yield Path(tmp)
