@@ -30,6 +30,7 @@ import hashlib
 import json
 import os
 import shutil
+import socket
 import sys
 import time
 import traceback
@@ -104,19 +105,15 @@ class _Task:
 def _execute(task: _Task) -> list[dict]:
     """Run ``task`` unless its result exists; its rows. Never raises: an
     error becomes failed rows, so one bad file cannot stop the batch."""
-    import dask
-
     final = Path(task.out) / _RESULTS / task.name
     if (final / "rows.json").exists():  # done before (an earlier run, or before a worker died)
         return _read_rows(final)
     tmp = final.parent / f".{final.name}.tmp-{uuid.uuid4().hex}"
     try:
         tmp.mkdir(parents=True)
-        # Frames are read with the synchronous scheduler inside the task: the
-        # cluster's workers run tasks, they do not wait on other tasks.
-        with dask.config.set(scheduler="synchronous"):
-            rows = (_segment_task if task.kind == "segment" else _track_task)(task, tmp)
-        for row in rows:  # outputs named relative to out
+        rows = (_segment_task if task.kind == "segment" else _track_task)(task, tmp)
+        for row in rows:  # outputs named relative to out; who ran it, for the cluster's logs
+            row.update(host=socket.gethostname(), pid=os.getpid())
             for key in ("contours", "tracks"):
                 if row.get(key):
                     row[key] = str(Path(_RESULTS) / task.name / row[key])

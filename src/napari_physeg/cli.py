@@ -546,7 +546,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as stop:  # --help (0), or a malformed argument (2, one line already printed)
+        return stop.code
     try:
         return args.run(args)
     except (ValueError, OSError) as err:  # bad input, or a file that cannot be read or written

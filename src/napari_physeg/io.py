@@ -187,7 +187,8 @@ def open_stack(path, *, channel: int | None = None):
     Yields
     ------
     dask.array.Array
-        ``(T, H, W)``; reading frame ``t`` reads only that frame. The file is
+        ``(T, H, W)``; reading frame ``t`` reads only that frame, in this
+        process (dask's synchronous scheduler inside the block). The file is
         closed when the ``with`` block ends.
 
     Raises
@@ -196,6 +197,7 @@ def open_stack(path, *, channel: int | None = None):
         If the file cannot be read, or its shape is not an image or a stack of
         2D frames (after ``channel``).
     """
+    import dask
     import dask.array as da
 
     path = Path(path)
@@ -222,7 +224,10 @@ def open_stack(path, *, channel: int | None = None):
                 stack = da.from_array(image, chunks=image.shape)
         except Exception as err:  # unreadable or corrupt: one plain sentence
             raise ValueError(f"could not read {path}: {type(err).__name__}: {err}") from None
-        yield _as_frames(stack, samples, channel, path)
+        # Frames are read here, in this process: the store is not for sending
+        # to a cluster (a distributed Client made default elsewhere would try).
+        with dask.config.set(scheduler="synchronous"):
+            yield _as_frames(stack, samples, channel, path)
     finally:
         for close in closers:
             close()
