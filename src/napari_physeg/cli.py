@@ -137,15 +137,16 @@ def _segment_options(args) -> dict:
     return opts
 
 
-def _add_match_options(p, title: str) -> None:
+def _add_match_options(p, title: str, *, method: bool = True) -> None:
     from .core import match
     from .core.matching import METHODS
 
     d = _defaults(match)
     g = p.add_argument_group(title)
-    g.add_argument("--method", choices=METHODS, help=f"how correspondences are chosen: order (order-preserving, "
-                   f"dynamic programming), global (one-to-one assignment), local (mutual best matches only); "
-                   f"default {d['method']}")
+    if method:  # track() matches consecutive contours with "order" itself
+        g.add_argument("--method", choices=METHODS, help=f"how correspondences are chosen: order (order-preserving, "
+                       f"dynamic programming), global (one-to-one assignment), local (mutual best matches "
+                       f"only); default {d['method']}")
     g.add_argument("--n-modes", type=_number(int, 1), metavar="N", help="vibration modes in the modal affinity "
                    "(eq. 12); fewer: coarser and more robust, more: finer (default: automatic, 6 to 12)")
 
@@ -488,7 +489,7 @@ def _add_track_options(p):
                    help=f"time steps per object and frame (each frame starts from the previous result); "
                    f"default {d['max_steps']}")
     _add_segment_options(p, max_steps=False)
-    _add_match_options(p, "node correspondences between frames")
+    _add_match_options(p, "node correspondences between frames (order-preserving matching)", method=False)
 
 
 def _add_track(sub):
@@ -525,7 +526,7 @@ def _add_batch(sub):
         cluster.add_argument("--scheduler", metavar="ADDRESS",
                              help="address of a running dask.distributed scheduler (e.g. tcp://10.0.0.5:8786, or "
                              "one started by dask-jobqueue on SLURM) to run the tasks on instead")
-        q.add_argument("--quiet", action="store_true", help="no progress bar")
+        q.add_argument("--quiet", action="store_true", help="no progress bar on stderr (e.g. in a cluster job's log)")
         if kind == "segment":
             _frames_option(q, "frames of each stack to segment (default all)")
             _channel_option(q)
