@@ -25,6 +25,7 @@ bench: setup
 	$(PY) benchmarks/matching.py
 	$(PY) benchmarks/real.py
 	$(PY) benchmarks/tracking.py
+	$(PY) benchmarks/batch.py
 
 # Build the documentation (docs/ and the API reference from the docstrings) into site/;
 # --strict makes every warning (a broken link, a bad docstring) an error.

@@ -205,17 +205,22 @@ def open_stack(path, *, channel: int | None = None):
     try:
         try:
             if _is_zarr(path):
+                _need("zarr", path)
                 stack = da.from_zarr(str(path))
                 samples = False
             elif path.suffix.lower() in TIFF_SUFFIXES:
                 import tifffile
-                import zarr
 
                 with tifffile.TiffFile(path) as tif:
                     samples = tif.series[0].axes.endswith("S")
-                store = tifffile.imread(path, aszarr=True)
-                closers.append(store.close)
-                stack = da.from_zarr(zarr.open(store, mode="r"))
+                try:
+                    import zarr
+                except ImportError:  # without zarr: a memory map if the file allows, else read whole
+                    stack = da.from_array(_tiff_without_zarr(path))
+                else:
+                    store = tifffile.imread(path, aszarr=True)
+                    closers.append(store.close)
+                    stack = da.from_zarr(zarr.open(store, mode="r"))
             else:
                 from skimage import io
 
@@ -231,6 +236,23 @@ def open_stack(path, *, channel: int | None = None):
     finally:
         for close in closers:
             close()
+
+
+def _need(module: str, path) -> None:
+    try:
+        __import__(module)
+    except ImportError:
+        raise ValueError(f"{path} needs the {module} package: pip install {module} "
+                         "(or napari-physeg[batch])") from None
+
+
+def _tiff_without_zarr(path):
+    import tifffile
+
+    try:
+        return tifffile.memmap(path, mode="r")
+    except ValueError:  # compressed or tiled: not memory-mappable
+        return tifffile.imread(path)
 
 
 def _as_frames(stack, samples: bool, channel, path):
