@@ -115,12 +115,19 @@ def run(paths, inits, out: Path, workers: int) -> dict:
             "warm_mb": max(warm.values()) / 2**20, "peak_mb": max(peak.values()) / 2**20}
 
 
+def _duration(seconds: float) -> str:
+    if seconds >= 3600:
+        return f"{int(seconds // 3600)} h {int(round(seconds % 3600 / 60)):02d} min"
+    return f"{seconds / 60:.1f} min" if seconds >= 60 else f"{seconds:.0f} s"
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--write", action="store_true", help="write the table into docs/batch.md")
     ap.add_argument("--movies", type=int, default=8, help="movies in the throughput runs (default 8)")
     args = ap.parse_args(argv)
     lines = []
+    load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         paths, inits = write_movies(tmp / "movies", args.movies, 30, 256)
@@ -130,7 +137,10 @@ def main(argv=None):
             mpaths, minits = write_movies(tmp / f"m{n_frames}", 2, n_frames, 512)
             memory[n_frames] = run(mpaths, minits, tmp / f"mem{n_frames}", 1)
     one, two = speed[1], speed[2]
-    lines.append(f"Measured by `benchmarks/batch.py` on {machine()}.")
+    load = max(load_before, os.getloadavg()[0])
+    lines.append(f"Measured by `benchmarks/batch.py` on {machine()}; load average {load:.1f} "
+                 f"around the run" + (f" (other jobs shared the {os.cpu_count()} cores: the times and the "
+                                      "speed-up are pessimistic)" if load > 1.0 else "") + ".")
     lines.append("")
     lines.append(f"**Throughput**, {args.movies} movies of 30 frames (256 x 256), one cell each:")
     lines.append("")
@@ -157,7 +167,7 @@ def main(argv=None):
     lines.append("|---:|---:|---:|")
     for n in (2, 8, 32, 128):
         seconds = 1000 * per_task / n
-        lines.append(f"| {n} | {seconds / 3600:.2f} h ({seconds / 60:.0f} min) | {n * peak / 1024:.1f} GB |")
+        lines.append(f"| {n} | {_duration(seconds)} | {n * peak / 1024:.1f} GB |")
     table = "\n".join(lines)
     print(table)
     if args.write:

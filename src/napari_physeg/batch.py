@@ -407,7 +407,8 @@ def _checked_run(inputs, inits, out):
     """Inputs that exist, contours as tuples of float lists, a writable out."""
     from .core.contour import as_contour
 
-    paths = [str(Path(p)) for p in inputs]
+    # Absolute: the workers of a cluster may start elsewhere (the files on a shared file system).
+    paths = [str(Path(p).absolute()) for p in inputs]
     if not paths:
         raise ValueError("no input file given")
     missing = [p for p in paths if not Path(p).exists()]
@@ -421,7 +422,7 @@ def _checked_run(inputs, inits, out):
     inits = tuple(as_contour(c, name=f"contour {k}").tolist() for k, c in enumerate(inits))
     if not inits:
         raise ValueError("no initial contour given")
-    out = Path(out)
+    out = Path(out).absolute()
     check_writable(out, folder=True)
     return paths, inits, out
 
