@@ -94,6 +94,19 @@ def test_segment_files_one_row_per_input_frame_and_object(client, movies, movie)
         assert _iou(shapes[row["shape"]], movie.masks[row["frame"]]) > 0.95
 
 
+def test_cli_batch_runs_on_an_existing_scheduler(client, movies, movie, capsys):
+    paths, init, tmp = movies
+    out = tmp / "seg"
+    assert main(["batch", "segment", *map(str, paths[:2]), "--init", str(init), "--out", str(out), "--frames", "3",
+                 "--scheduler", client.scheduler.address, "--quiet", "--stiffness", "3000"]) == 0
+    table = pd.read_csv(out / "summary.csv")
+    assert len(table) == 2 and (table["status"] == "ok").all() and (table["frame"] == 3).all()
+    workers = set(client.run(os.getpid).values())
+    assert set(table["pid"]) <= workers  # ran on that cluster's workers
+    assert json.loads((out / "batch.json").read_text())["options"] == {"stiffness": 3000.0}
+    assert "2 of 2 rows ok" in capsys.readouterr().out
+
+
 def _mtimes(out):
     return {p: p.stat().st_mtime_ns for p in (out / "results").rglob("rows.json")}
 
@@ -186,16 +199,18 @@ def test_stacks_open_lazily_one_frame_per_chunk(tmp_path, movie):
 
 @pytest.mark.parametrize("inputs, options, message", [
     ([], ["--workers", "0"], "--workers"),
+    ([], ["--workers", "2", "--scheduler", "tcp://x:1"], "not allowed with"),
     ([], ["--init", "{tmp}/nope.csv"], "nope.csv does not exist"),
     (["{tmp}/missing.tif"], [], "missing.tif does not exist"),
     ([], ["--out", "{tmp}/init.csv"], "is a file"),
     ([], ["--stiffness", "-1"], "stiffness"),
     ([], ["--material", "cheese"], "material"),
+    ([], ["--scheduler", "nonsense"], "could not reach the dask scheduler"),
 ])
 def test_batch_refuses_bad_arguments_before_any_work(movies, capsys, inputs, options, message):
     paths, init, tmp = movies
     argv = ["batch", "segment", str(paths[0]), *[a.format(tmp=tmp) for a in inputs], "--init", str(init),
-            "--out", str(tmp / "out"), "--workers", "2", *[a.format(tmp=tmp) for a in options]]  # the last wins
+            "--out", str(tmp / "out"), *[a.format(tmp=tmp) for a in options or ["--workers", "2"]]]
     before = sorted(p.name for p in tmp.iterdir())
     assert main(argv) == 2
     err = capsys.readouterr().err

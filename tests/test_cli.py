@@ -205,12 +205,14 @@ def _bad_outputs(tmp):
         "bad weights": (["--weights", "edges=0"], "every force off"),
         "bad frame": (["--frames", "99"], "frames 0 to"),
         "bad stiffness": (["--stiffness", "abc"], "--stiffness"),
+        "contour outside": (["--init", str(write_shapes_csv(tmp / "far.csv", [[[500, 500], [500, 520], [520, 510]]]))],
+                            "wholly outside"),
     }
 
 
 @pytest.mark.parametrize("case", [
     "missing init", "out is init", "out exists", "out in a file", "out folder missing", "bad material",
-    "bad polarity", "bad weights", "bad frame", "bad stiffness"])
+    "bad polarity", "bad weights", "bad frame", "bad stiffness", "contour outside"])
 def test_segment_refuses_bad_input_before_any_work(scene, capsys, no_work, case):
     obj, image, init, tmp = scene
     (tmp / "init.csvx").write_text("kept")

@@ -316,6 +316,7 @@ def segment_files(inputs, inits, out, *, frames: str | None = None, channel: int
 
     check_segment_options(**segment_options)
     paths, inits, out = _checked_run(inputs, inits, out)
+    _check_scheduler(scheduler)
     settings = dict(kind="segment", frames=frames, channel=channel, node_spacing=node_spacing,
                     options=segment_options)
     _prepare_out(out, settings, inits, overwrite)
@@ -384,6 +385,7 @@ def track_files(inputs, inits, out, *, frames: str | None = None, start: int | N
     if inits is not None and not isinstance(inits, (list, tuple)) and start is None:
         start = _drawn_on(inits)
     paths, inits, out = _checked_run(inputs, inits, out)
+    _check_scheduler(scheduler)
     settings = dict(kind="track", frames=frames, start=start, channel=channel, node_spacing=node_spacing,
                     max_steps=max_steps, match_options=match_options or {}, options=segment_options)
     _prepare_out(out, settings, inits, overwrite)
@@ -425,6 +427,13 @@ def _checked_run(inputs, inits, out):
     out = Path(out).absolute()
     check_writable(out, folder=True)
     return paths, inits, out
+
+
+def _check_scheduler(scheduler) -> None:
+    """Connect to ``scheduler`` once, before anything is written: a wrong address is a bad argument."""
+    if scheduler:
+        with _client(None, scheduler, None):
+            pass
 
 
 def check_writable(path: Path, *, folder: bool = False) -> None:
@@ -495,8 +504,8 @@ def _client(workers, scheduler, client):
     if scheduler:
         try:
             connected = Client(scheduler, timeout="10s")
-        except OSError as err:
-            raise ValueError(f"could not reach the dask scheduler at {scheduler}: {err}") from None
+        except (OSError, ValueError, TypeError) as err:  # refused, timed out, not an address
+            raise ValueError(f"could not reach the dask scheduler at {scheduler}: {_one_line(err)}") from None
         with connected:
             yield connected
         return

@@ -205,6 +205,7 @@ def _segment(args) -> int:
     options = _segment_options(args)
     with open_stack(args.image, channel=args.channel) as stack:
         jobs, is_stack = _segment_jobs(args, len(stack), leading, len(shapes))
+        _check_contours(shapes, stack.shape[1:], args.init)
         results, frames, status = [], [], 0
         for t in sorted({t for t, _ in jobs}):
             image = np.asarray(stack[t], dtype=np.float64)  # one frame at a time
@@ -224,6 +225,17 @@ def _segment(args) -> int:
         _write_mask(args.mask, results, frames, shape)
         print(f"wrote {args.mask}")
     return status
+
+
+def _check_contours(shapes, frame_shape, path) -> None:
+    """What segment() would refuse for a contour, found before the first one runs."""
+    from .core.contour import as_contour
+
+    for k, shape in enumerate(shapes):
+        c = as_contour(shape, name=f"shape {k} of {path}")
+        if np.any(c.max(0) < 0) or np.any(c.min(0) > np.array(frame_shape) - 1):
+            raise ValueError(f"shape {k} of {path} lies wholly outside the image ({frame_shape[0]} x "
+                             f"{frame_shape[1]} px): check that the contours were drawn on this image")
 
 
 def _segment_jobs(args, n_frames: int, leading, n_shapes: int):
@@ -560,6 +572,10 @@ def main(argv=None) -> int:
     except RuntimeError as err:  # DivergenceError
         print(f"{PROG}: {' '.join(str(err).split())}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        resume = " (run the same command again to resume)" if args.command == "batch" else ""
+        print(f"\n{PROG}: interrupted{resume}", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
