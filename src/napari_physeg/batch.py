@@ -157,15 +157,27 @@ def _segment_task(task: _Task, tmp: Path) -> list[dict]:
             rows.append({**row, "status": FAILED, "error": _one_line(err)})
             continue
         c = res.contour
+        centroid = _area_centroid(c)
         rows.append({**row, "status": OK, "error": "", "converged": bool(res.converged),
                      "stop_reason": res.stop_reason, "steps": int(res.steps), "n_nodes": len(c),
                      "area": abs(float(signed_area(c))), "perimeter": float(perimeter(c)),
-                     "centroid_row": float(c[:, 0].mean()), "centroid_col": float(c[:, 1].mean()),
+                     "centroid_row": float(centroid[0]), "centroid_col": float(centroid[1]),
                      "seconds": time.perf_counter() - t0, "contours": "contours.csv", "shape": len(shapes)})
         shapes.append(c)
     if shapes:
         write_shapes_csv(tmp / "contours.csv", shapes)
     return rows
+
+
+def _area_centroid(contour: np.ndarray) -> np.ndarray:
+    """Centroid of the region a polygon encloses (shoelace formula)."""
+    r, c = contour[:, 0], contour[:, 1]
+    r1, c1 = np.roll(r, -1), np.roll(c, -1)
+    cross = r * c1 - r1 * c
+    area = 0.5 * cross.sum()
+    if abs(area) < 1e-12:
+        return contour.mean(0)
+    return np.array([((r + r1) * cross).sum(), ((c + c1) * cross).sum()]) / (6 * area)
 
 
 def _track_task(task: _Task, tmp: Path) -> list[dict]:
@@ -302,8 +314,8 @@ def segment_files(inputs, inits, out, *, frames: str | None = None, channel: int
         ``out/summary.csv``): ``input, frame, object, status`` (``"ok"`` or
         ``"failed"``), ``error``, ``converged, stop_reason, steps, n_nodes,
         area, perimeter, centroid_row, centroid_col, seconds``, ``contours``
-        (napari shapes CSV under ``out``) and ``shape`` (the object's shape
-        index in it).
+        (napari shapes CSV under ``out``), ``shape`` (the object's shape
+        index in it), and ``host``, ``pid`` (the worker that ran the task).
 
     Raises
     ------
@@ -372,7 +384,7 @@ def track_files(inputs, inits, out, *, frames: str | None = None, start: int | N
         counts), ``last_status``, ``seconds``, ``contours`` (napari shapes CSV,
         the frame as axis-0) and ``tracks`` (the per-node table of
         :meth:`~napari_physeg.core.TrackingResult.table`, frames numbered as in
-        the stack).
+        the stack), ``host``, ``pid``.
 
     Raises
     ------
