@@ -48,7 +48,7 @@ def movies(tmp_path, movie):
 def client():
     """A local cluster of 2 single-threaded worker processes, shared by the module's tests."""
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as c:
+                                  dashboard_address=None) as cluster, distributed.Client(cluster, set_as_default=False) as c:
         yield c
 
 
@@ -142,7 +142,7 @@ def test_a_killed_worker_loses_no_result_and_duplicates_none(tmp_path):
     init = [movie.outlines[0][::6]]
     out = tmp_path / "out"
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as c:
+                                  dashboard_address=None) as cluster, distributed.Client(cluster, set_as_default=False) as c:
         done = {}
         run = threading.Thread(target=lambda: done.update(
             table=batch.track_files(paths, init, out, client=c, progress=False)))
@@ -216,3 +216,15 @@ def test_batch_refuses_bad_arguments_before_any_work(movies, capsys, inputs, opt
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
     assert sorted(p.name for p in tmp.iterdir()) == before  # nothing written
+
+
+def test_a_batch_leaves_dask_on_its_default_scheduler(client, movies):
+    """After a batch, dask in this process computes locally again (no closed client is left the default)."""
+    import dask
+    import dask.array as da
+
+    paths, init, tmp = movies
+    batch.segment_files(paths[:1], init, tmp / "seg", frames="0", client=client, progress=False)
+    batch.segment_files(paths[:1], init, tmp / "seg2", frames="0", workers=1, progress=False)
+    assert dask.config.get("scheduler", None) is None
+    assert int(da.ones(4, chunks=2).sum().compute()) == 4

@@ -515,7 +515,7 @@ def _client(workers, scheduler, client):
 
     if scheduler:
         try:
-            connected = Client(scheduler, timeout="10s")
+            connected = Client(scheduler, timeout="10s", set_as_default=False)
         except (OSError, ValueError, TypeError) as err:  # refused, timed out, not an address
             raise ValueError(f"could not reach the dask scheduler at {scheduler}: {_one_line(err)}") from None
         with connected:
@@ -525,9 +525,11 @@ def _client(workers, scheduler, client):
     if n < 1:
         raise ValueError(f"workers must be at least 1, got {workers!r}")
     # Processes, one thread each: the core is numpy/scipy code that holds the
-    # GIL in places; dask's nannies pin BLAS to one thread in each.
+    # GIL in places; dask's nannies pin BLAS to one thread in each. Not the
+    # default client (set_as_default=False): dask computations elsewhere in
+    # this process must not be sent to it, nor find it gone once it closes.
     with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
-            Client(cluster) as local:
+            Client(cluster, set_as_default=False) as local:
         yield local
 
 
@@ -548,7 +550,7 @@ def _run(tasks, workers, scheduler, client, progress) -> list[dict]:
                             pure=False): task for task in todo}
         bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), unit="task", disable=not progress,
                    file=sys.stderr, desc=todo[0].kind)
-        for future in as_completed(futures):
+        for future in as_completed(futures, loop=c.loop):  # c need not be the default client
             try:
                 rows = future.result()
             except Exception as err:  # noqa: BLE001 - e.g. KilledWorker: the task's workers kept dying
