@@ -321,3 +321,24 @@ def test_every_option_of_every_command_is_explained():
         for option in ("material", "stiffness", "polarity", "weights", "n_nodes", "frames"):
             assert (f"napari-physeg {command}", option) in seen
     assert ("napari-physeg batch track", "scheduler") in seen and ("napari-physeg match", "method") in seen
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--frames", "0:2"], "not among --frames"),
+    (["--frames", "7"], "frames 0 to 5"),
+    (["--start", "1", "--frames", "3:6"], "not among --frames 3:6"),
+    (["--steps-per-frame", "0"], "--steps-per-frame"),
+])
+def test_track_refuses_bad_frames_before_any_work(movie_files, capsys, no_work, extra, message):
+    movie, stack, init, tmp = movie_files
+    assert main(["track", str(stack), "--init", str(init), "--out", str(tmp / "tracked"), *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+    assert not (tmp / "tracked").exists()
+
+
+def test_track_refuses_contours_outside_the_movie(movie_files, capsys, no_work):
+    movie, stack, _, tmp = movie_files
+    far = write_shapes_csv(tmp / "far.csv", [[[500, 500], [500, 520], [520, 510]]])
+    assert main(["track", str(stack), "--init", str(far), "--out", str(tmp / "tracked")]) == 2
+    assert "wholly outside" in capsys.readouterr().err and not (tmp / "tracked").exists()

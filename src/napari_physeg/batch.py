@@ -210,7 +210,7 @@ def track_file(path, inits, folder, *, frames: str | None = None, start: int | N
     inits : sequence of (N, 2) array_like
         The contours drawn on frame ``start``.
     folder : Path
-        Existing folder for ``contours.csv`` (napari shapes CSV, one polygon
+        Folder (created when the tracking is done) for ``contours.csv`` (napari shapes CSV, one polygon
         per object and frame, the frame as axis-0) and ``tracks.csv`` (and
         ``tracks.parquet`` with pyarrow): :meth:`~napari_physeg.core.TrackingResult.table`
         with the frames numbered as in the stack.
@@ -248,6 +248,7 @@ def track_file(path, inits, folder, *, frames: str | None = None, start: int | N
             if c is not None:
                 shapes.append(c)
                 leading.append((chosen[t],))
+    folder.mkdir(parents=True, exist_ok=True)
     written = [folder / "contours.csv"]
     if shapes:
         write_shapes_csv(written[0], shapes, leading=leading)

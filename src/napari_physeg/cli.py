@@ -369,7 +369,7 @@ def _track(args) -> int:
         chosen = parse_frames(args.frames, len(stack)) if args.frames else list(range(len(stack)))
         if start is not None and start not in chosen:
             raise ValueError(f"the contours are drawn on frame {start}, not among --frames {args.frames}")
-    args.out.mkdir(parents=True, exist_ok=True)
+        _check_contours(inits, stack.shape[1:], args.init)
     tr, frames, written = track_file(args.stack, inits, args.out, frames=args.frames, start=start,
                                      channel=args.channel, node_spacing=args.node_spacing,
                                      max_steps=args.steps_per_frame, match_options=_match_options(args),
