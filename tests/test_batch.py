@@ -133,6 +133,7 @@ def test_a_second_run_resumes_and_other_settings_are_refused(client, movies):
         {"stiffness": 5000.0}
 
 
+@pytest.mark.filterwarnings("ignore:Port 8787 is already in use")  # the restarted worker's HTTP server
 def test_a_killed_worker_loses_no_result_and_duplicates_none(tmp_path):
     movie = data.deforming_cell(n_frames=10, shape=(96, 96))
     paths = []
