@@ -40,7 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import atomic_path, open_stack, parse_frames, read_shapes_csv, write_shapes_csv, write_table
+from .io import (TIFF_SUFFIXES, atomic_path, is_zarr, open_stack, parse_frames, read_shapes_csv, write_shapes_csv,
+                 write_table)
 
 __all__ = ["segment_files", "track_files", "track_file", "check_writable", "default_workers", "segment_options_for"]
 
@@ -336,14 +337,23 @@ def segment_files(inputs, inits, out, *, frames: str | None = None, channel: int
     tasks, failed = [], []
     for path in paths:
         try:
-            with open_stack(path, channel=channel) as stack:  # the header only
-                chosen = parse_frames(frames, len(stack)) if frames is not None else range(len(stack))
+            n_frames = _frame_count(path, channel)
+            chosen = parse_frames(frames, n_frames) if frames is not None else range(n_frames)
         except ValueError as err:
             failed += _Task("segment", path, "", str(out), inits).failed(_one_line(err))
             continue
         tasks += [_Task("segment", path, f"{_name(path)}/t{t:05d}", str(out), inits, segment_options, frame=t,
                         channel=channel, node_spacing=node_spacing) for t in chosen]
     return _finish(out, failed + _run(tasks, workers, scheduler, client, progress), ["input", "frame", "object"])
+
+
+def _frame_count(path, channel) -> int:
+    """Frames of a TIFF or zarr stack (its header only); other formats hold one
+    2D image (read by the task, not here: the client reads no pixels)."""
+    if Path(path).suffix.lower() not in TIFF_SUFFIXES and not is_zarr(Path(path)):
+        return 1
+    with open_stack(path, channel=channel) as stack:
+        return len(stack)
 
 
 def track_files(inputs, inits, out, *, frames: str | None = None, start: int | None = None,

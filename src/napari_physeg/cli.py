@@ -74,7 +74,8 @@ def _weights(text):
         name, _, value = part.partition("=")
         name = name.strip()
         if name not in FORCE_NAMES or not value:
-            raise argparse.ArgumentTypeError(f"{part!r}: expected name=weight with a name among {', '.join(FORCE_NAMES)}")
+            raise argparse.ArgumentTypeError(f"{part!r}: expected name=weight with a name among "
+                                             f"{', '.join(FORCE_NAMES)}")
         out[name] = _number(float, 0.0)(value)
     return out
 

@@ -25,7 +25,8 @@ import numpy as np
 # it does not import napari): an ellipse is its polygon, not its 4 box corners.
 from ._widgets._layers import CLOSED_SHAPE_TYPES, shape_to_polygon
 
-__all__ = ["read_shapes_csv", "write_shapes_csv", "open_stack", "write_table", "atomic_path", "TIFF_SUFFIXES"]
+__all__ = ["read_shapes_csv", "write_shapes_csv", "open_stack", "parse_frames", "write_table", "atomic_path", "is_zarr",
+           "TIFF_SUFFIXES"]
 
 #: File name endings read with tifffile (lazily, one page per chunk).
 TIFF_SUFFIXES = (".tif", ".tiff", ".btf", ".tf8", ".tf2")
@@ -166,7 +167,8 @@ def write_table(table, path) -> list[Path]:
     return written
 
 
-def _is_zarr(path: Path) -> bool:
+def is_zarr(path: Path) -> bool:
+    """Whether ``path`` is a zarr store (a ``.zarr`` folder, or one with zarr metadata)."""
     return path.suffix == ".zarr" or (path.is_dir() and any((path / n).exists() for n in
                                                             ("zarr.json", ".zarray", ".zgroup")))
 
@@ -204,7 +206,7 @@ def open_stack(path, *, channel: int | None = None):
     closers = []
     try:
         try:
-            if _is_zarr(path):
+            if is_zarr(path):
                 _need("zarr", path)
                 stack = da.from_zarr(str(path))
                 samples = False
