@@ -136,6 +136,13 @@ def test_ellipse_saved_by_napari_is_read_as_an_ellipse(tmp_path):
     np.testing.assert_allclose(sorted(map(tuple, rectangle)), [(5, 5), (5, 25), (15, 5), (15, 25)])
     np.testing.assert_array_equal(polygon, layer.data[2])
     np.testing.assert_array_equal(open_path, layer.data[3])  # closed by joining its ends
+    # and back: napari's own reader takes what we write
+    from napari_builtins.io import csv_to_layer_data
+
+    ours = write_shapes_csv(tmp_path / "ours.csv", [ellipse, rectangle], leading=[(3,), (4,)])
+    data_back, meta, kind = csv_to_layer_data(str(ours), require_type="shapes")
+    assert kind == "shapes" and meta["shape_type"] == ["polygon", "polygon"]
+    np.testing.assert_allclose(data_back[0], np.c_[np.full(len(ellipse), 3.0), ellipse])
 
 
 def test_rotated_and_nd_ellipses_keep_their_axes_and_frame(tmp_path):
