@@ -7,7 +7,9 @@ cell's frame-0 outline as the initial contour. Each task tracks one movie; the w
 
 * **Throughput** - the same movies (default 8 of 30 frames of 256 x 256) on 1 and on 2
   workers, each cluster started and its workers warmed up (the package imported) before
-  the clock starts: movies per minute and the speed-up.
+  the clock starts, the fastest of ``--repeat`` runs: movies per minute, the speed-up, and
+  the CPU time per movie of the workers and of the scheduler and client (which a shared
+  machine inflates much less than wall time).
 * **Memory per worker** - movies of 10, 20 and 40 frames of 512 x 512 on one worker, a
   fresh cluster for each length: the worker's resident memory once warmed up, and its peak
   resident memory during the batch (Linux's ``VmHWM``, reset after the warm-up). Frames are read one at a
@@ -20,7 +22,7 @@ cell's frame-0 outline as the initial contour. Each task tracks one movie; the w
 
 Run::
 
-    make bench        # or: .venv/bin/python benchmarks/batch.py [--write] [--movies 8]
+    make bench        # or: .venv/bin/python benchmarks/batch.py [--write] [--movies 8] [--repeat 2]
 """
 
 from __future__ import annotations
@@ -135,6 +137,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--write", action="store_true", help="write the table into docs/batch.md")
     ap.add_argument("--movies", type=int, default=8, help="movies in the throughput runs (default 8)")
+    ap.add_argument("--repeat", type=int, default=2, help="throughput runs per worker count; the fastest "
+                    "is kept (default 2)")
     args = ap.parse_args(argv)
     lines = []
     load_before = os.getloadavg()[0]
@@ -142,7 +146,9 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         paths, inits = write_movies(tmp / "movies", args.movies, 30, 256)
-        speed = {w: run(paths, inits, tmp / f"out{w}", w) for w in (1, 2)}
+        # Best of --repeat runs (fresh output each): other jobs on a shared machine only slow a run down.
+        speed = {w: min((run(paths, inits, tmp / f"out{w}-{i}", w) for i in range(args.repeat)),
+                        key=lambda r: r["wall"]) for w in (1, 2)}
         memory = {}
         for n_frames in (10, 20, 40):
             mpaths, minits = write_movies(tmp / f"m{n_frames}", 2, n_frames, 512)
@@ -163,7 +169,8 @@ def main(argv=None):
                      f"{one['wall'] / r['wall']:.2f}x | {r['cpu_per_task']:.2f} | {r['client_cpu_per_task']:.3f} |")
     lines.append("")
     idle = 2 * one["cpu_per_task"] / (two["cpu_per_task"] + two["client_cpu_per_task"])
-    lines.append("CPU time does not depend on the other jobs on the machine. With one worker the scheduler "
+    lines.append("CPU time depends much less than wall time on other jobs on the machine (only through shared "
+                 "caches). With one worker the scheduler "
                  "has the other core to itself; with two, the workers share the 2 cores with it: on idle cores "
                  f"the speed-up is about 2 x {one['cpu_per_task']:.2f} / ({two['cpu_per_task']:.2f} + "
                  f"{two['client_cpu_per_task']:.3f}) = {idle:.2f}x.")
