@@ -1,6 +1,7 @@
 """The batch command line: napari shapes CSV in, segmented contours out."""
 
 import argparse
+import functools
 import os
 import subprocess
 import sys
@@ -187,8 +188,6 @@ def test_segment_from_an_ellipse_drawn_in_napari(tmp_path):
 @pytest.fixture
 def no_work(monkeypatch):
     """Fail the test if any computation starts."""
-    import functools
-
     import napari_physeg.core as core
 
     for name in ("segment", "track", "match", "simulate"):
@@ -212,6 +211,7 @@ def _bad_outputs(tmp):
         "bad weights": (["--weights", "edges=0"], "every force off"),
         "bad frame": (["--frames", "99"], "frames 0 to"),
         "bad stiffness": (["--stiffness", "abc"], "--stiffness"),
+        "bad poisson": (["--poisson", "0.7"], "poisson"),
         "contour outside": (["--init", str(write_shapes_csv(tmp / "far.csv", [[[500, 500], [500, 520], [520, 510]]]))],
                             "wholly outside"),
     }
@@ -219,7 +219,7 @@ def _bad_outputs(tmp):
 
 @pytest.mark.parametrize("case", [
     "missing init", "out is init", "out exists", "out in a file", "out folder missing", "bad material",
-    "bad polarity", "bad weights", "bad frame", "bad stiffness", "contour outside"])
+    "bad polarity", "bad weights", "bad frame", "bad stiffness", "bad poisson", "contour outside"])
 def test_segment_refuses_bad_input_before_any_work(scene, capsys, no_work, case):
     obj, image, init, tmp = scene
     (tmp / "init.csvx").write_text("kept")
@@ -349,3 +349,29 @@ def test_track_refuses_contours_outside_the_movie(movie_files, capsys, no_work):
     far = write_shapes_csv(tmp / "far.csv", [[[500, 500], [500, 520], [520, 510]]])
     assert main(["track", str(stack), "--init", str(far), "--out", str(tmp / "tracked")]) == 2
     assert "wholly outside" in capsys.readouterr().err and not (tmp / "tracked").exists()
+
+
+def test_options_reach_segment_by_name_and_the_rest_keep_its_defaults(scene, monkeypatch):
+    import napari_physeg.core as core
+
+    seen, real = [], core.segment
+
+    @functools.wraps(real)  # its signature: the CLI reads the defaults from it
+    def spy(image, init, **options):
+        seen.append(options)
+        return real(image, init, **options)
+
+    monkeypatch.setattr(core, "segment", spy)
+    obj, image, init, tmp = scene
+    assert main(["segment", str(image), "--init", str(init), "--out", str(tmp / "a.csv")]) == 0
+    assert seen[-1] == {}  # nothing given: segment()'s own defaults
+    assert main(["segment", str(image), "--init", str(init), "--out", str(tmp / "b.csv"), "--material", "copper",
+                 "--young", "50", "--density", "2000", "--stiffness", "1e5", "--node-spacing", "4", "--polarity",
+                 "bright", "--weights", "edges=0.5,distance=0.5", "--sigma-factor", "1.2", "--max-steps", "400"]) == 0
+    options = seen[-1]
+    material = options.pop("material")
+    assert (material.young, material.density, material.poisson) == (50e6, 2000.0, core.MATERIALS["copper"].poisson)
+    from napari_physeg.core.contour import perimeter
+    assert options == {"stiffness": 1e5, "n_nodes": round(perimeter(read_shapes_csv(init)[0]) / 4),
+                       "polarity": "bright", "forces": ("edges", "distance"),
+                       "weights": {"edges": 0.5, "distance": 0.5}, "sigma_factor": 1.2, "max_steps": 400}

@@ -94,6 +94,13 @@ def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> 
     g.add_argument("--material", help=f"virtual material of the contour: {', '.join(MATERIALS)}; default "
                    f"{d['material']}. Soft materials move fast and follow details; stiff metals keep the contour "
                    "smooth and need a larger --stiffness")
+    g.add_argument("--young", type=_number(float, 0, True), metavar="MPA",
+                   help="a custom material: Young's modulus E in MPa instead of the --material preset's (rubber "
+                   "~100, soft tissue ~0.1, copper ~117000); higher E: a stiffer, smoother, slower contour")
+    g.add_argument("--poisson", type=float, metavar="NU", help="a custom material: Poisson's ratio nu instead "
+                   "of the preset's, typically 0.25-0.49 (rubber 0.49, metals ~0.3)")
+    g.add_argument("--density", type=_number(float, 0, True), metavar="RHO", help="a custom material: mass "
+                   "density in kg/m^3 instead of the preset's, typically 1000-9000 (rubber 1100, copper 8960)")
     g.add_argument("--stiffness", type=_number(float, 0, True), metavar="R",
                    help=f"stiffness constant r (N/m) scaling the image forces: force on a node = r x its feature "
                    f"force; default {d['stiffness']:g}. Typical: 2000 for rubber, 1e6 for copper or steel; too low "
@@ -129,6 +136,14 @@ def _segment_options(args) -> dict:
     opts = {name: getattr(args, name) for name in ("material", "stiffness", "n_nodes", "sigma_factor",
                                                      "polarity", "max_steps")
             if getattr(args, name, None) is not None}
+    changes = {name: value for name, value in (("young", args.young and args.young * 1e6),
+                                               ("poisson", args.poisson), ("density", args.density))
+               if value is not None}
+    if changes:  # a custom material: the preset (or the default) with these constants changed
+        from .core import get_material, segment
+
+        preset = get_material(opts.get("material", _defaults(segment)["material"]))
+        opts["material"] = preset.with_(name=f"custom ({preset.name})", **changes)
     if args.weights is not None:
         opts["forces"] = tuple(k for k, w in args.weights.items() if w > 0)
         opts["weights"] = {k: args.weights[k] for k in opts["forces"]}
