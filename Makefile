@@ -25,6 +25,7 @@ bench: setup
 	$(PY) benchmarks/matching.py
 	$(PY) benchmarks/real.py
 	$(PY) benchmarks/tracking.py
+	$(PY) benchmarks/batch.py
 	if [ -n "$$DISPLAY" ]; then $(PY) benchmarks/gui.py; else xvfb-run -a $(PY) benchmarks/gui.py; fi
 
 # Build the documentation (docs/ and the API reference from the docstrings) into site/;

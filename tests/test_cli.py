@@ -1,5 +1,8 @@
 """The batch command line: napari shapes CSV in, segmented contours out."""
 
+import argparse
+import functools
+import os
 import subprocess
 import sys
 
@@ -108,3 +111,267 @@ def test_track_refuses_contours_drawn_on_several_frames(movie_files, capsys):
     init = write_shapes_csv(tmp / "two.csv", [movie.outlines[0][::6], movie.outlines[3][::6]], leading=[(0,), (3,)])
     assert main(["track", str(stack), "--init", str(init), "--out", str(tmp / "o")]) == 2
     assert "--start" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------
+# napari's shapes CSV: every shape type
+# --------------------------------------------------------------------------
+
+
+def test_ellipse_saved_by_napari_is_read_as_an_ellipse(tmp_path):
+    """napari stores an ellipse as the 4 corners of its box; it must come back as the ellipse."""
+    from napari.layers import Shapes
+    from napari_builtins.io import napari_write_shapes
+
+    layer = Shapes([np.array([[50.0, 60.0], [20.0, 35.0]])], shape_type="ellipse")  # centre, radii
+    layer.add_rectangles([np.array([[5.0, 5.0], [15.0, 25.0]])])
+    layer.add_polygons([np.array([[1.0, 1.0], [1.0, 8.0], [6.0, 4.0]])])
+    layer.add_paths([np.array([[30.0, 30.0], [30.0, 40.0], [40.0, 40.0], [40.0, 30.0]])])
+    path = str(tmp_path / "shapes.csv")
+    napari_write_shapes(path, layer.data, {"shape_type": layer.shape_type})  # napari's own writer
+    assert "ellipse" in open(path).read()
+    ellipse, rectangle, polygon, open_path = read_shapes_csv(path)
+    assert len(ellipse) > 32  # not the 4 corners
+    r, c = (ellipse - [50.0, 60.0]).T
+    np.testing.assert_allclose((r / 20.0) ** 2 + (c / 35.0) ** 2, 1.0, atol=1e-6)
+    np.testing.assert_allclose(sorted(map(tuple, rectangle)), [(5, 5), (5, 25), (15, 5), (15, 25)])
+    np.testing.assert_array_equal(polygon, layer.data[2])
+    np.testing.assert_array_equal(open_path, layer.data[3])  # closed by joining its ends
+    # and back: napari's own reader takes what we write
+    from napari_builtins.io import csv_to_layer_data
+
+    ours = write_shapes_csv(tmp_path / "ours.csv", [ellipse, rectangle], leading=[(3,), (4,)])
+    data_back, meta, kind = csv_to_layer_data(str(ours), require_type="shapes")
+    assert kind == "shapes" and meta["shape_type"] == ["polygon", "polygon"]
+    np.testing.assert_allclose(data_back[0], np.c_[np.full(len(ellipse), 3.0), ellipse])
+
+
+def test_rotated_and_nd_ellipses_keep_their_axes_and_frame(tmp_path):
+    angle = np.deg2rad(30)
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    box = np.array([[-10.0, -25.0], [10.0, -25.0], [10.0, 25.0], [-10.0, 25.0]]) @ rot.T + [40.0, 50.0]
+    lines = ["index,shape-type,vertex-index,axis-0,axis-1,axis-2"]
+    lines += [f"0,ellipse,{k},7.0,{float(r)!r},{float(c)!r}" for k, (r, c) in enumerate(box)]
+    lines += ["1,line,0,7.0,0,0", "1,line,1,7.0,5,5"]
+    (tmp_path / "e.csv").write_text("\n".join(lines[:5]) + "\n")
+    (ellipse,), (lead,) = read_shapes_csv(tmp_path / "e.csv", leading=True)
+    assert lead == (7.0,)
+    u, v = ((ellipse - [40.0, 50.0]) @ rot).T  # back in the ellipse's own axes
+    np.testing.assert_allclose((u / 10.0) ** 2 + (v / 25.0) ** 2, 1.0, atol=1e-6)
+    (tmp_path / "line.csv").write_text("\n".join(lines) + "\n")
+    with pytest.raises(ValueError, match="line"):
+        read_shapes_csv(tmp_path / "line.csv")
+
+
+def test_segment_from_an_ellipse_drawn_in_napari(tmp_path):
+    obj = data.ellipse((128, 128), noise=0.05)
+    image = tmp_path / "image.tif"
+    io.imsave(image, (obj.image * 1000).astype(np.uint16), check_contrast=False)
+    rows, cols = np.nonzero(obj.mask)
+    centre, radii = [rows.mean(), cols.mean()], [np.ptp(rows) / 2 + 8, np.ptp(cols) / 2 + 8]
+    box = [[centre[0] - radii[0], centre[1] - radii[1]], [centre[0] + radii[0], centre[1] - radii[1]],
+           [centre[0] + radii[0], centre[1] + radii[1]], [centre[0] - radii[0], centre[1] + radii[1]]]
+    init = tmp_path / "init.csv"
+    init.write_text("index,shape-type,vertex-index,axis-0,axis-1\n"
+                    + "".join(f"0,ellipse,{k},{r},{c}\n" for k, (r, c) in enumerate(box)))
+    assert main(["segment", str(image), "--init", str(init), "--out", str(tmp_path / "o.csv")]) == 0
+    (contour,) = read_shapes_csv(tmp_path / "o.csv")
+    m = polygon_mask(contour, obj.mask.shape)
+    assert (m & obj.mask).sum() / (m | obj.mask).sum() > 0.97
+
+
+# --------------------------------------------------------------------------
+# Clean failures: exit 2, one line, nothing written, before any work
+# --------------------------------------------------------------------------
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Fail the test if any computation starts."""
+    import napari_physeg.core as core
+
+    for name in ("segment", "track", "match", "simulate"):
+        @functools.wraps(getattr(core, name))  # the signature stays: the CLI reads its defaults
+        def forbidden(*args, **kwargs):
+            raise AssertionError("the computation started before the arguments were checked")
+
+        monkeypatch.setattr(core, name, forbidden)
+
+
+def _bad_outputs(tmp):
+    (tmp / "a-file").write_text("")
+    return {
+        "missing init": (["--init", str(tmp / "missing.csv")], "missing.csv does not exist"),
+        "out is init": (["--out", "{init}", "--overwrite"], "also an input"),
+        "out exists": (["--out", "{init}x"], "exists: pass --overwrite"),
+        "out in a file": (["--out", str(tmp / "a-file" / "o.csv")], "is not a folder"),
+        "out folder missing": (["--out", str(tmp / "nowhere" / "o.csv")], "does not exist"),
+        "bad material": (["--material", "unobtainium"], "material"),
+        "bad polarity": (["--polarity", "grey"], "polarity"),
+        "bad weights": (["--weights", "edges=0"], "every force off"),
+        "bad frame": (["--frames", "99"], "frames 0 to"),
+        "bad stiffness": (["--stiffness", "abc"], "--stiffness"),
+        "bad poisson": (["--poisson", "0.7"], "poisson"),
+        "contour outside": (["--init", str(write_shapes_csv(tmp / "far.csv", [[[500, 500], [500, 520], [520, 510]]]))],
+                            "wholly outside"),
+    }
+
+
+@pytest.mark.parametrize("case", [
+    "missing init", "out is init", "out exists", "out in a file", "out folder missing", "bad material",
+    "bad polarity", "bad weights", "bad frame", "bad stiffness", "bad poisson", "contour outside"])
+def test_segment_refuses_bad_input_before_any_work(scene, capsys, no_work, case):
+    obj, image, init, tmp = scene
+    (tmp / "init.csvx").write_text("kept")
+    extra, message = _bad_outputs(tmp)[case]
+    extra = [e.format(init=init) for e in extra]
+    before = {p.name: p.read_bytes() for p in tmp.iterdir() if p.is_file()}
+    assert main(["segment", str(image), "--init", str(init), "--out", str(tmp / "o.csv"), *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert {p.name: p.read_bytes() for p in tmp.iterdir() if p.is_file()} == before  # nothing written
+
+
+@pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="root may write to a read-only folder")
+def test_an_unwritable_out_is_refused_before_any_work(scene, capsys, no_work):
+    obj, image, init, tmp = scene
+    locked = tmp / "locked"
+    locked.mkdir(mode=0o500)
+    assert main(["segment", str(image), "--init", str(init), "--out", str(locked / "o.csv")]) == 2
+    assert "cannot write" in capsys.readouterr().err
+
+
+def test_no_traceback_from_the_installed_command(scene):
+    obj, image, init, tmp = scene
+    run = subprocess.run([sys.executable, "-m", "napari_physeg.cli", "track", str(image), "--init",
+                          str(tmp / "missing.csv"), "--out", str(tmp / "out")], capture_output=True, text=True)
+    assert run.returncode == 2 and run.stderr.count("\n") == 1 and "Traceback" not in run.stderr
+    assert not (tmp / "out").exists()
+
+
+def test_track_refuses_a_non_empty_out_without_overwrite(movie_files, capsys, no_work):
+    movie, stack, init, tmp = movie_files
+    (tmp / "tracked").mkdir()
+    (tmp / "tracked" / "contours.csv").write_text("mine")
+    assert main(["track", str(stack), "--init", str(init), "--out", str(tmp / "tracked")]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+    assert (tmp / "tracked" / "contours.csv").read_text() == "mine"
+
+
+# --------------------------------------------------------------------------
+# Stacks, zarr, frames; match and simulate
+# --------------------------------------------------------------------------
+
+
+def test_segment_a_stack_on_chosen_frames(movie_files):
+    movie, stack, _, tmp = movie_files
+    init = write_shapes_csv(tmp / "init2d.csv", [movie.outlines[0][::6]])
+    out = tmp / "frames.csv"
+    assert main(["segment", str(stack), "--init", str(init), "--out", str(out), "--frames", "1:6:2",
+                 "--node-spacing", "4", "--mask", str(tmp / "labels.tif")]) == 0
+    shapes, frames = read_shapes_csv(out, leading=True)
+    assert [f[0] for f in frames] == [1, 3, 5]
+    for (t,), contour in zip(frames, shapes):
+        found = polygon_mask(contour, movie.masks[int(t)].shape)
+        assert (found & movie.masks[int(t)]).sum() / (found | movie.masks[int(t)]).sum() > 0.97
+    labels = io.imread(tmp / "labels.tif")
+    assert labels.shape == movie.frames.shape and labels[0].max() == 0 and labels[3].max() == 2
+
+
+def test_track_a_zarr_stack_on_a_range_of_frames(movie_files):
+    zarr = pytest.importorskip("zarr")
+    movie, _, init, tmp = movie_files
+    z = zarr.open(str(tmp / "movie.zarr"), mode="w", shape=movie.frames.shape, chunks=(1, 80, 80), dtype="f4")
+    z[:] = movie.frames
+    out = tmp / "tracked"
+    assert main(["track", str(tmp / "movie.zarr"), "--init", str(init), "--out", str(out), "--frames", "1:5",
+                 "--steps-per-frame", "200", "--n-modes", "8"]) == 0
+    _, frames = read_shapes_csv(out / "contours.csv", leading=True)
+    assert [f[0] for f in frames] == [1, 2, 3, 4]  # the stack's own frame numbers
+    table = __import__("pandas").read_csv(out / "tracks.csv")
+    assert sorted(set(table["frame"])) == [1, 2, 3, 4] and (table["status"] == "tracked").all()
+
+
+def test_match_and_simulate_from_one_csv(tmp_path, capsys):
+    a, b, truth = data.hand_pair(67, 66)
+    hands = write_shapes_csv(tmp_path / "hands.csv", [a, b])
+    pairs = tmp_path / "pairs.csv"
+    assert main(["match", str(hands), "--out", str(pairs), "--method", "global"]) == 0
+    table = np.genfromtxt(pairs, delimiter=",", names=True)
+    assert len(table) == 67 and set(table["node_a"].astype(int)) == set(range(67))
+    np.testing.assert_allclose(np.c_[table["row_b"], table["col_b"]], b[table["node_b"].astype(int)])
+    frames = tmp_path / "frames.csv"
+    assert main(["simulate", str(hands), "--out", str(frames), "--n-frames", "4", "--q", "30000"]) == 0
+    shapes, lead = read_shapes_csv(frames, leading=True)
+    assert [t[0] for t in lead] == [0, 1, 2, 3]
+    np.testing.assert_allclose(shapes[0], a)
+    assert np.abs(shapes[-1] - b[table["node_b"].astype(int)]).max() > 0  # moved toward b
+    assert main(["simulate", str(hands), "--out", str(frames)]) == 2  # exists
+    assert main(["match", str(hands), "--out", str(pairs), "--overwrite", "--b-shape", "2"]) == 2
+    assert "holds 2 shape(s)" in capsys.readouterr().err
+
+
+def test_every_option_of_every_command_is_explained():
+    from napari_physeg.cli import build_parser
+
+    def walk(parser, name):
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub_name, sub in action.choices.items():
+                    yield from walk(sub, f"{name} {sub_name}")
+            elif action.dest != "help":
+                assert action.help and len(action.help) > 15, f"{name} {action.option_strings or action.dest}"
+                yield name, action
+
+    seen = {(name, a.dest) for name, a in walk(build_parser(), "napari-physeg")}
+    for command in ("segment", "track", "batch segment", "batch track"):
+        for option in ("material", "stiffness", "polarity", "weights", "n_nodes", "frames"):
+            assert (f"napari-physeg {command}", option) in seen
+    assert ("napari-physeg batch track", "scheduler") in seen and ("napari-physeg match", "method") in seen
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--frames", "0:2"], "not among --frames"),
+    (["--frames", "7"], "frames 0 to 5"),
+    (["--start", "1", "--frames", "3:6"], "not among --frames 3:6"),
+    (["--steps-per-frame", "0"], "--steps-per-frame"),
+])
+def test_track_refuses_bad_frames_before_any_work(movie_files, capsys, no_work, extra, message):
+    movie, stack, init, tmp = movie_files
+    assert main(["track", str(stack), "--init", str(init), "--out", str(tmp / "tracked"), *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+    assert not (tmp / "tracked").exists()
+
+
+def test_track_refuses_contours_outside_the_movie(movie_files, capsys, no_work):
+    movie, stack, _, tmp = movie_files
+    far = write_shapes_csv(tmp / "far.csv", [[[500, 500], [500, 520], [520, 510]]])
+    assert main(["track", str(stack), "--init", str(far), "--out", str(tmp / "tracked")]) == 2
+    assert "wholly outside" in capsys.readouterr().err and not (tmp / "tracked").exists()
+
+
+def test_options_reach_segment_by_name_and_the_rest_keep_its_defaults(scene, monkeypatch):
+    import napari_physeg.core as core
+
+    seen, real = [], core.segment
+
+    @functools.wraps(real)  # its signature: the CLI reads the defaults from it
+    def spy(image, init, **options):
+        seen.append(options)
+        return real(image, init, **options)
+
+    monkeypatch.setattr(core, "segment", spy)
+    obj, image, init, tmp = scene
+    assert main(["segment", str(image), "--init", str(init), "--out", str(tmp / "a.csv")]) == 0
+    assert seen[-1] == {}  # nothing given: segment()'s own defaults
+    assert main(["segment", str(image), "--init", str(init), "--out", str(tmp / "b.csv"), "--material", "copper",
+                 "--young", "50", "--density", "2000", "--stiffness", "1e5", "--node-spacing", "4", "--polarity",
+                 "bright", "--weights", "edges=0.5,distance=0.5", "--sigma-factor", "1.2", "--max-steps", "400"]) == 0
+    options = seen[-1]
+    material = options.pop("material")
+    assert (material.young, material.density, material.poisson) == (50e6, 2000.0, core.MATERIALS["copper"].poisson)
+    from napari_physeg.core.contour import perimeter
+    assert options == {"stiffness": 1e5, "n_nodes": round(perimeter(read_shapes_csv(init)[0]) / 4),
+                       "polarity": "bright", "forces": ("edges", "distance"),
+                       "weights": {"edges": 0.5, "distance": 0.5}, "sigma_factor": 1.2, "max_steps": 400}

@@ -1,217 +1,597 @@
-"""Command line for batch work: ``napari-physeg segment IMAGE --init CONTOUR.csv --out RESULT.csv``.
+"""Command line: every step of the widgets, and batches of files on dask.
 
+``napari-physeg segment | match | simulate | track | batch {segment,track}``.
 Contours are read and written in napari's shapes CSV format (File > Save
-Selected Layer in napari), so a contour drawn in napari can be segmented in a
-batch job and the result opened back in napari.
+Selected Layer in napari), so a contour drawn in napari can be processed in a
+script and the result opened back in napari.
+
+Every path and option is checked before any work starts; a problem ends the
+command with exit status 2 and one line saying what to fix. The options'
+defaults are the core functions' own (read from their signatures), so the
+command line, the widgets and scripts behave alike.
 """
 
 from __future__ import annotations
 
 import argparse
+import inspect
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
-from .io import read_shapes_csv, write_shapes_csv
+from .io import open_stack, parse_frames, read_shapes_csv, write_shapes_csv
+
+PROG = "napari-physeg"
 
 EPILOG = """examples:
   napari-physeg segment cells.tif --init rough.csv --out cells.csv
+  napari-physeg segment movie.tif --frames 0:10 --init rough.csv --out cells.csv --material copper --stiffness 1e6
+  napari-physeg match hands.csv --out pairs.csv --method global
+  napari-physeg simulate open.csv closed.csv --out frames.csv --q 30000 --n-frames 10
   napari-physeg track movie.tif --init frame0.csv --out tracked/
-  napari-physeg segment photo.png --channel 1 --init rough.csv --out result.csv \\
-      --material copper --stiffness 1e6 --mask result-mask.png
+  napari-physeg batch track plate/*.tif --init frame0.csv --out plate-tracks/ --workers 8
 
-The initial contour CSV is napari's shapes format (columns index, shape-type,
-vertex-index, axis-0, axis-1; every shape is segmented) or a plain 'row,col'
-table. Exit status: 0 on success, 2 for bad input (with a message saying what
-to fix), 1 when a run did not converge or diverged (track: an object was lost).
-
-track writes OUT/contours.csv (one polygon per object and frame, the frame as
-axis-0: open it in napari over the stack) and OUT/tracks.parquet (or .csv
-without pyarrow): object, frame, node, row, col, arc, normal_velocity,
-curvature, status.
+Contours are napari's shapes CSV (File > Save Selected Layer: columns index,
+shape-type, vertex-index, axis-0, axis-1, ...; polygons, rectangles, paths and
+ellipses) or a plain 'row,col' table. Exit status: 0 on success, 2 for bad
+input (one line saying what to fix; nothing is written), 1 when a run did not
+converge or diverged (track: an object was lost; batch: a task failed).
 """
 
 
-def _load_image(path: Path, channel: int | None) -> np.ndarray:
-    from skimage import io
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (no usage block) and exit status 2."""
 
-    try:
-        image = io.imread(path)
-    except Exception as err:  # unreadable file: say so plainly
-        raise ValueError(f"could not read image {path}: {err}") from None
-    if channel is not None:
-        if image.ndim != 3:
-            raise ValueError(f"--channel given but {path} has shape {image.shape}, not (rows, cols, channels)")
-        if not 0 <= channel < image.shape[-1]:
-            raise ValueError(f"--channel {channel} out of range: {path} has {image.shape[-1]} channels")
-        image = image[..., channel]
-    return image
+    def error(self, message):
+        self.exit(2, f"{PROG}: error: {message} (see {self.prog} --help)\n")
+
+
+def _defaults(func) -> dict:
+    """The core function's defaults: the one set the widgets and the CLI read."""
+    return {name: p.default for name, p in inspect.signature(func).parameters.items()
+            if p.default is not inspect.Parameter.empty}
+
+
+def _number(kind, low=None, low_open=False):
+    def parse(text):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a {'whole ' if kind is int else ''}number") from None
+        if low is not None and (value <= low if low_open else value < low) or not np.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{text!r} must be {'>' if low_open else '>='} {low}")
+        return value
+    return parse
+
+
+def _weights(text):
+    """``edges=0.4,intensity=0.3`` -> dict."""
+    from .core.forces import FORCE_NAMES
+
+    out = {}
+    for part in text.split(","):
+        name, _, value = part.partition("=")
+        name = name.strip()
+        if name not in FORCE_NAMES or not value:
+            raise argparse.ArgumentTypeError(f"{part!r}: expected name=weight with a name among "
+                                             f"{', '.join(FORCE_NAMES)}")
+        out[name] = _number(float, 0.0)(value)
+    return out
+
+
+# --------------------------------------------------------------------------
+# Options shared by several subcommands
+# --------------------------------------------------------------------------
+
+
+def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> None:
+    from .core import MATERIALS, segment
+    from .core.forces import DEFAULT_WEIGHTS
+
+    d = _defaults(segment)
+    g = p.add_argument_group("contour model (the Segmentation widget's options; defaults are segment()'s)")
+    g.add_argument("--material", help=f"virtual material of the contour: {', '.join(MATERIALS)}; default "
+                   f"{d['material']}. Soft materials move fast and follow details; stiff metals keep the contour "
+                   "smooth and need a larger --stiffness")
+    g.add_argument("--young", type=_number(float, 0, True), metavar="MPA",
+                   help="a custom material: Young's modulus E in MPa instead of the --material preset's (rubber "
+                   "~100, soft tissue ~0.1, copper ~117000); higher E: a stiffer, smoother, slower contour")
+    g.add_argument("--poisson", type=float, metavar="NU", help="a custom material: Poisson's ratio nu instead "
+                   "of the preset's, typically 0.25-0.49 (rubber 0.49, metals ~0.3)")
+    g.add_argument("--density", type=_number(float, 0, True), metavar="RHO", help="a custom material: mass "
+                   "density in kg/m^3 instead of the preset's, typically 1000-9000 (rubber 1100, copper 8960)")
+    g.add_argument("--stiffness", type=_number(float, 0, True), metavar="R",
+                   help=f"stiffness constant r (N/m) scaling the image forces: force on a node = r x its feature "
+                   f"force; default {d['stiffness']:g}. Typical: 2000 for rubber, 1e6 for copper or steel; too low "
+                   "and the contour barely moves, far too high and it may diverge")
+    nodes = g.add_mutually_exclusive_group()
+    if spacing:
+        nodes.add_argument("--node-spacing", type=_number(float, 0, True), metavar="PX",
+                           help="distance between nodes in pixels, typically 2-5, kept as the contour grows or "
+                           "shrinks; smaller follows finer detail but is slower (default: one node per ~3 px)")
+    nodes.add_argument("--n-nodes", type=_number(int, 3), metavar="N",
+                       help="number of nodes of each initial contour instead, typically 50-500")
+    g.add_argument("--sigma-factor", type=_number(float, 0, True), metavar="F",
+                   help=f"width of the interaction between nodes relative to the node spacing, 0.75-1.5 (max 2); "
+                   f"larger: smoother, stiffer contour; default {d['sigma_factor']:g}")
+    g.add_argument("--weights", type=_weights, metavar="NAME=W,...",
+                   help="image forces and their weights, e.g. "
+                   + ",".join(f"{k}={v:g}" for k, v in DEFAULT_WEIGHTS.items())
+                   + " (the default): edges (Shen-Castan edges pull nodes onto the border), intensity (region: "
+                   "pushes nodes out of the object's intensity), distance (pulls toward the nearest edge from "
+                   "afar); a force left out or weighted 0 is off")
+    g.add_argument("--polarity", help=f"the object is 'bright' or 'dark' on its background, or 'auto' (compares "
+                   f"the inside of the initial contour with a band around it); default {d['polarity']}")
+    if max_steps:
+        g.add_argument("--max-steps", type=_number(int, 1), metavar="N",
+                       help=f"upper bound on time steps per contour; default {d['max_steps']}")
+
+
+def _segment_options(args) -> dict:
+    """The segment() options given on the command line (the others keep the
+    core's defaults), checked as segment() would before any image is read."""
+    from .core.segmentation import check_segment_options
+
+    opts = {name: getattr(args, name) for name in ("material", "stiffness", "n_nodes", "sigma_factor",
+                                                     "polarity", "max_steps")
+            if getattr(args, name, None) is not None}
+    changes = {name: value for name, value in (("young", args.young and args.young * 1e6),
+                                               ("poisson", args.poisson), ("density", args.density))
+               if value is not None}
+    if changes:  # a custom material: the preset (or the default) with these constants changed
+        from .core import get_material, segment
+
+        preset = get_material(opts.get("material", _defaults(segment)["material"]))
+        opts["material"] = preset.with_(name=f"custom ({preset.name})", **changes)
+    if args.weights is not None:
+        opts["forces"] = tuple(k for k, w in args.weights.items() if w > 0)
+        opts["weights"] = {k: args.weights[k] for k in opts["forces"]}
+        if not opts["forces"]:
+            raise ValueError("--weights turns every force off: give at least one a positive weight")
+    check_segment_options(**opts)
+    return opts
+
+
+def _add_match_options(p, title: str, *, method: bool = True) -> None:
+    from .core import match
+    from .core.matching import METHODS
+
+    d = _defaults(match)
+    g = p.add_argument_group(title)
+    if method:  # track() matches consecutive contours with "order" itself
+        g.add_argument("--method", choices=METHODS, help=f"how correspondences are chosen: order (order-preserving, "
+                       f"dynamic programming), global (one-to-one assignment), local (mutual best matches "
+                       f"only); default {d['method']}")
+    g.add_argument("--n-modes", type=_number(int, 1), metavar="N", help="vibration modes in the modal affinity "
+                   "(eq. 12); fewer: coarser and more robust, more: finer (default: automatic, 6 to 12)")
+
+
+def _match_options(args) -> dict:
+    return {name: getattr(args, name) for name in ("method", "n_modes") if getattr(args, name, None) is not None}
+
+
+def _add_io(p, *, out_help: str, init: bool = True) -> None:
+    if init:
+        p.add_argument("--init", type=Path, required=True, metavar="CONTOURS.csv",
+                       help="initial contour(s): napari shapes CSV (polygon, rectangle, path or ellipse; nD "
+                       "shapes use their last two axes) or a 'row,col' table")
+    p.add_argument("--out", type=Path, required=True, help=out_help)
+    p.add_argument("--overwrite", action="store_true", help="replace existing output (never an input file)")
+
+
+def _check_input(path: Path, what: str) -> None:
+    if not path.exists():
+        raise ValueError(f"{what} {path} does not exist")
+
+
+def _check_output(path: Path, args, inputs, *, folder: bool = False) -> None:
+    """Refuse an output that is an input, that exists (without --overwrite) or
+    that cannot be written: before any work, not after it."""
+    from .batch import check_writable
+
+    for source in inputs:
+        if source is not None and Path(source).exists() and path.resolve() == Path(source).resolve():
+            raise ValueError(f"--out {path} is also an input: write the result elsewhere")
+    exists = path.exists() and (not folder or any(path.iterdir()))
+    if exists and not args.overwrite:
+        raise ValueError(f"{path} exists: pass --overwrite to replace it, or choose another --out")
+    check_writable(path, folder=folder)
+
+
+def _read_contours(path: Path, what: str = "--init", leading: bool = False):
+    _check_input(path, what)
+    return read_shapes_csv(path, leading=leading)
+
+
+# --------------------------------------------------------------------------
+# segment
+# --------------------------------------------------------------------------
 
 
 def _segment(args) -> int:
-    from .core import MATERIALS, segment
+    from .core import segment
+    from .batch import segment_options_for
 
-    if args.material not in MATERIALS:
-        raise ValueError(f"unknown --material {args.material!r}; choose from {', '.join(sorted(MATERIALS))}")
-    image = _load_image(args.image, args.channel)
-    shapes = read_shapes_csv(args.init)
-    results, status = [], 0
-    for k, init in enumerate(shapes):
-        t0 = time.perf_counter()
-        res = segment(image, init, material=args.material, stiffness=args.stiffness, n_nodes=args.n_nodes,
-                      sigma_factor=args.sigma_factor, max_steps=args.max_steps)
-        results.append(res.contour)
-        state = "converged" if res.converged else f"stopped ({res.stop_reason})"
-        print(f"shape {k}: {res.n_nodes} nodes, {res.steps} steps, {state}, "
-              f"{(time.perf_counter() - t0) * 1e3:.0f} ms")
-        status = status or (0 if res.converged else 1)
-    write_shapes_csv(args.out, results)
+    _check_input(args.image, "image")
+    shapes, leading = _read_contours(args.init, leading=True)
+    _check_output(args.out, args, [args.image, args.init])
+    if args.mask:
+        _check_output(args.mask, args, [args.image, args.init, args.out])
+    options = _segment_options(args)
+    with open_stack(args.image, channel=args.channel) as stack:
+        jobs, is_stack = _segment_jobs(args, len(stack), leading, len(shapes))
+        _check_contours(shapes, stack.shape[1:], args.init)
+        results, frames, status = [], [], 0
+        for t in sorted({t for t, _ in jobs}):
+            image = np.asarray(stack[t], dtype=np.float64)  # one frame at a time
+            for _, k in (job for job in jobs if job[0] == t):
+                res = segment(image, shapes[k], **segment_options_for(shapes[k], options, args.node_spacing))
+                state = "converged" if res.converged else f"stopped ({res.stop_reason})"
+                where = f"frame {t}, " if is_stack else ""
+                print(f"{where}shape {k}: {len(res.contour)} nodes, {res.steps} steps, {state}, "
+                      f"{res.timings['total'] * 1e3:.0f} ms")
+                results.append(res.contour)
+                frames.append((t,))
+                status = status or (0 if res.converged else 1)
+        shape = (len(stack), *stack.shape[1:]) if is_stack else tuple(stack.shape[1:])
+    write_shapes_csv(args.out, results, leading=frames if is_stack else None)
     print(f"wrote {args.out}")
     if args.mask:
-        from skimage import io
-
-        from .core.contour import polygon_mask
-
-        labels = np.zeros(image.shape[:2], dtype=np.uint16)
-        for k, c in enumerate(results, start=1):
-            labels[polygon_mask(c, labels.shape)] = k
-        io.imsave(args.mask, labels, check_contrast=False)
+        _write_mask(args.mask, results, frames, shape)
         print(f"wrote {args.mask}")
     return status
 
 
-def _load_stack(path: Path):
-    """A (T, H, W) stack, lazily when it can be: a zarr array, or a TIFF read
-    through a memory map when uncompressed."""
-    if path.suffix == ".zarr" or path.is_dir():
-        try:
-            import zarr
-        except ImportError:
-            raise ValueError(f"{path} looks like a zarr store: pip install zarr to read it") from None
-        stack = zarr.open(str(path), mode="r")
-    else:
-        import tifffile
+def _check_contours(shapes, frame_shape, path) -> None:
+    """What segment() would refuse for a contour, found before the first one runs."""
+    from .core.contour import as_contour
 
-        try:
-            stack = tifffile.memmap(path, mode="r")
-        except Exception:  # compressed or not memory-mappable: read it whole
-            try:
-                stack = tifffile.imread(path)
-            except Exception as err:
-                raise ValueError(f"could not read the stack {path}: {err}") from None
-    if len(stack.shape) != 3:
-        raise ValueError(f"{path} has shape {tuple(stack.shape)}; track needs a (frames, rows, cols) stack")
-    return stack
+    for k, shape in enumerate(shapes):
+        c = as_contour(shape, name=f"shape {k} of {path}")
+        if np.any(c.max(0) < 0) or np.any(c.min(0) > np.array(frame_shape) - 1):
+            raise ValueError(f"shape {k} of {path} lies wholly outside the image ({frame_shape[0]} x "
+                             f"{frame_shape[1]} px): check that the contours were drawn on this image")
+
+
+def _segment_jobs(args, n_frames: int, leading, n_shapes: int):
+    """``[(frame, shape)]`` to segment, and whether the output has a frame axis."""
+    if args.frames is not None:
+        return [(t, k) for t in parse_frames(args.frames, n_frames) for k in range(n_shapes)], n_frames > 1
+    drawn = [int(round(lead[0])) if lead else None for lead in leading]
+    if any(t is not None for t in drawn) and n_frames > 1:
+        bad = [t for t in drawn if t is None or not 0 <= t < n_frames]
+        if bad:
+            raise ValueError(f"the contours of {args.init} lie on frames {sorted(set(map(str, drawn)))} but the "
+                             f"image has frames 0 to {n_frames - 1}: choose frames with --frames")
+        return [(t, k) for k, t in enumerate(drawn)], True
+    if n_frames > 1:
+        raise ValueError(f"{args.image} is a stack of {n_frames} frames: choose which with --frames (e.g. 0, 0:10 "
+                         "or 2,5), or draw the contours on their frames in napari (the CSV's axis-0)")
+    return [(0, k) for k in range(n_shapes)], False
+
+
+def _write_mask(path: Path, contours, frames, shape) -> None:
+    from skimage import io
+
+    from .core.contour import polygon_mask
+    from .io import atomic_path
+
+    labels = np.zeros(shape, dtype=np.uint16)
+    for k, (c, (t,)) in enumerate(zip(contours, frames), start=1):
+        plane = labels[t] if labels.ndim == 3 else labels
+        plane[polygon_mask(c, plane.shape)] = k
+    with atomic_path(path) as tmp:
+        io.imsave(tmp, labels, check_contrast=False)
+
+
+# --------------------------------------------------------------------------
+# match and simulate
+# --------------------------------------------------------------------------
+
+
+def _pair(args):
+    """Contours a and b: shape --a-shape of A and --b-shape of B (or of A)."""
+    a_shapes = _read_contours(args.a, "contours")
+    b_shapes = _read_contours(args.b, "contours") if args.b else a_shapes
+    b_index = args.b_shape if args.b_shape is not None else (0 if args.b else 1)
+    for shapes, index, path, opt in ((a_shapes, args.a_shape, args.a, "--a-shape"),
+                                     (b_shapes, b_index, args.b or args.a, "--b-shape")):
+        if not 0 <= index < len(shapes):
+            raise ValueError(f"{opt} {index}: {path} holds {len(shapes)} shape(s), numbered from 0"
+                             + ("; give a second file B, or two shapes in A" if not args.b and len(shapes) < 2
+                                else ""))
+    return a_shapes[args.a_shape], b_shapes[b_index]
+
+
+def _match(args) -> int:
+    import csv
+
+    from .core import match
+    from .io import atomic_path
+
+    a, b = _pair(args)
+    _check_output(args.out, args, [args.a, args.b])
+    m = match(a, b, **_match_options(args))
+    cost = np.asarray(getattr(m, "cost", np.full(len(m.pairs), np.nan)))
+    with atomic_path(args.out) as tmp, open(tmp, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["node_a", "node_b", "row_a", "col_a", "row_b", "col_b", "cost"])
+        for (i, j), c in zip(m.pairs, cost):
+            w.writerow([int(i), int(j), *map(float, a[i]), *map(float, b[j]), float(c)])
+    print(f"{len(m.pairs)} pairs ({m.method}): {len(m.pairs)} of {len(a)} nodes of a matched, "
+          f"{len(m.unmatched)} unmatched; wrote {args.out}")
+    return 0
+
+
+def _simulate(args) -> int:
+    from .core import get_material, match, simulate
+
+    a, b = _pair(args)
+    _check_output(args.out, args, [args.a, args.b])
+    options = {name: getattr(args, name) for name in ("q", "material", "n_frames", "max_steps")
+               if getattr(args, name) is not None}
+    if "material" in options:
+        get_material(options["material"])  # a misspelt material: before matching
+    sim = simulate(a, b, match(a, b, **_match_options(args)), **options)
+    write_shapes_csv(args.out, list(sim.frames), leading=[(t,) for t in range(len(sim.frames))])
+    state = "came to rest" if sim.converged else "stopped before rest (raise --max-steps)"
+    print(f"{len(sim.frames)} frames of {sim.frames.shape[1]} nodes, {sim.steps} steps, {state}; wrote {args.out} "
+          "(the frame as axis-0)")
+    return 0 if sim.converged else 1
+
+
+# --------------------------------------------------------------------------
+# track
+# --------------------------------------------------------------------------
 
 
 class _ProgressBar:
     """A one-line text progress bar on stderr."""
 
-    def __init__(self, width: int = 30):
-        self.width = width
+    def __init__(self, frames=None, width: int = 30):
+        self.frames, self.width = frames, width  # frames: the stack's number of each frame tracked
 
     def __call__(self, progress) -> None:
         done = progress.done / progress.total
         bar = "#" * int(round(done * self.width))
-        print(f"\r[{bar:<{self.width}}] frame {progress.frame}, {progress.done}/{progress.total} object-frames",
+        frame = self.frames[progress.frame] if self.frames else progress.frame
+        print(f"\r[{bar:<{self.width}}] frame {frame}, {progress.done}/{progress.total} object-frames",
               end="", file=sys.stderr, flush=True)
         if progress.done == progress.total:
             print(file=sys.stderr)
 
 
-def _track(args) -> int:
-    from .core import LOST, MATERIALS, track
-
-    if args.material not in MATERIALS:
-        raise ValueError(f"unknown --material {args.material!r}; choose from {', '.join(sorted(MATERIALS))}")
-    stack = _load_stack(args.stack)
-    inits, leading = read_shapes_csv(args.init, leading=True)
-    frames_drawn = {int(round(lead[0])) for lead in leading if lead}
+def _start_frame(args, leading):
     if args.start is not None:
-        start = args.start
-    elif len(frames_drawn) > 1:
-        raise ValueError(f"the contours of {args.init} lie on frames {sorted(frames_drawn)}: draw them all on one "
-                         "frame, or say which with --start")
-    else:
-        start = frames_drawn.pop() if frames_drawn else 0
-    tr = track(stack, inits, start=start, segment_options=dict(material=args.material, stiffness=args.stiffness),
-               callback=_ProgressBar())
-    args.out.mkdir(parents=True, exist_ok=True)
-    shapes, frames = [], []
-    for k in range(tr.n_objects):
-        for t, c in enumerate(tr.contours[k]):
-            if c is not None:
-                shapes.append(c)
-                frames.append((t,))
-    write_shapes_csv(args.out / "contours.csv", shapes, leading=frames)
-    table = tr.table()
-    try:
-        table.to_parquet(args.out / "tracks.parquet")
-        written = "tracks.parquet"
-    except ImportError:  # no pyarrow
-        table.to_csv(args.out / "tracks.csv", index=False)
-        written = "tracks.csv"
+        return args.start
+    drawn = sorted({int(round(lead[0])) for lead in leading if lead})
+    if len(drawn) > 1:
+        raise ValueError(f"the contours of {args.init} lie on frames {drawn}: draw them all on one frame, or say "
+                         "which with --start")
+    return drawn[0] if drawn else None
+
+
+def _track(args) -> int:
+    from .batch import track_file
+    from .core import LOST
+
+    _check_input(args.stack, "stack")
+    inits, leading = _read_contours(args.init, leading=True)
+    _check_output(args.out, args, [args.stack, args.init], folder=True)
+    options = _segment_options(args)
+    start = _start_frame(args, leading)
+    with open_stack(args.stack, channel=args.channel) as stack:  # the frames and start, before any work
+        chosen = parse_frames(args.frames, len(stack)) if args.frames else list(range(len(stack)))
+        if start is not None and start not in chosen:
+            raise ValueError(f"the contours are drawn on frame {start}, not among --frames {args.frames}")
+        _check_contours(inits, stack.shape[1:], args.init)
+    tr, frames, written = track_file(args.stack, inits, args.out, frames=args.frames, start=start,
+                                     channel=args.channel, node_spacing=args.node_spacing,
+                                     max_steps=args.steps_per_frame, match_options=_match_options(args),
+                                     callback=_ProgressBar(chosen), **options)
     for k in range(tr.n_objects):
         counts = {s: tr.status[k].count(s) for s in dict.fromkeys(tr.status[k])}
         print(f"object {k}: " + ", ".join(f"{n} {s}" for s, n in counts.items()))
-    print(f"wrote {args.out / 'contours.csv'} and {args.out / written} ({tr.timings['total']:.1f} s)")
+    print(f"wrote {', '.join(str(p) for p in written if p.exists())} ({tr.timings['total']:.1f} s)")
     return 1 if any(LOST in row for row in tr.status) else 0
 
 
+# --------------------------------------------------------------------------
+# batch
+# --------------------------------------------------------------------------
+
+
+def _batch(args) -> int:
+    from . import batch
+
+    for path in args.inputs:
+        _check_input(path, "input")
+    shapes, leading = _read_contours(args.init, leading=True)
+    options = _segment_options(args)
+    common = dict(channel=args.channel, node_spacing=args.node_spacing, workers=args.workers,
+                  scheduler=args.scheduler, overwrite=args.overwrite, progress=not args.quiet, frames=args.frames)
+    if args.kind == "segment":
+        table = batch.segment_files(args.inputs, shapes, args.out, **common, **options)
+    else:
+        table = batch.track_files(args.inputs, shapes, args.out, start=_start_frame(args, leading),
+                                  max_steps=args.steps_per_frame, match_options=_match_options(args),
+                                  **common, **options)
+    failed = table[table["status"] == batch.FAILED]
+    print(f"{len(table) - len(failed)} of {len(table)} rows ok; summary in {args.out / 'summary.csv'}")
+    for _, row in failed.drop_duplicates("input").iterrows():
+        print(f"failed: {row['input']}: {row['error']}", file=sys.stderr)
+    return 1 if len(failed) else 0
+
+
+# --------------------------------------------------------------------------
+# The parser
+# --------------------------------------------------------------------------
+
+
+def _subparser(sub, name, help, description):
+    return sub.add_parser(name, help=help, description=description, epilog=EPILOG,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def _frames_option(p, what):
+    p.add_argument("--frames", "--frame", dest="frames", metavar="FRAMES",
+                   help=f"{what}: one frame (3), a range (0:10, stop excluded; 0:30:2 every other) or a list (2,5,9)")
+
+
+def _channel_option(p):
+    p.add_argument("--channel", type=_number(int, 0), help="channel of an RGB(A) image to use: 0 red, 1 green, 2 blue")
+
+
+def _add_segment(sub):
+    p = _subparser(sub, "segment", "segment the object(s) around initial contour(s)",
+                   "Drive each initial contour onto the border of the object it surrounds (the Segmentation "
+                   "widget). On a stack, each contour is segmented on the frame it was drawn on (the CSV's "
+                   "axis-0) or on every frame of --frames.")
+    p.add_argument("image", type=Path, help="2D image (TIFF, PNG, ... any format scikit-image reads), or a "
+                   "(frames, rows, cols) TIFF stack or zarr array")
+    _add_io(p, out_help="where to write the result: napari shapes CSV, one polygon per contour (and frame, "
+            "as axis-0, on a stack)")
+    _frames_option(p, "frames of a stack to segment every contour on")
+    _channel_option(p)
+    p.add_argument("--mask", type=Path, help="also write a label image (label k for shape k; a stack of labels "
+                   "for a stack)")
+    _add_segment_options(p)
+    p.set_defaults(run=_segment)
+
+
+def _add_pair_arguments(p):
+    p.add_argument("a", type=Path, metavar="A.csv", help="napari shapes CSV holding contour a")
+    p.add_argument("b", type=Path, nargs="?", metavar="B.csv",
+                   help="napari shapes CSV holding contour b (default: A, its second shape)")
+    p.add_argument("--a-shape", type=_number(int, 0), default=0, metavar="I",
+                   help="which shape of A is contour a (0 = the first drawn); default 0")
+    p.add_argument("--b-shape", type=_number(int, 0), metavar="J",
+                   help="which shape of B is contour b; default 0 (1 when B is not given)")
+
+
+def _add_match(sub):
+    from .core import match
+
+    p = _subparser(sub, "match", "match the nodes of two contours by modal analysis",
+                   "Match the nodes of contour a to those of contour b (the Matching widget).")
+    _add_pair_arguments(p)
+    _add_io(p, init=False, out_help="CSV of the correspondences: node_a, node_b, row_a, col_a, row_b, col_b, "
+            "cost (0 = a perfect match)")
+    _add_match_options(p, f"matching (defaults are match()'s: method {_defaults(match)['method']})")
+    p.set_defaults(run=_match)
+
+
+def _add_simulate(sub):
+    from .core import MATERIALS, simulate
+
+    d = _defaults(simulate)
+    p = _subparser(sub, "simulate", "simulate the deformation of one contour into another",
+                   "Match a to b (order-preserving by default), then pull each node of a toward its partner and "
+                   "let the material deform (the Simulation widget). Writes one polygon per frame, the frame as "
+                   "axis-0, to open in napari over a frame slider.")
+    _add_pair_arguments(p)
+    _add_io(p, init=False, out_help="napari shapes CSV of the frames (frame as axis-0)")
+    g = p.add_argument_group("simulation (defaults are simulate()'s)")
+    g.add_argument("--q", type=_number(float, 0, True), help=f"global stiffness constant q (N/m) of the forces "
+                   f"pulling each node toward its partner (eq. 17); default {d['q']:g}. Larger: ends closer to b; "
+                   "stiff materials need ~1e6-1e8")
+    g.add_argument("--material", help=f"virtual material of a: {', '.join(MATERIALS)}; default {d['material']}")
+    g.add_argument("--n-frames", type=_number(int, 2), metavar="T",
+                   help=f"frames written, a and the rest shape included; default {d['n_frames']}")
+    g.add_argument("--max-steps", type=_number(int, 1), metavar="N",
+                   help=f"upper bound on time steps; default {d['max_steps']}")
+    _add_match_options(p, "matching used by the simulation")
+    p.set_defaults(run=_simulate)
+
+
+def _add_track_options(p):
+    from .core import track
+
+    d = _defaults(track)
+    _frames_option(p, "frames to track (default all)")
+    p.add_argument("--start", type=_number(int, 0), help="the frame the contours were drawn on (default: their "
+                   "axis-0 in the CSV, else the first frame tracked)")
+    _channel_option(p)
+    p.add_argument("--steps-per-frame", type=_number(int, 1), metavar="N",
+                   help=f"time steps per object and frame (each frame starts from the previous result); "
+                   f"default {d['max_steps']}")
+    _add_segment_options(p, max_steps=False)
+    _add_match_options(p, "node correspondences between frames (order-preserving matching)", method=False)
+
+
+def _add_track(sub):
+    p = _subparser(sub, "track", "follow the object(s) of initial contour(s) through a time-lapse",
+                   "Segment each object frame by frame from the contours drawn on one frame, forward and backward, "
+                   "with node correspondences and membrane velocities (the Tracking widget). Writes OUT/contours.csv "
+                   "(one polygon per object and frame, the frame as axis-0: open it in napari over the stack) and "
+                   "OUT/tracks.csv (and tracks.parquet with pyarrow): object, frame, node, row, col, arc, "
+                   "normal_velocity, curvature, status.")
+    p.add_argument("stack", type=Path, help="(frames, rows, cols) TIFF stack or zarr array, read a frame at a time")
+    _add_io(p, out_help="output folder (created): contours.csv and the tidy table")
+    _add_track_options(p)
+    p.set_defaults(run=_track)
+
+
+def _add_batch(sub):
+    p = _subparser(sub, "batch", "segment or track many files at once, on dask",
+                   "Run segment or track over many files on a dask cluster. See napari-physeg batch segment --help.")
+    kinds = p.add_subparsers(dest="kind", required=True, parser_class=_Parser)
+    for kind, text in (("segment", "segment the same contours on every frame (or --frames) of every input"),
+                       ("track", "track the same contours through every input movie")):
+        q = _subparser(kinds, kind, text, text[0].upper() + text[1:] + ", each task on a worker of a dask "
+                       "cluster: a local one (--workers) or an existing one (--scheduler). Writes OUT/summary.csv "
+                       "(and summary.parquet with pyarrow), one row per input" + (", frame" if kind == "segment"
+                       else "") + " and object with a status column (ok or failed, with the error), and each "
+                       "task's contours under OUT/results/. Run the same command again to resume: complete "
+                       "results are kept, failed tasks are tried again.")
+        q.add_argument("inputs", type=Path, nargs="+", metavar="INPUT",
+                       help="images or stacks (TIFF, zarr, ...); a file that cannot be read is reported as failed")
+        _add_io(q, out_help="output folder (created; an earlier run's results there are reused)")
+        cluster = q.add_mutually_exclusive_group()
+        cluster.add_argument("--workers", type=_number(int, 1), metavar="N",
+                             help="worker processes of the local dask cluster (default: the cores available)")
+        cluster.add_argument("--scheduler", metavar="ADDRESS",
+                             help="address of a running dask.distributed scheduler (e.g. tcp://10.0.0.5:8786, or "
+                             "one started by dask-jobqueue on SLURM) to run the tasks on instead")
+        q.add_argument("--quiet", action="store_true", help="no progress bar on stderr (e.g. in a cluster job's log)")
+        if kind == "segment":
+            _frames_option(q, "frames of each stack to segment (default all)")
+            _channel_option(q)
+            _add_segment_options(q)
+        else:
+            _add_track_options(q)
+        q.set_defaults(run=_batch)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="napari-physeg",
-        description="Physical deformable contours: segment objects in images from rough initial contours.",
-        epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    sub = parser.add_subparsers(dest="command", required=True)
-    seg = sub.add_parser("segment", help="segment the object(s) around initial contour(s)",
-                         description="Drive each initial contour onto the border of the object it surrounds.",
-                         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    seg.add_argument("image", type=Path, help="2D grey image (any format scikit-image reads)")
-    seg.add_argument("--init", type=Path, required=True, help="initial contour(s), napari shapes CSV")
-    seg.add_argument("--out", type=Path, required=True, help="where to write the result (napari shapes CSV)")
-    seg.add_argument("--channel", type=int, default=None, help="channel of an RGB(A) image to use (0, 1, 2)")
-    seg.add_argument("--material", default="rubber", help="virtual material (rubber, soft tissue, aluminium, "
-                     "copper, steel); default rubber")
-    seg.add_argument("--stiffness", type=float, default=2000.0,
-                     help="stiffness constant r in N/m (rubber ~2e3, copper ~1e6); default 2000")
-    seg.add_argument("--n-nodes", type=int, default=None, help="nodes of the model (default: one per ~3 px)")
-    seg.add_argument("--sigma-factor", type=float, default=1.0,
-                     help="node interaction relative to the node spacing, 0.75-1.5; default 1")
-    seg.add_argument("--max-steps", type=int, default=1000, help="upper bound on time steps; default 1000")
-    seg.add_argument("--mask", type=Path, default=None, help="also write a label image (one label per shape)")
-    seg.set_defaults(run=_segment)
-    trk = sub.add_parser("track", help="follow the object(s) of initial contour(s) through a time-lapse",
-                         description="Segment each object frame by frame from the contours drawn on one frame, "
-                         "forward and backward, with node correspondences and membrane velocities.",
-                         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    trk.add_argument("stack", type=Path, help="(frames, rows, cols) TIFF stack or zarr array")
-    trk.add_argument("--init", type=Path, required=True,
-                     help="contour(s) drawn on one frame, napari shapes CSV (with the frame as axis-0, or 2D)")
-    trk.add_argument("--out", type=Path, required=True, help="output folder: contours.csv and the tidy table")
-    trk.add_argument("--start", type=int, default=None, help="the frame the contours were drawn on "
-                     "(default: their axis-0, else 0)")
-    trk.add_argument("--material", default="rubber", help="virtual material; default rubber")
-    trk.add_argument("--stiffness", type=float, default=2000.0, help="stiffness constant r in N/m; default 2000")
-    trk.set_defaults(run=_track)
+    parser = _Parser(prog=PROG, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
+                     description="Physical deformable contours: segment objects in images from rough initial "
+                     "contours, match and simulate contours, track objects through time-lapses, in batches.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    for add in (_add_segment, _add_match, _add_simulate, _add_track, _add_batch):
+        add(sub)
     return parser
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as stop:  # --help (0), or a malformed argument (2, one line already printed)
+        return stop.code
     try:
         return args.run(args)
-    except ValueError as err:
-        print(f"napari-physeg: error: {err}", file=sys.stderr)
+    except (ValueError, OSError) as err:  # bad input, or a file that cannot be read or written
+        text = " ".join(str(err).split())
+        print(f"{PROG}: error: {text}", file=sys.stderr)
         return 2
     except RuntimeError as err:  # DivergenceError
-        print(f"napari-physeg: {err}", file=sys.stderr)
+        print(f"{PROG}: {' '.join(str(err).split())}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        resume = " (run the same command again to resume)" if args.command == "batch" else ""
+        print(f"\n{PROG}: interrupted{resume}", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -1,37 +1,64 @@
-"""Contours in napari's shapes CSV format, without napari.
+"""Files in and out, without napari: contours as napari's shapes CSV, lazy image stacks, tables.
 
 napari saves a Shapes layer as a CSV table with the columns
 ``index, shape-type, vertex-index, axis-0, axis-1[, axis-2, ...]`` (one row per
 vertex). :func:`read_shapes_csv` reads that (or a plain two-column
 ``row, col`` table) and :func:`write_shapes_csv` writes it, so contours move
 between napari, scripts and the command line unchanged.
+
+:func:`open_stack` opens a TIFF (or TIFF stack), a zarr array or any image
+scikit-image reads as a lazy ``(frames, rows, cols)`` dask array with one
+chunk per frame, so a task holds one frame in memory.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_shapes_csv", "write_shapes_csv"]
+# The same conversion the widgets use for a Shapes layer (numpy only; importing
+# it does not import napari): an ellipse is its polygon, not its 4 box corners.
+from ._widgets._layers import CLOSED_SHAPE_TYPES, shape_to_polygon
+
+__all__ = ["read_shapes_csv", "write_shapes_csv", "open_stack", "parse_frames", "write_table", "atomic_path", "is_zarr",
+           "TIFF_SUFFIXES"]
+
+#: File name endings read with tifffile (lazily, one page per chunk).
+TIFF_SUFFIXES = (".tif", ".tiff", ".btf", ".tf8", ".tf2")
 
 
 def read_shapes_csv(path, *, leading: bool = False):
     """Read the shapes in a CSV file as a list of ``(N, 2)`` float64 contours.
 
-    Accepts napari's shapes CSV (for nD shapes the last two axes are kept) or
-    a table whose last two columns are ``row, col`` (one shape, an optional
-    header).
+    Parameters
+    ----------
+    path : str or Path
+        napari's shapes CSV (File > Save Selected Layer), with shapes of type
+        polygon, rectangle, path (closed by joining its ends) or ellipse (read
+        as the ellipse's polygon, not the 4 corners napari stores); for nD
+        shapes the last two axes are the contour. Or a table whose last two
+        columns are ``row, col`` (one shape, an optional header line).
+    leading : bool, optional
+        Also return, per shape, the coordinates of its first vertex on the
+        axes before the last two (e.g. ``(frame,)`` for a shape drawn on one
+        frame of a movie; ``()`` for 2D shapes).
 
-    With ``leading=True`` also return, per shape, the coordinates of its
-    first vertex on the axes before the last two (e.g. ``(frame,)`` for a
-    shape drawn on one frame of a movie; ``()`` for 2D shapes).
+    Returns
+    -------
+    shapes : list of (N, 2) ndarray
+    before : list of tuple
+        Only with ``leading=True``.
 
     Raises
     ------
     ValueError
-        If the file holds no shape or its columns cannot be read.
+        If the file holds no shape, a shape that encloses nothing (a line) or
+        columns that cannot be read.
     """
     path = Path(path)
     with path.open(newline="") as fh:
@@ -41,14 +68,7 @@ def read_shapes_csv(path, *, leading: bool = False):
     header = [c.strip() for c in rows[0]]
     try:
         if "index" in header and "axis-0" in header:
-            axes = sorted((c for c in header if c.startswith("axis-")), key=lambda c: int(c[5:]))
-            cols = [header.index(a) for a in axes]
-            index = header.index("index")
-            table = [(int(float(r[index])), [float(r[c]) for c in cols]) for r in rows[1:]]
-            shapes: dict[int, list] = {}
-            for i, xy in table:
-                shapes.setdefault(i, []).append(xy)
-            full = [np.asarray(v, dtype=np.float64) for _, v in sorted(shapes.items())]
+            full = _napari_shapes(header, rows[1:], path)
             out = [v[:, -2:] for v in full]
             before = [tuple(v[0, :-2]) for v in full]
         else:
@@ -66,15 +86,43 @@ def read_shapes_csv(path, *, leading: bool = False):
     return (out, before) if leading else out
 
 
+def _napari_shapes(header, body, path) -> list[np.ndarray]:
+    """The shapes of napari's CSV, each as the polygon it stands for (all axes)."""
+    axes = sorted((c for c in header if c.startswith("axis-")), key=lambda c: int(c[5:]))
+    cols = [header.index(a) for a in axes]
+    index = header.index("index")
+    kind = header.index("shape-type") if "shape-type" in header else None
+    order = header.index("vertex-index") if "vertex-index" in header else None
+    shapes: dict[int, list] = {}
+    types: dict[int, str] = {}
+    for r in body:
+        i = int(float(r[index]))
+        vertex = int(float(r[order])) if order is not None else len(shapes.get(i, ()))
+        shapes.setdefault(i, []).append((vertex, [float(r[c]) for c in cols]))
+        types.setdefault(i, r[kind].strip() if kind is not None else "polygon")
+    out = []
+    for i in sorted(shapes):
+        vertices = np.asarray([xy for _, xy in sorted(shapes[i], key=lambda v: v[0])], dtype=np.float64)
+        if types[i] not in CLOSED_SHAPE_TYPES:
+            raise ValueError(f"shape {i} is a {types[i]!r}, which encloses no region; use a polygon, "
+                             f"rectangle, ellipse or path ({', '.join(CLOSED_SHAPE_TYPES)})")
+        try:
+            out.append(shape_to_polygon(vertices, types[i]))
+        except ValueError as err:
+            raise ValueError(f"shape {i}: {err}") from None
+    return out
+
+
 def write_shapes_csv(path, shapes, shape_type: str = "polygon", leading=None) -> Path:
     """Write contours as napari's shapes CSV (polygons), readable by napari.
 
     ``leading``, one tuple per shape (e.g. ``(frame,)``), puts each shape on
-    a slice of an nD layer: its values become the first axes.
+    a slice of an nD layer: its values become the first axes. The file is
+    written under a temporary name and renamed, so it is whole or absent.
     """
     path = Path(path)
     n_lead = len(leading[0]) if leading else 0
-    with path.open("w", newline="") as fh:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["index", "shape-type", "vertex-index"] + [f"axis-{a}" for a in range(n_lead + 2)])
         for i, shape in enumerate(shapes):
@@ -82,3 +130,176 @@ def write_shapes_csv(path, shapes, shape_type: str = "polygon", leading=None) ->
             for k, (r, c) in enumerate(np.asarray(shape, dtype=np.float64)):
                 w.writerow([i, shape_type, k, *lead, repr(float(r)), repr(float(c))])
     return path
+
+
+@contextlib.contextmanager
+def atomic_path(path):
+    """A temporary path next to ``path``, renamed to ``path`` when the block
+    ends without error (and removed when it fails): a reader, or a batch run
+    that resumes, never sees half a file."""
+    path = Path(path)
+    # The suffix kept last: writers that choose the format by it still do.
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=path.parent)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def write_table(table, path) -> list[Path]:
+    """Write a pandas DataFrame as ``path`` with the suffix ``.csv``, and as
+    ``.parquet`` too when pyarrow is installed; the paths written."""
+    path = Path(path)
+    written = [path.with_suffix(".csv")]
+    with atomic_path(written[0]) as tmp:
+        table.to_csv(tmp, index=False)
+    try:
+        import pyarrow  # noqa: F401
+    except ImportError:
+        return written
+    written.append(path.with_suffix(".parquet"))
+    with atomic_path(written[1]) as tmp:
+        table.to_parquet(tmp, index=False)
+    return written
+
+
+def is_zarr(path: Path) -> bool:
+    """Whether ``path`` is a zarr store (a ``.zarr`` folder, or one with zarr metadata)."""
+    return path.suffix == ".zarr" or (path.is_dir() and any((path / n).exists() for n in
+                                                            ("zarr.json", ".zarray", ".zgroup")))
+
+
+@contextlib.contextmanager
+def open_stack(path, *, channel: int | None = None):
+    """Open an image file as a lazy ``(T, H, W)`` dask array, one chunk per frame.
+
+    Parameters
+    ----------
+    path : str or Path
+        A TIFF (a 2D image, a stack of pages, an ImageJ or OME series), a zarr
+        array (a ``.zarr`` folder) or another 2D image scikit-image reads
+        (PNG, JPEG, ...; read whole). A 2D image is a stack of one frame.
+    channel : int, optional
+        Channel of an RGB(A) image (its last axis of 3 or 4 samples).
+
+    Yields
+    ------
+    dask.array.Array
+        ``(T, H, W)``; reading frame ``t`` reads only that frame, in this
+        process (dask's synchronous scheduler inside the block). The file is
+        closed when the ``with`` block ends.
+
+    Raises
+    ------
+    ValueError
+        If the file cannot be read, or its shape is not an image or a stack of
+        2D frames (after ``channel``).
+    """
+    import dask
+    import dask.array as da
+
+    path = Path(path)
+    closers = []
+    try:
+        try:
+            if is_zarr(path):
+                _need("zarr", path)
+                stack = da.from_zarr(str(path))
+                samples = False
+            elif path.suffix.lower() in TIFF_SUFFIXES:
+                import tifffile
+
+                with tifffile.TiffFile(path) as tif:
+                    samples = tif.series[0].axes.endswith("S")
+                try:
+                    import zarr
+                except ImportError:  # without zarr: a memory map if the file allows, else read whole
+                    stack = da.from_array(_tiff_without_zarr(path))
+                else:
+                    store = tifffile.imread(path, aszarr=True)
+                    closers.append(store.close)
+                    stack = da.from_zarr(zarr.open(store, mode="r"))
+            else:
+                from skimage import io
+
+                image = io.imread(path)
+                samples = image.ndim == 3 and image.shape[-1] in (3, 4)
+                stack = da.from_array(image, chunks=image.shape)
+        except Exception as err:  # unreadable or corrupt: one plain sentence
+            raise ValueError(f"could not read {path}: {type(err).__name__}: {err}") from None
+        # Frames are read here, in this process: the store is not for sending
+        # to a cluster (a distributed Client made default elsewhere would try).
+        with dask.config.set(scheduler="synchronous"):
+            yield _as_frames(stack, samples, channel, path)
+    finally:
+        for close in closers:
+            close()
+
+
+def _need(module: str, path) -> None:
+    try:
+        __import__(module)
+    except ImportError:
+        raise ValueError(f"{path} needs the {module} package: pip install {module} "
+                         "(or napari-physeg[batch])") from None
+
+
+def _tiff_without_zarr(path):
+    import tifffile
+
+    try:
+        return tifffile.memmap(path, mode="r")
+    except ValueError:  # compressed or tiled: not memory-mappable
+        return tifffile.imread(path)
+
+
+def _as_frames(stack, samples: bool, channel, path):
+    """``stack`` as ``(T, H, W)`` with one chunk per frame, the channel chosen."""
+    if channel is not None:
+        if not samples and stack.ndim != 3:
+            raise ValueError(f"--channel given but {path} has shape {tuple(stack.shape)}, not (rows, cols, channels)")
+        if not 0 <= channel < stack.shape[-1]:
+            raise ValueError(f"channel {channel} is out of range: {path} has {stack.shape[-1]} channels")
+        stack = stack[..., channel]
+    elif samples:
+        raise ValueError(f"{path} is an RGB(A) image of shape {tuple(stack.shape)}: choose a channel with "
+                         "--channel 0, 1 or 2")
+    if stack.ndim == 2:
+        stack = stack[None]
+    if stack.ndim != 3:
+        raise ValueError(f"{path} has shape {tuple(stack.shape)}: expected a 2D image or a (frames, rows, cols) "
+                         "stack; save one channel and one z-plane per file (e.g. in Fiji: Image > Stacks)")
+    return stack.rechunk((1, *stack.shape[1:]))
+
+
+def parse_frames(spec: str, n_frames: int) -> list[int]:
+    """Frame indices from ``"3"``, ``"0:10"``, ``"0:30:2"``, ``"2,5,9"`` (Python
+    ranges: the stop excluded; negative counts from the end).
+
+    Raises
+    ------
+    ValueError
+        For a malformed spec or a frame outside ``[0, n_frames)``.
+    """
+    frames: list[int] = []
+    try:
+        for part in str(spec).split(","):
+            if ":" in part:
+                bounds = [int(x) if x.strip() else None for x in part.split(":")]
+                frames.extend(range(n_frames)[slice(*bounds)])
+            else:
+                t = int(part)
+                if not -n_frames <= t < n_frames:
+                    raise IndexError(t)
+                frames.append(t % n_frames)
+    except (ValueError, TypeError):
+        raise ValueError(f"frames {spec!r}: expected e.g. 3, 0:10, 0:30:2 or 2,5,9") from None
+    except IndexError:
+        raise ValueError(f"frames {spec!r}: the stack has frames 0 to {n_frames - 1}") from None
+    if not frames:
+        raise ValueError(f"frames {spec!r} selects no frame of the {n_frames}")
+    return frames

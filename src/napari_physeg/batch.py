@@ -1,0 +1,587 @@
+"""Many files and objects at once, on dask: segmentation or tracking of a folder or a plate.
+
+:func:`segment_files` segments the same initial contours on every frame of
+many images or stacks, :func:`track_files` tracks them through many movies.
+Both run their tasks on a ``dask.distributed`` cluster: a local one with
+``workers`` processes by default, or an existing one at ``scheduler`` (for
+instance a SLURM cluster started with ``dask-jobqueue``; see docs/batch.md).
+
+Each task (one frame of one file for segmentation, one movie for tracking)
+opens its file itself, lazily (a TIFF or zarr stack is read one frame at a
+time), writes its outputs under ``out/results/<name>/`` and reports one row per
+object. The outputs of a task are written in a temporary folder that is
+renamed when complete, so:
+
+* a run that is stopped (or a worker that is killed) leaves no half result,
+  and a task the cluster runs again finds its result and does not redo it;
+* running the same command again skips every task already complete
+  (*resumable*); failed tasks are tried again.
+
+A file that cannot be read, or a task that raises, becomes rows with
+``status="failed"`` and the error; the other tasks finish. When all are done
+``out/summary.csv`` (and ``summary.parquet`` with pyarrow) holds one row per
+input (and frame) and object.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import shutil
+import socket
+import sys
+import time
+import traceback
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .io import (TIFF_SUFFIXES, atomic_path, is_zarr, open_stack, parse_frames, read_shapes_csv, write_shapes_csv,
+                 write_table)
+
+__all__ = ["segment_files", "track_files", "track_file", "check_writable", "default_workers", "segment_options_for"]
+
+#: Status of a row whose task (or object) failed; the ``error`` column says why.
+FAILED = "failed"
+#: Status of a row whose task completed (see the other columns for the outcome).
+OK = "ok"
+
+_RESULTS = "results"
+_SETTINGS = "batch.json"
+_SUMMARY = "summary"
+
+
+def default_workers() -> int:
+    """The number of cores this process may use: the default ``workers``."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def segment_options_for(contour, options: dict, node_spacing: float | None) -> dict:
+    """``options`` of :func:`~napari_physeg.core.segment` for one contour:
+    ``node_spacing`` (px) becomes its node count, as in the widgets."""
+    from .core.contour import perimeter
+
+    if node_spacing is None:
+        return dict(options)
+    if not node_spacing > 0:
+        raise ValueError(f"node spacing must be positive, got {node_spacing!r} px")
+    return {**options, "n_nodes": max(3, int(round(perimeter(np.asarray(contour, float)) / node_spacing)))}
+
+
+# --------------------------------------------------------------------------
+# Tasks: run on the workers
+# --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Task:
+    """One unit of work: its folder name under ``out/results`` and what to do."""
+
+    kind: str  # "segment" or "track"
+    path: str
+    name: str  # results/<name>, unique per input (and frame)
+    out: str
+    inits: tuple
+    options: dict = field(default_factory=dict)
+    frame: int | None = None  # segment: the frame
+    frames: str | None = None  # track: the frame spec
+    start: int | None = None  # track: the frame the contours were drawn on
+    channel: int | None = None
+    node_spacing: float | None = None
+    max_steps: int | None = None
+    match_options: dict = field(default_factory=dict)
+
+    def failed(self, error: str) -> list[dict]:
+        base = {"input": self.path, "frame": self.frame} if self.kind == "segment" else {"input": self.path}
+        return [{**base, "object": k, "status": FAILED, "error": error} for k in range(len(self.inits))]
+
+
+def _execute(task: _Task) -> list[dict]:
+    """Run ``task`` unless its result exists; its rows. Never raises: an
+    error becomes failed rows, so one bad file cannot stop the batch."""
+    final = Path(task.out) / _RESULTS / task.name
+    if (final / "rows.json").exists():  # done before (an earlier run, or before a worker died)
+        return _read_rows(final)
+    tmp = final.parent / f".{final.name}.tmp-{uuid.uuid4().hex}"
+    try:
+        tmp.mkdir(parents=True)
+        rows = (_segment_task if task.kind == "segment" else _track_task)(task, tmp)
+        for row in rows:  # outputs named relative to out; who ran it, for the cluster's logs
+            row.update(host=socket.gethostname(), pid=os.getpid())
+            for key in ("contours", "tracks"):
+                if row.get(key):
+                    row[key] = str(Path(_RESULTS) / task.name / row[key])
+        (tmp / "rows.json").write_text(json.dumps(rows))  # written last: marks the folder complete
+        try:
+            os.rename(tmp, final)
+        except OSError:  # another run of this task finished first: keep its result
+            shutil.rmtree(tmp, ignore_errors=True)
+            return _read_rows(final)
+        return rows
+    except Exception as err:  # noqa: BLE001 - isolation: any failure is reported, not raised
+        shutil.rmtree(tmp, ignore_errors=True)
+        return task.failed(_one_line(err))
+
+
+def _one_line(err: BaseException) -> str:
+    text = " ".join(str(err).split())
+    if isinstance(err, ValueError):  # our checks: the message says it all
+        return text
+    where = traceback.extract_tb(err.__traceback__)[-1] if err.__traceback__ else None
+    return f"{type(err).__name__}: {text}" + (f" ({Path(where.filename).name}:{where.lineno})" if where else "")
+
+
+def _read_rows(folder: Path) -> list[dict]:
+    return json.loads((folder / "rows.json").read_text())
+
+
+def _segment_task(task: _Task, tmp: Path) -> list[dict]:
+    from .core import segment
+    from .core.contour import perimeter, signed_area
+
+    with open_stack(task.path, channel=task.channel) as stack:
+        image = np.asarray(stack[task.frame])  # this frame only
+    rows, shapes = [], []
+    for k, init in enumerate(task.inits):
+        t0 = time.perf_counter()
+        row = {"input": task.path, "frame": task.frame, "object": k}
+        try:
+            res = segment(image, np.asarray(init), **segment_options_for(init, task.options, task.node_spacing))
+        except (ValueError, RuntimeError) as err:  # a bad contour or a divergence: this object only
+            rows.append({**row, "status": FAILED, "error": _one_line(err)})
+            continue
+        c = res.contour
+        centroid = _area_centroid(c)
+        rows.append({**row, "status": OK, "error": "", "converged": bool(res.converged),
+                     "stop_reason": res.stop_reason, "steps": int(res.steps), "n_nodes": len(c),
+                     "area": abs(float(signed_area(c))), "perimeter": float(perimeter(c)),
+                     "centroid_row": float(centroid[0]), "centroid_col": float(centroid[1]),
+                     "seconds": time.perf_counter() - t0, "contours": "contours.csv", "shape": len(shapes)})
+        shapes.append(c)
+    if shapes:
+        write_shapes_csv(tmp / "contours.csv", shapes)
+    return rows
+
+
+def _area_centroid(contour: np.ndarray) -> np.ndarray:
+    """Centroid of the region a polygon encloses (shoelace formula)."""
+    r, c = contour[:, 0], contour[:, 1]
+    r1, c1 = np.roll(r, -1), np.roll(c, -1)
+    cross = r * c1 - r1 * c
+    area = 0.5 * cross.sum()
+    if abs(area) < 1e-12:
+        return contour.mean(0)
+    return np.array([((r + r1) * cross).sum(), ((c + c1) * cross).sum()]) / (6 * area)
+
+
+def _track_task(task: _Task, tmp: Path) -> list[dict]:
+    from .core import LEFT, LOST, TRACKED
+
+    t0 = time.perf_counter()
+    tr, frames, written = track_file(task.path, task.inits, tmp, frames=task.frames, start=task.start,
+                                     channel=task.channel, node_spacing=task.node_spacing, max_steps=task.max_steps,
+                                     match_options=task.match_options, **task.options)
+    seconds = time.perf_counter() - t0
+    rows = []
+    for k in range(tr.n_objects):
+        counts = {s: tr.status[k].count(s) for s in (TRACKED, LOST, LEFT)}
+        rows.append({"input": task.path, "object": k, "status": OK, "error": "", "frames": tr.n_frames,
+                     "tracked": counts[TRACKED], "lost": counts[LOST], "left": counts[LEFT],
+                     "last_status": tr.status[k][-1], "seconds": seconds / tr.n_objects,
+                     "contours": written[0].name if written[0].exists() else "", "tracks": written[-1].name})
+    return rows
+
+
+def track_file(path, inits, folder, *, frames: str | None = None, start: int | None = None,
+               channel: int | None = None, node_spacing: float | None = None, max_steps: int | None = None,
+               match_options: dict | None = None, callback=None, **segment_options):
+    """Track contours through one movie and write the results in ``folder``.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``(frames, rows, cols)`` TIFF stack or zarr array, read one frame at a time.
+    inits : sequence of (N, 2) array_like
+        The contours drawn on frame ``start``.
+    folder : Path
+        Folder (created when the tracking is done) for ``contours.csv`` (napari shapes CSV, one polygon
+        per object and frame, the frame as axis-0) and ``tracks.csv`` (and
+        ``tracks.parquet`` with pyarrow): :meth:`~napari_physeg.core.TrackingResult.table`
+        with the frames numbered as in the stack.
+    frames, start, channel, node_spacing, max_steps, match_options, **segment_options
+        As for :func:`track_files`.
+    callback : callable, optional
+        Passed to :func:`~napari_physeg.core.track`.
+
+    Returns
+    -------
+    result : TrackingResult
+        Its frame ``t`` is the stack's frame ``frames[t]``.
+    frames : list of int
+    written : list of Path
+        ``contours.csv`` (absent when no object was found on any frame), then the tables.
+    """
+    from .core import track
+
+    folder = Path(folder)
+    with open_stack(path, channel=channel) as stack:
+        chosen = parse_frames(frames, len(stack)) if frames is not None else list(range(len(stack)))
+        start = chosen[0] if start is None else int(start)
+        if start not in chosen:
+            raise ValueError(f"the contours are drawn on frame {start}, which is not among the frames chosen "
+                             f"({frames}): include it, or give the frame they are drawn on (--start)")
+        movie = stack if chosen == list(range(len(stack))) else stack[chosen]
+        options = {"max_steps": max_steps} if max_steps is not None else {}
+        inits = [np.asarray(c, dtype=np.float64) for c in inits]
+        tr = track(movie, inits, start=chosen.index(start), callback=callback,
+                   segment_options=segment_options_for(_mean_contour(inits), segment_options, node_spacing),
+                   match_options=dict(match_options or {}), **options)
+    shapes, leading = [], []
+    for k in range(tr.n_objects):
+        for t, c in enumerate(tr.contours[k]):
+            if c is not None:
+                shapes.append(c)
+                leading.append((chosen[t],))
+    folder.mkdir(parents=True, exist_ok=True)
+    written = [folder / "contours.csv"]
+    if shapes:
+        write_shapes_csv(written[0], shapes, leading=leading)
+    table = tr.table()
+    table["frame"] = np.asarray(chosen)[table["frame"].to_numpy()]
+    written += write_table(table, folder / "tracks")
+    return tr, chosen, written
+
+
+def _mean_contour(inits):
+    """For ``node_spacing`` in tracking (one node count for all objects): the
+    contour of mean perimeter stands for them all."""
+    from .core.contour import perimeter
+
+    if len(inits) == 1:
+        return inits[0]
+    lengths = [perimeter(np.asarray(c, float)) for c in inits]
+    return inits[int(np.argmin(np.abs(np.asarray(lengths) - np.mean(lengths))))]
+
+
+# --------------------------------------------------------------------------
+# The run: checks, tasks, the cluster, the summary
+# --------------------------------------------------------------------------
+
+
+def segment_files(inputs, inits, out, *, frames: str | None = None, channel: int | None = None,
+                  node_spacing: float | None = None, workers: int | None = None, scheduler: str | None = None,
+                  client=None, overwrite: bool = False, progress: bool = True, **segment_options):
+    """Segment the same initial contours on every chosen frame of many images.
+
+    Parameters
+    ----------
+    inputs : sequence of str or Path
+        Images or stacks (TIFF, zarr, or any 2D image scikit-image reads).
+    inits : str, Path or sequence of (N, 2) array_like
+        The initial contours (napari's shapes CSV, or arrays), in every
+        image's (row, col) pixel coordinates.
+    out : str or Path
+        Output folder (created; an earlier run's results there are reused).
+    frames : str, optional
+        Frames of each stack, e.g. ``"0:10"`` or ``"3,7"`` (default: all).
+    channel : int, optional
+        Channel of RGB(A) images.
+    node_spacing : float, optional
+        Distance between nodes (px), turned into each contour's ``n_nodes``.
+    workers : int, optional
+        Worker processes of the local cluster (default: the cores available).
+    scheduler : str, optional
+        Address of a running ``dask.distributed`` scheduler to use instead.
+    client : distributed.Client, optional
+        A client to use instead (e.g. in a notebook).
+    overwrite : bool, optional
+        Delete the results of an earlier run in ``out`` first.
+    progress : bool, optional
+        Show a progress bar on stderr.
+    **segment_options
+        Options of :func:`~napari_physeg.core.segment` (material, stiffness,
+        polarity, forces, weights, ...); the core's defaults otherwise.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The summary, one row per input, frame and object (also written to
+        ``out/summary.csv``): ``input, frame, object, status`` (``"ok"`` or
+        ``"failed"``), ``error``, ``converged, stop_reason, steps, n_nodes,
+        area, perimeter, centroid_row, centroid_col, seconds``, ``contours``
+        (napari shapes CSV under ``out``), ``shape`` (the object's shape
+        index in it), and ``host``, ``pid`` (the worker that ran the task).
+
+    Raises
+    ------
+    ValueError
+        Before any work, for a missing input, bad contours or options, an
+        output folder that cannot be written or that holds results made with
+        other settings.
+    """
+    from .core.segmentation import check_segment_options
+
+    check_segment_options(**segment_options)
+    paths, inits, out = _checked_run(inputs, inits, out)
+    _check_scheduler(scheduler)
+    settings = dict(kind="segment", frames=frames, channel=channel, node_spacing=node_spacing,
+                    options=segment_options)
+    _prepare_out(out, settings, inits, overwrite)
+    tasks, failed = [], []
+    for path in paths:
+        try:
+            n_frames = _frame_count(path, channel)
+            chosen = parse_frames(frames, n_frames) if frames is not None else range(n_frames)
+        except ValueError as err:
+            failed += _Task("segment", path, "", str(out), inits).failed(_one_line(err))
+            continue
+        tasks += [_Task("segment", path, f"{_name(path)}/t{t:05d}", str(out), inits, segment_options, frame=t,
+                        channel=channel, node_spacing=node_spacing) for t in chosen]
+    return _finish(out, failed + _run(tasks, workers, scheduler, client, progress), ["input", "frame", "object"])
+
+
+def _frame_count(path, channel) -> int:
+    """Frames of a TIFF or zarr stack (its header only); other formats hold one
+    2D image (read by the task, not here: the client reads no pixels)."""
+    if Path(path).suffix.lower() not in TIFF_SUFFIXES and not is_zarr(Path(path)):
+        return 1
+    with open_stack(path, channel=channel) as stack:
+        return len(stack)
+
+
+def track_files(inputs, inits, out, *, frames: str | None = None, start: int | None = None,
+                channel: int | None = None, node_spacing: float | None = None, max_steps: int | None = None,
+                match_options: dict | None = None, workers: int | None = None, scheduler: str | None = None,
+                client=None, overwrite: bool = False, progress: bool = True, **segment_options):
+    """Track the same initial contours through many movies.
+
+    Parameters
+    ----------
+    inputs : sequence of str or Path
+        ``(frames, rows, cols)`` TIFF stacks or zarr arrays, read one frame at
+        a time.
+    inits : str, Path or sequence of (N, 2) array_like
+        The contours drawn on frame ``start`` (napari's shapes CSV, or arrays).
+    out : str or Path
+        Output folder (created; an earlier run's results there are reused).
+    frames : str, optional
+        Frames to track, e.g. ``"0:20"`` (default: all).
+    start : int, optional
+        The frame the contours were drawn on (default: the CSV's axis-0, else
+        the first frame chosen).
+    channel, node_spacing, workers, scheduler, client, overwrite, progress
+        As for :func:`segment_files` (one node count for all objects: that of
+        the contour of mean perimeter).
+    max_steps : int, optional
+        Time steps per object and frame (default: :func:`~napari_physeg.core.track`'s).
+    match_options : dict, optional
+        Options of :func:`~napari_physeg.core.match` for the correspondences.
+    **segment_options
+        Options of :func:`~napari_physeg.core.segment` (material, stiffness, ...).
+
+    Returns
+    -------
+    pandas.DataFrame
+        The summary, one row per input and object (also in
+        ``out/summary.csv``): ``input, object, status`` (``"ok"`` or
+        ``"failed"``), ``error``, ``frames, tracked, lost, left`` (frame
+        counts), ``last_status``, ``seconds``, ``contours`` (napari shapes CSV,
+        the frame as axis-0) and ``tracks`` (the per-node table of
+        :meth:`~napari_physeg.core.TrackingResult.table`, frames numbered as in
+        the stack), ``host``, ``pid``.
+
+    Raises
+    ------
+    ValueError
+        As :func:`segment_files`.
+    """
+    from .core.segmentation import check_segment_options
+
+    check_segment_options(**segment_options)
+    if inits is not None and not isinstance(inits, (list, tuple)) and start is None:
+        start = _drawn_on(inits)
+    paths, inits, out = _checked_run(inputs, inits, out)
+    _check_scheduler(scheduler)
+    settings = dict(kind="track", frames=frames, start=start, channel=channel, node_spacing=node_spacing,
+                    max_steps=max_steps, match_options=match_options or {}, options=segment_options)
+    _prepare_out(out, settings, inits, overwrite)
+    tasks = [_Task("track", path, _name(path), str(out), inits, segment_options, frames=frames, start=start,
+                   channel=channel, node_spacing=node_spacing, max_steps=max_steps,
+                   match_options=match_options or {}) for path in paths]
+    return _finish(out, _run(tasks, workers, scheduler, client, progress), ["input", "object"])
+
+
+def _drawn_on(csv_path) -> int | None:
+    """The one frame (axis-0) the contours of a shapes CSV lie on, or None for 2D ones."""
+    _, leading = read_shapes_csv(csv_path, leading=True)
+    drawn = sorted({int(round(lead[0])) for lead in leading if lead})
+    if len(drawn) > 1:
+        raise ValueError(f"the contours of {csv_path} lie on frames {drawn}: draw them all on one frame, "
+                         "or say which with start (--start)")
+    return drawn[0] if drawn else None
+
+
+def _checked_run(inputs, inits, out):
+    """Inputs that exist, contours as tuples of float lists, a writable out."""
+    from .core.contour import as_contour
+
+    # Absolute: the workers of a cluster may start elsewhere (the files on a shared file system).
+    paths = [str(Path(p).absolute()) for p in inputs]
+    if not paths:
+        raise ValueError("no input file given")
+    missing = [p for p in paths if not Path(p).exists()]
+    if missing:
+        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+        raise ValueError(f"no such input: {', '.join(missing[:3])}{more}")
+    if len(set(_name(p) for p in paths)) < len(paths):
+        raise ValueError("an input is given twice")
+    if isinstance(inits, (str, Path)):
+        inits = read_shapes_csv(inits)
+    inits = tuple(as_contour(c, name=f"contour {k}").tolist() for k, c in enumerate(inits))
+    if not inits:
+        raise ValueError("no initial contour given")
+    out = Path(out).absolute()
+    check_writable(out, folder=True)
+    return paths, inits, out
+
+
+def _check_scheduler(scheduler) -> None:
+    """Connect to ``scheduler`` once, before anything is written: a wrong address is a bad argument."""
+    if scheduler:
+        with _client(None, scheduler, None):
+            pass
+
+
+def check_writable(path: Path, *, folder: bool = False) -> None:
+    """Raise ValueError unless ``path`` (a file, or a folder to create) can be
+    written: its nearest existing folder is a folder and accepts a new file."""
+    path = Path(path)
+    if path.exists() and folder != path.is_dir():
+        raise ValueError(f"{path} exists and is {'a file' if folder else 'a folder'}: choose another output")
+    parent = path if folder and path.exists() else path.parent
+    while not parent.exists():  # a folder output: its missing parents are created
+        if not folder:
+            raise ValueError(f"cannot write {path}: the folder {parent} does not exist; create it first")
+        parent = parent.parent
+    if not parent.is_dir():
+        raise ValueError(f"cannot write {path}: {parent} is not a folder")
+    try:  # os.access says yes to root even on a read-only file system: try it
+        with atomic_path(parent / ".napari-physeg-write-test") as probe:
+            probe.write_bytes(b"")
+        os.unlink(parent / ".napari-physeg-write-test")
+    except OSError as err:
+        raise ValueError(f"cannot write to {parent}: {err.strerror or err}; choose another output") from None
+
+
+def _name(path) -> str:
+    """The results folder of an input: its name and a digest of its absolute
+    path (two plates' 'A01.tif' do not collide; the same file finds its results)."""
+    path = Path(path)
+    digest = hashlib.sha1(str(path.resolve()).encode()).hexdigest()[:8]
+    return f"{path.name}-{digest}"
+
+
+def _prepare_out(out: Path, settings: dict, inits, overwrite: bool) -> None:
+    """Create ``out``; refuse to mix results of other settings (or clear them
+    with ``overwrite``)."""
+    settings = json.loads(json.dumps({**settings, "inits": _digest(inits)}, default=str))
+    saved = out / _SETTINGS
+    if out.exists() and any(out.iterdir()) and not saved.exists():
+        raise ValueError(f"{out} is not empty and holds no batch results: choose another output folder")
+    if overwrite:
+        shutil.rmtree(out / _RESULTS, ignore_errors=True)
+        for name in (_SETTINGS, f"{_SUMMARY}.csv", f"{_SUMMARY}.parquet"):
+            with contextlib.suppress(FileNotFoundError):
+                (out / name).unlink()
+    elif saved.exists():
+        before = json.loads(saved.read_text())
+        if before != settings:
+            changed = sorted(k for k in set(before) | set(settings) if before.get(k) != settings.get(k))
+            raise ValueError(f"{out} holds results made with other settings ({', '.join(changed)}): "
+                             "choose another output folder, or pass --overwrite to replace them")
+    (out / _RESULTS).mkdir(parents=True, exist_ok=True)
+    with atomic_path(saved) as tmp:
+        tmp.write_text(json.dumps(settings, indent=1))
+
+
+def _digest(inits) -> str:
+    return hashlib.sha1(np.asarray(np.concatenate(inits), dtype=np.float64).tobytes()).hexdigest()[:16]
+
+
+@contextlib.contextmanager
+def _client(workers, scheduler, client):
+    """The client to run on: the one given, one connected to ``scheduler``, or
+    a local cluster of ``workers`` single-threaded processes."""
+    if client is not None:
+        yield client
+        return
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            connected = Client(scheduler, timeout="10s", set_as_default=False)
+        except (OSError, ValueError, TypeError) as err:  # refused, timed out, not an address
+            raise ValueError(f"could not reach the dask scheduler at {scheduler}: {_one_line(err)}") from None
+        with connected:
+            yield connected
+        return
+    n = default_workers() if workers is None else int(workers)
+    if n < 1:
+        raise ValueError(f"workers must be at least 1, got {workers!r}")
+    # Processes, one thread each: the core is numpy/scipy code that holds the
+    # GIL in places; dask's nannies pin BLAS to one thread in each. Not the
+    # default client (set_as_default=False): dask computations elsewhere in
+    # this process must not be sent to it, nor find it gone once it closes.
+    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            Client(cluster, set_as_default=False) as local:
+        yield local
+
+
+def _run(tasks, workers, scheduler, client, progress) -> list[dict]:
+    """Run the tasks on the cluster; every task's rows (failed ones too)."""
+    out_rows: list[dict] = []
+    todo = []
+    for task in tasks:  # complete ones need no cluster
+        done = Path(task.out) / _RESULTS / task.name
+        (out_rows.extend(_read_rows(done)) if (done / "rows.json").exists() else todo.append(task))
+    if not todo:
+        return out_rows
+    from dask.distributed import as_completed
+    from tqdm.auto import tqdm
+
+    with _client(workers, scheduler, client) as c:
+        futures = {c.submit(_execute, task, key=f"napari-physeg-{task.name}-{uuid.uuid4().hex[:8]}",
+                            pure=False): task for task in todo}
+        bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), unit="task", disable=not progress,
+                   file=sys.stderr, desc=todo[0].kind)
+        for future in as_completed(futures, loop=c.loop):  # c need not be the default client
+            try:
+                rows = future.result()
+            except Exception as err:  # noqa: BLE001 - e.g. KilledWorker: the task's workers kept dying
+                rows = futures[future].failed(_one_line(err))
+            out_rows.extend(rows)
+            bar.update(1)
+        bar.close()
+    return out_rows
+
+
+def _finish(out: Path, rows: list[dict], keys: list[str]):
+    """Write the summary (sorted, one row per key) and clear temporary folders."""
+    import pandas as pd
+
+    for tmp in (out / _RESULTS).rglob(".*.tmp-*"):  # left by tasks whose worker died
+        shutil.rmtree(tmp, ignore_errors=True)
+    # Nullable dtypes: a failed row's missing counts leave the others' integers whole.
+    table = pd.DataFrame(rows).convert_dtypes()
+    table = table.sort_values(keys, kind="stable").reset_index(drop=True)
+    lead = [*keys, "status", "error"]
+    table = table[lead + [c for c in table.columns if c not in lead]]
+    write_table(table, out / _SUMMARY)
+    return table
