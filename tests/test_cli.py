@@ -375,3 +375,20 @@ def test_options_reach_segment_by_name_and_the_rest_keep_its_defaults(scene, mon
     assert options == {"stiffness": 1e5, "n_nodes": round(perimeter(read_shapes_csv(init)[0]) / 4),
                        "polarity": "bright", "forces": ("edges", "distance"),
                        "weights": {"edges": 0.5, "distance": 0.5}, "sigma_factor": 1.2, "max_steps": 400}
+
+
+def test_a_material_without_stiffness_gets_the_r_that_suits_it(scene, monkeypatch):
+    # As the widget does: copper's suggested r (the paper's 1e6), not rubber's default 2000.
+    import napari_physeg.core as core
+
+    seen, real = [], core.segment
+
+    @functools.wraps(real)
+    def spy(image, init, **options):
+        seen.append(options)
+        return real(image, init, **options)
+
+    monkeypatch.setattr(core, "segment", spy)
+    obj, image, init, tmp = scene
+    assert main(["segment", str(image), "--init", str(init), "--out", str(tmp / "c.csv"), "--material", "copper"]) == 0
+    assert seen[-1] == {"material": "copper", "stiffness": 1e6}

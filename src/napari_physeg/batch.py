@@ -65,14 +65,13 @@ def default_workers() -> int:
 
 def segment_options_for(contour, options: dict, node_spacing: float | None) -> dict:
     """``options`` of :func:`~napari_physeg.core.segment` for one contour:
-    ``node_spacing`` (px) becomes its node count, as in the widgets."""
-    from .core.contour import perimeter
+    ``node_spacing`` (px) becomes its node count, as in the widgets
+    (:func:`~napari_physeg.core.contour.nodes_for_spacing`)."""
+    from .core.contour import nodes_for_spacing
 
     if node_spacing is None:
         return dict(options)
-    if not node_spacing > 0:
-        raise ValueError(f"node spacing must be positive, got {node_spacing!r} px")
-    return {**options, "n_nodes": max(3, int(round(perimeter(np.asarray(contour, float)) / node_spacing)))}
+    return {**options, "n_nodes": nodes_for_spacing(np.asarray(contour, float), node_spacing)}
 
 
 # --------------------------------------------------------------------------

@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from .io import open_stack, parse_frames, read_shapes_csv, write_shapes_csv
 
@@ -103,8 +104,9 @@ def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> 
                    "density in kg/m^3 instead of the preset's, typically 1000-9000 (rubber 1100, copper 8960)")
     g.add_argument("--stiffness", type=_number(float, 0, True), metavar="R",
                    help=f"stiffness constant r (N/m) scaling the image forces: force on a node = r x its feature "
-                   f"force; default {d['stiffness']:g}. Typical: 2000 for rubber, 1e6 for copper or steel; too low "
-                   "and the contour barely moves, far too high and it may diverge")
+                   f"force; default: the one that suits --material ({d['stiffness']:g} for {d['material']}, 1e6 for "
+                   "copper, see core.materials.SUGGESTED_STIFFNESS); too low and the contour barely moves, far too "
+                   "high and it may diverge")
     nodes = g.add_mutually_exclusive_group()
     if spacing:
         nodes.add_argument("--node-spacing", type=_number(float, 0, True), metavar="PX",
@@ -144,6 +146,10 @@ def _segment_options(args) -> dict:
 
         preset = get_material(opts.get("material", _defaults(segment)["material"]))
         opts["material"] = preset.with_(name=f"custom ({preset.name})", **changes)
+    if "material" in opts and "stiffness" not in opts:  # as the widget: the r that suits the material
+        from .core.materials import suggested_stiffness
+
+        opts["stiffness"] = suggested_stiffness(opts["material"])
     if args.weights is not None:
         opts["forces"] = tuple(k for k, w in args.weights.items() if w > 0)
         opts["weights"] = {k: args.weights[k] for k in opts["forces"]}
@@ -580,7 +586,10 @@ def main(argv=None) -> int:
     except SystemExit as stop:  # --help (0), or a malformed argument (2, one line already printed)
         return stop.code
     try:
-        return args.run(args)
+        # The core's dense problems are small: more BLAS threads only fight each
+        # other (a 128 x 128 eigenproblem took 0.5 s instead of 2 ms on a busy machine).
+        with threadpool_limits(limits=1, user_api="blas"):
+            return args.run(args)
     except (ValueError, OSError) as err:  # bad input, or a file that cannot be read or written
         text = " ".join(str(err).split())
         print(f"{PROG}: error: {text}", file=sys.stderr)
