@@ -143,7 +143,7 @@ def _read_rows(folder: Path) -> list[dict]:
 
 def _segment_task(task: _Task, tmp: Path) -> list[dict]:
     from .core import segment
-    from .core.contour import perimeter, signed_area
+    from .core.contour import area_centroid, perimeter, signed_area
 
     with open_stack(task.path, channel=task.channel) as stack:
         image = np.asarray(stack[task.frame])  # this frame only
@@ -157,7 +157,7 @@ def _segment_task(task: _Task, tmp: Path) -> list[dict]:
             rows.append({**row, "status": FAILED, "error": _one_line(err)})
             continue
         c = res.contour
-        centroid = _area_centroid(c)
+        centroid = area_centroid(c)
         rows.append({**row, "status": OK, "error": "", "converged": bool(res.converged),
                      "stop_reason": res.stop_reason, "steps": int(res.steps), "n_nodes": len(c),
                      "area": abs(float(signed_area(c))), "perimeter": float(perimeter(c)),
@@ -167,17 +167,6 @@ def _segment_task(task: _Task, tmp: Path) -> list[dict]:
     if shapes:
         write_shapes_csv(tmp / "contours.csv", shapes)
     return rows
-
-
-def _area_centroid(contour: np.ndarray) -> np.ndarray:
-    """Centroid of the region a polygon encloses (shoelace formula)."""
-    r, c = contour[:, 0], contour[:, 1]
-    r1, c1 = np.roll(r, -1), np.roll(c, -1)
-    cross = r * c1 - r1 * c
-    area = 0.5 * cross.sum()
-    if abs(area) < 1e-12:
-        return contour.mean(0)
-    return np.array([((r + r1) * cross).sum(), ((c + c1) * cross).sum()]) / (6 * area)
 
 
 def _track_task(task: _Task, tmp: Path) -> list[dict]:

@@ -74,6 +74,18 @@ def record_updates(widget, monkeypatch, on_update=None):
     return seen
 
 
+def fail_on_small_shapes(monkeypatch):
+    """Make the core fail on shapes less than 60 px tall, as it does on a uniform background."""
+    real_iter_segment = seg.iter_segment
+
+    def failing_on_the_small_one(image, init, **kwargs):
+        if np.ptp(init[:, 0]) < 60:
+            raise ValueError("the contour collapsed to a point after 12 steps: no object border was found")
+        return real_iter_segment(image, init, **kwargs)
+
+    monkeypatch.setattr(seg, "iter_segment", failing_on_the_small_one)
+
+
 @pytest.fixture
 def viewer_widget(dock):
     """A viewer with the segmentation widget docked in it."""
@@ -589,14 +601,7 @@ def test_good_shapes_come_back_when_another_fails(viewer_widget, wait_done, erro
     viewer.open_sample("napari-physeg", "hand_segmentation")
     shapes = viewer.layers["initial contour"]
     shapes.add_polygons([np.asarray(shapes.data[0]) * 0.2 + 5])  # a second, small shape in the corner
-    real_iter_segment = seg.iter_segment
-
-    def failing_on_the_small_one(image, init, **kwargs):
-        if np.ptp(init[:, 0]) < 60:
-            raise ValueError("the contour collapsed to a point after 12 steps: no object border was found")
-        return real_iter_segment(image, init, **kwargs)
-
-    monkeypatch.setattr(seg, "iter_segment", failing_on_the_small_one)
+    fail_on_small_shapes(monkeypatch)
     widget.reset_choices()
     widget.run()
     wait_done(widget)
@@ -691,14 +696,7 @@ def test_a_long_run_keeps_the_gui_live_and_keeps_the_good_shapes(viewer_widget, 
     widget.reset_choices()
     widget._image.value, widget._shapes.value = viewer.layers["camera"], viewer.layers["drawn"]
     widget.physics._spacing.value = 1.75  # ~600 nodes
-    real_iter_segment = seg.iter_segment
-
-    def failing_on_the_small_one(image, init, **kwargs):
-        if np.ptp(init[:, 0]) < 60:
-            raise ValueError("the contour collapsed to a point after 12 steps: no object border was found")
-        return real_iter_segment(image, init, **kwargs)
-
-    monkeypatch.setattr(seg, "iter_segment", failing_on_the_small_one)
+    fail_on_small_shapes(monkeypatch)
     gaps, last = [], [time.perf_counter()]
 
     def tick():

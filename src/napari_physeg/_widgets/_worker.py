@@ -22,6 +22,8 @@ from napari.qt.threading import GeneratorWorker, thread_worker
 from napari.utils.notifications import show_error
 from threadpoolctl import threadpool_limits
 
+from ._layers import write_csv
+
 __all__ = ["WorkerWidget", "ask_save_path", "relay", "run_to_completion"]
 
 
@@ -103,6 +105,23 @@ class WorkerWidget(Container):
         self.native.layout().insertWidget(0, self.scroll_area, 1)
         self.native.layout().setSpacing(2)
         self._status.native.setWordWrap(True)  # long reports must not widen the dock
+
+    # ------------------------------------------------------------ export (widgets with a "Save CSV…" button)
+    #: What the CSV holds, for the file name; a widget that exports sets it and defines export_table().
+    export_what = ""
+
+    def _ask_export(self, *_):
+        pair = getattr(self, "pair", None)
+        name = f"{pair.a_label} to {pair.b_label} {self.export_what}.csv" if pair else f"{self.export_what}.csv"
+        path = ask_save_path(self, f"Save the {self.export_what} as CSV", name)
+        if path:
+            self.export_csv(path)
+
+    def export_csv(self, path) -> None:
+        """Write the last result's :meth:`export_table` to ``path`` as CSV."""
+        table = self.export_table()
+        write_csv(path, table)
+        self._status.value = f"Saved {len(next(iter(table.values())))} rows of {self.export_what} to {path}"
 
     def controls(self) -> list:
         """The parameter widgets: those in the scroll area, then the Advanced ones."""

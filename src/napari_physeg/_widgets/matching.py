@@ -47,8 +47,7 @@ from ._inputs import (
     read_contour_pair,
 )
 from ._layers import contours_to_shapes_data
-from ._layers import write_csv
-from ._worker import WorkerWidget, ask_save_path, relay, run_to_completion
+from ._worker import WorkerWidget, relay, run_to_completion
 
 __all__ = [
     "COST_COLORMAP",
@@ -422,14 +421,10 @@ class MatchingWidget(WorkerWidget):
         self._fail(error_message(err))
 
     # ------------------------------------------------------------ export
-    def _ask_export(self, *_):
-        path = ask_save_path(self, "Save the pairs as CSV", f"{self.pair.a_label} to {self.pair.b_label} pairs.csv")
-        if path:
-            self.export_csv(path)
+    export_what = "pairs"
 
-    def export_csv(self, path) -> None:
-        """Write the last matching's pairs (see :func:`matching_table`) to ``path``."""
+    def export_table(self) -> dict:
+        """The last matching's pairs as CSV columns (see :func:`matching_table`)."""
         if self.last_outcome is None or not self.last_outcome.ok:
             raise InputError("no matching to save yet: press Run first")
-        write_csv(path, matching_table(self.last_outcome.matching, self.pair))
-        self._status.value = f"Saved {len(self.last_outcome.matching.pairs)} pairs to {path}"
+        return matching_table(self.last_outcome.matching, self.pair)

@@ -49,8 +49,8 @@ from ._inputs import (
     pick_default_b,
     read_contour_pair,
 )
-from ._layers import contours_to_shapes_data, prepend_axes_transform, write_csv
-from ._worker import WorkerWidget, ask_save_path, relay, run_to_completion
+from ._layers import contours_to_shapes_data, prepend_axes_transform
+from ._worker import WorkerWidget, relay, run_to_completion
 
 __all__ = [
     "COMPUTE_MATCHING",
@@ -536,14 +536,10 @@ class SimulationWidget(WorkerWidget):
         self._fail(error_message(err))
 
     # ------------------------------------------------------------ export
-    def _ask_export(self, *_):
-        path = ask_save_path(self, "Save the frames as CSV", f"{self.pair.a_label} to {self.pair.b_label} frames.csv")
-        if path:
-            self.export_csv(path)
+    export_what = "frames"
 
-    def export_csv(self, path) -> None:
-        """Write the last simulation's frames (see :func:`frames_table`) to ``path``."""
+    def export_table(self) -> dict:
+        """The last simulation's frames as CSV columns (see :func:`frames_table`)."""
         if self.last_outcome is None or not self.last_outcome.ok:
             raise InputError("no simulation to save yet: press Run first")
-        write_csv(path, frames_table(self.last_outcome.result))
-        self._status.value = f"Saved {len(self.last_outcome.result.frames)} frames to {path}"
+        return frames_table(self.last_outcome.result)

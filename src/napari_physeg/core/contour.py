@@ -17,6 +17,7 @@ __all__ = [
     "resample",
     "nodes_for_spacing",
     "crosses_itself",
+    "area_centroid",
     "outward_normals",
     "mean_nearest_neighbour_distance",
     "polygon_mask",
@@ -264,3 +265,16 @@ def cut_pinches(contour: np.ndarray, gap: float, max_cuts: int = 100) -> np.ndar
 def crosses_itself(contour) -> bool:
     """Whether two non-adjacent edges of the closed ``contour`` cross (it is not a simple polygon)."""
     return len(_crossing_pairs(np.asarray(contour, dtype=np.float64))) > 0
+
+
+def area_centroid(contour) -> np.ndarray:
+    """Centroid of the region the closed ``contour`` encloses (shoelace
+    formula); the mean of the nodes when it encloses no area."""
+    contour = np.asarray(contour, dtype=np.float64)
+    r, c = contour[:, 0], contour[:, 1]
+    r1, c1 = np.roll(r, -1), np.roll(c, -1)
+    cross = r * c1 - r1 * c
+    area = 0.5 * cross.sum()
+    if abs(area) < 1e-12:
+        return contour.mean(0)
+    return np.array([((r + r1) * cross).sum(), ((c + c1) * cross).sum()]) / (6 * area)

@@ -27,7 +27,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._drain import drain
-from .contour import (as_contour, outward_normals, perimeter, polygon_mask, positively_oriented, remove_loops,
+from .contour import (area_centroid, as_contour, outward_normals, perimeter, polygon_mask, positively_oriented, remove_loops,
                       resample, signed_area)
 from .dynamics import DivergenceError
 from .matching import match
@@ -127,7 +127,7 @@ class TrackingResult:
 
     def centroids(self, k: int) -> np.ndarray:
         """``(T, 2)`` area centroids of object ``k`` (NaN where it has no contour)."""
-        return np.array([_centroid(c) if c is not None else (np.nan, np.nan) for c in self.contours[k]])
+        return np.array([area_centroid(c) if c is not None else (np.nan, np.nan) for c in self.contours[k]])
 
     def membrane_map(self, k: int, quantity: str = "normal_velocity", n_arc: int = 100) -> np.ndarray:
         """Object ``k``'s ``quantity`` as an image, arc position x time.
@@ -184,16 +184,6 @@ class TrackingResult:
         return pd.concat(parts, ignore_index=True)
 
 
-def _centroid(contour: np.ndarray) -> np.ndarray:
-    r, c = contour[:, 0], contour[:, 1]
-    r1, c1 = np.roll(r, -1), np.roll(c, -1)
-    cross = r * c1 - r1 * c
-    area = 0.5 * cross.sum()
-    if abs(area) < 1e-12:
-        return contour.mean(0)
-    return np.array([((r + r1) * cross).sum(), ((c + c1) * cross).sum()]) / (6 * area)
-
-
 def _check_frames(frames):
     shape = getattr(frames, "shape", None)
     if shape is None:
@@ -232,7 +222,7 @@ def _next_init(history: list[np.ndarray]) -> np.ndarray:
     """The previous contour moved by the centroid's last displacement and
     grown by a margin: the next frame's starting contour."""
     prev = history[-1]
-    shift = _centroid(prev) - _centroid(history[-2]) if len(history) > 1 else 0.0
+    shift = area_centroid(prev) - area_centroid(history[-2]) if len(history) > 1 else 0.0
     radius = np.sqrt(abs(signed_area(prev)) / np.pi)
     return _grown(prev + shift, float(np.clip(0.2 * radius, 3.0, 8.0)))
 
