@@ -49,7 +49,8 @@ from scipy.spatial import cKDTree
 from ._drain import drain
 from .contour import segment_lengths, signed_area
 from .materials import Material
-from .modes import MAX_AUTO_MODES, ModalBasis, _check_nodes, _modal_raw, select_modes, truncate
+from ._validation import check_contour
+from .modes import MAX_AUTO_MODES, ModalBasis, _modal_raw, select_modes, truncate
 
 __all__ = [
     "Matching",
@@ -186,12 +187,20 @@ class Matching:
 # --------------------------------------------------------------------------
 
 
-def _ccw_permutation(nodes: np.ndarray) -> np.ndarray:
-    """Index map that makes the contour positively oriented, node 0 kept first."""
+def _canonical_order(nodes: np.ndarray) -> np.ndarray:
+    """Index map that makes the contour positively oriented and starts it at
+    the node farthest from the centroid.
+
+    Every feature of the matching (model nodes, curvature signature, arc
+    positions, start candidates) is measured from node 0; starting at a node
+    the geometry picks makes the matching independent of where the caller's
+    numbering starts and of its direction.
+    """
     m = len(nodes)
-    if signed_area(nodes) >= 0:
-        return np.arange(m)
-    return (-np.arange(m)) % m
+    order = np.arange(m) if signed_area(nodes) >= 0 else (-np.arange(m)) % m
+    centred = nodes - nodes.mean(axis=0)
+    start = int(np.argmax(np.einsum("ij,ij->i", centred, centred)[order]))
+    return np.roll(order, -start)
 
 
 def _arc_positions(nodes: np.ndarray):
@@ -593,7 +602,7 @@ def _band_cost(part: np.ndarray, t_a: np.ndarray, t_b: np.ndarray, half_width: f
     return np.where(d2 <= half_width**2, 0.0, 1e3)
 
 
-def _detail_pass(A, B, part, t_a, t_b, perimeter_a, perimeter_b, opts):
+def _detail_pass(A, B, part, t_a, t_b, opts):
     """Re-align ``part`` within a narrow band using curvature at 1-4 node spacings.
 
     The signature of :func:`match` stops at 1/400 of the perimeter, about
@@ -604,12 +613,14 @@ def _detail_pass(A, B, part, t_a, t_b, perimeter_a, perimeter_b, opts):
     pieces change shape, shift whole parts by a few nodes. Searched only
     near the first path, the fine scales pin them.
     """
-    spacing = max(perimeter_a / len(A), perimeter_b / len(B))
-    ka = curvature_signature(A, tuple(m * spacing / perimeter_a for m in _DETAIL_SCALES))
-    kb = curvature_signature(B, tuple(m * spacing / perimeter_b for m in _DETAIL_SCALES))
+    # The coarser of the two node spacings, as a fraction of each perimeter
+    # (absolute lengths would make the pass depend on the contours' scales).
+    spacing = max(1.0 / len(A), 1.0 / len(B))
+    ka = curvature_signature(A, tuple(m * spacing for m in _DETAIL_SCALES))
+    kb = curvature_signature(B, tuple(m * spacing for m in _DETAIL_SCALES))
     C = _pairwise_sq(ka, kb) / ka.shape[1]
     penalty = _DETAIL_PENALTY * float(C.mean()) + 1e-12
-    band = _band_cost(part, t_a, t_b, _DETAIL_BAND * spacing * len(B) / perimeter_b)
+    band = _band_cost(part, t_a, t_b, _DETAIL_BAND * spacing * len(B))
     start = int(part[0]) if part[0] >= 0 else None
     return _search("order", C + band, t_a, t_b, **{**opts, "penalty": penalty, "n_starts": 1}, start=start)
 
@@ -850,8 +861,8 @@ def _prepare(a, b, *, method, n_modes, model_nodes, sigma_factor, material, curv
              refine, sign_correction, order_penalty, n_starts, gap_cost, detail, displacement_weight) -> _Job:
     """Check every argument of :func:`match` (cheap: before any heavy work)."""
     method = _check_method(method)
-    a = _check_nodes(a, "a")
-    b = _check_nodes(b, "b")
+    a = check_contour(a, "a")
+    b = check_contour(b, "b")
     if _check_weight(sigma_factor, "sigma_factor") == 0:
         raise ValueError(f"sigma_factor must be a positive number, got {sigma_factor!r}")
     if detail is not None and not isinstance(detail, (bool, np.bool_)):
@@ -859,15 +870,20 @@ def _prepare(a, b, *, method, n_modes, model_nodes, sigma_factor, material, curv
     if detail and method != "order":
         raise ValueError(f"the detail pass is part of method='order', not {method!r}")
     # Orient both contours alike (positively); indices are mapped back at the end.
-    pa, pb = _ccw_permutation(a), _ccw_permutation(b)
+    pa, pb = _canonical_order(a), _canonical_order(b)
+    # Centred (each on its own centroid, or both on a's when their relative
+    # position matters): features of far-off contours keep their precision.
+    displacement_weight = _check_weight(displacement_weight, "displacement_weight")
+    centre_a = a.mean(axis=0)
+    centre_b = centre_a if displacement_weight > 0 else b.mean(axis=0)
     return _Job(
-        A=a[pa], B=b[pb], pa=pa, pb=pb, method=method,
+        A=a[pa] - centre_a, B=b[pb] - centre_b, pa=pa, pb=pb, method=method,
         n_modes=_check_count(n_modes, "n_modes", 1, True),
         model_nodes=_check_count(model_nodes, "model_nodes", 8, True),
         sigma_factor=float(sigma_factor), material=material,
         curvature_weight=_check_weight(curvature_weight, "curvature_weight"),
         arclength_weight=_check_weight(arclength_weight, "arclength_weight"),
-        displacement_weight=_check_weight(displacement_weight, "displacement_weight"),
+        displacement_weight=displacement_weight,
         refine=method == "order" if refine is None else bool(refine),
         detail=detail, sign_correction=bool(sign_correction),
         order_penalty=_check_weight(order_penalty, "order_penalty"),
@@ -962,7 +978,7 @@ def _run(job: _Job):
         if (yield MatchingProgress(float(work[2]), "refinement")):
             return result(part, total, final, "cancelled")
     if detail:
-        part, total = _detail_pass(A, B, part, t_a, t_b, perimeter_a, perimeter_b, opts)
+        part, total = _detail_pass(A, B, part, t_a, t_b, opts)
         if (yield MatchingProgress(float(work[3]), "detail")):
             return result(part, total, final, "cancelled")
     return result(part, total, final, "completed")
