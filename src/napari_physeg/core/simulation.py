@@ -310,16 +310,18 @@ def _run(a, b, matching, options):
     pairs, affinity = _check_matching(matching, len(a), len(b))
     # Centred on a: the element and the springs see the shapes, not where
     # they lie (a contour at 1e10 px keeps its precision).
-    centre = a.mean(axis=0)
+    given, centre = a, a.mean(axis=0)
     a, b = a - centre, b - centre
     targets = node_targets(a, b, pairs, affinity)
     model = _Model(a, targets, q=q, material=material, sigma_factor=sigma_factor, damping_ratio=damping_ratio)
     t_model = time.perf_counter()
-    path, steps, stop_reason = yield from _evolve(a, model, max_steps, tol)
+    path, steps, stop_reason = yield from _evolve(a, model, max_steps, tol, centre)
     frames, times = _even_frames(path, model.dt, n_frames)
+    frames += centre
+    frames[0] = given  # exactly
     t_end = time.perf_counter()
     return SimulationResult(
-        frames=frames + centre,
+        frames=frames,
         targets=targets + centre,
         times=times,
         steps=steps,
@@ -385,10 +387,10 @@ def _singular(reason) -> ValueError:
     )
 
 
-def _evolve(a, model: _Model, max_steps: int, tol: float):
+def _evolve(a, model: _Model, max_steps: int, tol: float, centre: np.ndarray):
     """Time steps until at rest (within ``tol`` of the equilibrium), stopped
-    or ``max_steps``; yields :class:`SimulationProgress`, returns the path,
-    the steps taken and the stop reason."""
+    or ``max_steps``; yields :class:`SimulationProgress` (shapes moved back by
+    ``centre``), returns the path, the steps taken and the stop reason."""
     path = [a.copy()]
     stop_reason, steps = "max_steps", 0
     for steps in range(1, int(max_steps) + 1):
@@ -399,7 +401,7 @@ def _evolve(a, model: _Model, max_steps: int, tol: float):
         if not np.all(np.isfinite(X)):
             raise DivergenceError(f"the simulation diverged at step {steps}")
         path.append(X)
-        if (yield SimulationProgress(steps, X.copy())):
+        if (yield SimulationProgress(steps, X + centre)):
             stop_reason = "cancelled"
             break
         if np.abs(model.at_rest - X).max() < tol:
