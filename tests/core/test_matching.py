@@ -164,8 +164,13 @@ def test_detail_pass_pins_the_turned_thumb_of_a_dense_hand():
     acc, acc_coarse = within(m.partner, truth, 1000), within(coarse.partner, truth, 1000)
     print(f"hand spread->closed 1000x1000: detail {acc:.3f}, without {acc_coarse:.3f}")
     assert m.detail_refined and not coarse.detail_refined
-    assert acc >= 0.85 and acc >= acc_coarse + 0.1
+    assert acc >= 0.85 and acc >= acc_coarse
     assert is_cyclically_ordered(m.pairs, 1000)
+    # On the modal and curvature terms alone (no inner-distance context) the
+    # coarse passes leave the thumb a few nodes off: the detail pass pins it.
+    plain = within(match(a, b, context_weight=0.0).partner, truth, 1000)
+    plain_coarse = within(match(a, b, context_weight=0.0, detail=False).partner, truth, 1000)
+    assert plain >= plain_coarse + 0.1
 
 
 def test_detail_pass_only_where_the_nodes_resolve_fine_curvature():
@@ -237,8 +242,8 @@ def test_local_returns_only_mutual_minima():
     rows, cols = C.argmin(axis=1), C.argmin(axis=0)
     mutual = [(i, rows[i]) for i in range(67) if cols[rows[i]] == i]
     assert len(mutual) == len(loc.pairs)
-    # With the curvature term off the cost is the modal affinity itself.
-    pure = match(a, b, method="local", curvature_weight=0.0)
+    # With the curvature and context terms off the cost is the modal affinity itself.
+    pure = match(a, b, method="local", curvature_weight=0.0, context_weight=0.0)
     assert np.allclose(pure.cost_matrix, pure.affinity / pure.n_modes)
 
 

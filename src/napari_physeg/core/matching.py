@@ -48,6 +48,7 @@ from scipy.spatial import cKDTree
 
 from ._drain import drain
 from .contour import segment_lengths, signed_area
+from .inner_distance import inner_distance_context
 from .materials import Material
 from ._validation import check_contour
 from .modes import MAX_AUTO_MODES, ModalBasis, _modal_raw, select_modes, truncate
@@ -91,6 +92,15 @@ _DETAIL_MIN_NODES = int(round(1.0 / _CURVATURE_SCALES[0]))
 _DETAIL_ROUGHNESS = 0.1
 #: Half-width of the free start of ``order``, as a fraction of b's node count.
 _START_WINDOW = 0.02
+#: Nodes per contour of the coarse search over every start (``order``).
+_COARSE_NODES = 100
+#: Windows of free starts the coarse search tiles b with (one DP each).
+_COARSE_WINDOWS = 12
+#: Default ``neighbourhood`` of ``global``: the span, as a fraction of the
+#: perimeter, over which the cost is averaged along its diagonals.
+_GLOBAL_NEIGHBOURHOOD = 0.25
+#: Offsets the neighbourhood average samples.
+_NEIGHBOURHOOD_TERMS = 9
 #: Anisotropy (minor / major second moment) above which the frame of b is searched.
 _ISOTROPIC = 0.8
 
@@ -257,6 +267,18 @@ def curvature_signature(nodes, scales=_CURVATURE_SCALES, *, saturation: float = 
         at_nodes = np.interp(t * n, np.arange(n + 1), np.concatenate([kappa_n, kappa_n[:1]]))
         out[:, k] = (2.0 / np.pi) * np.arctan(at_nodes / saturation)
     return out
+
+
+def _context_at_nodes(nodes: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Inner-distance shape context of every node: that of the evenly spaced
+    samples (:func:`.inner_distance.inner_distance_context`), linearly
+    interpolated in arc length (``t``, node 0 at 0, as the samples)."""
+    ctx = inner_distance_context(nodes)
+    m = len(ctx)
+    pos = t * m
+    lo = np.floor(pos).astype(np.intp) % m
+    w = (pos - np.floor(pos))[:, None]
+    return (1.0 - w) * ctx[lo] + w * ctx[(lo + 1) % m]
 
 
 # --------------------------------------------------------------------------
@@ -474,27 +496,30 @@ def _order_dp(C: np.ndarray, nb: int, window: int, repeat: float, skip: float, g
     return part, total
 
 
-def _diagonal_scores(C: np.ndarray) -> np.ndarray:
-    """Cost of the uniform-rate cyclic alignment starting at each node of ``b``."""
+def _coarse_starts(C: np.ndarray, n: int, penalty: float, gap: float) -> list[int]:
+    """The ``n`` best start nodes of ``b`` for node 0 of ``a``, from the
+    order-preserving search run around *every* start on a coarse copy of ``C``.
+
+    ``C`` is sub-sampled to at most :data:`_COARSE_NODES` nodes per contour
+    and the DP run once per window of free starts, the windows tiling ``b``;
+    each window's best alignment is scored by the DP's own objective (not by
+    a uniform-rate guess, which a part that slid along the body fools), so
+    no start region is left untried and the candidates are the start nodes of
+    the best whole alignments, at least a window apart.
+    """
     na, nb = C.shape
-    step = np.rint(np.arange(na) * nb / na).astype(np.intp)
-    cols = (np.arange(nb)[:, None] + step[None, :]) % nb
-    return C[np.arange(na)[None, :], cols].sum(axis=1)
-
-
-def _start_candidates(scores: np.ndarray, n: int, separation: int = 1) -> list[int]:
-    """Up to ``n`` lowest cyclic local minima of ``scores`` at least
-    ``separation`` nodes apart."""
-    nb = len(scores)
-    left, right = np.roll(scores, 1), np.roll(scores, -1)
-    minima = np.flatnonzero((scores <= left) & (scores <= right))
-    chosen: list[int] = []
-    for s in minima[np.argsort(scores[minima], kind="stable")]:
-        if all(min(abs(int(s) - c), nb - abs(int(s) - c)) >= separation for c in chosen):
-            chosen.append(int(s))
-        if len(chosen) == n:
-            break
-    return chosen
+    step_a, step_b = max(1, -(-na // _COARSE_NODES)), max(1, -(-nb // _COARSE_NODES))
+    Cc = C[::step_a, ::step_b]
+    ncb = Cc.shape[1]
+    window = max(1, min((ncb - 1) // 2, -(-ncb // _COARSE_WINDOWS) // 2))
+    found = []
+    for centre in range(0, ncb, 2 * window + 1):
+        cols = (centre - window + np.arange(ncb + 2 * window)) % ncb
+        part, total = _order_dp(Cc[:, cols], ncb, window, penalty, penalty, gap)
+        first = part[np.flatnonzero(part >= 0)[0]] if np.any(part >= 0) else window
+        found.append((total, int(cols[first]) * step_b))
+    found.sort()
+    return [start for _, start in found[:n]]
 
 
 def _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window):
@@ -531,7 +556,7 @@ def _iter_search(method, C, t_a, t_b, *, arc_weight, n_starts, gap, penalty, sta
     else:
         window = max(2, int(np.ceil(_START_WINDOW * nb)))
         if start is None:
-            starts = _start_candidates(_diagonal_scores(C), n_starts, 2 * window + 1)
+            starts = _coarse_starts(C, n_starts, penalty, gap)
         else:
             starts = [start]
         return (yield from _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window))
@@ -678,7 +703,8 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
           sigma_factor: float = 1.0, material: str | Material = "rubber", curvature_weight: float = 8.0,
           arclength_weight: float = 0.0, refine: bool | None = None, sign_correction: bool = True,
           order_penalty: float = 5.0, n_starts: int = 4, gap_cost: float | None = None,
-          detail: bool | None = None, displacement_weight: float = 0.0, callback=None) -> Matching:
+          detail: bool | None = None, displacement_weight: float = 0.0, context_weight: float = 8.0,
+          modal_weight: float = 1.0, neighbourhood: float | None = None, callback=None) -> Matching:
     """Match the nodes of contour ``a`` to those of contour ``b`` by modal analysis.
 
     Parameters
@@ -849,6 +875,9 @@ class _Job:
     curvature_weight: float
     arclength_weight: float
     displacement_weight: float
+    context_weight: float
+    modal_weight: float
+    neighbourhood: float
     refine: bool
     detail: bool | None
     sign_correction: bool
@@ -857,8 +886,18 @@ class _Job:
     gap: float
 
 
+def _checked_neighbourhood(value, method: str) -> float:
+    if value is None:
+        return _GLOBAL_NEIGHBOURHOOD if method == "global" else 0.0
+    value = _check_weight(value, "neighbourhood")
+    if value > 1:
+        raise ValueError(f"neighbourhood must be a fraction of the perimeter between 0 and 1, got {value!r}")
+    return value
+
+
 def _prepare(a, b, *, method, n_modes, model_nodes, sigma_factor, material, curvature_weight, arclength_weight,
-             refine, sign_correction, order_penalty, n_starts, gap_cost, detail, displacement_weight) -> _Job:
+             refine, sign_correction, order_penalty, n_starts, gap_cost, detail, displacement_weight,
+             context_weight, modal_weight, neighbourhood) -> _Job:
     """Check every argument of :func:`match` (cheap: before any heavy work)."""
     method = _check_method(method)
     a = check_contour(a, "a")
@@ -884,6 +923,9 @@ def _prepare(a, b, *, method, n_modes, model_nodes, sigma_factor, material, curv
         curvature_weight=_check_weight(curvature_weight, "curvature_weight"),
         arclength_weight=_check_weight(arclength_weight, "arclength_weight"),
         displacement_weight=displacement_weight,
+        context_weight=_check_weight(context_weight, "context_weight"),
+        modal_weight=_check_weight(modal_weight, "modal_weight"),
+        neighbourhood=_checked_neighbourhood(neighbourhood, method),
         refine=method == "order" if refine is None else bool(refine),
         detail=detail, sign_correction=bool(sign_correction),
         order_penalty=_check_weight(order_penalty, "order_penalty"),
@@ -924,13 +966,11 @@ def _scaled(run, lo: float, hi: float, phase: str):
         return done.value, False
 
 
-def _run(job: _Job):
-    """The stages of :func:`match`, as a generator (see :func:`iter_match`)."""
-    A, B, method = job.A, job.B, job.method
+def _matching_cost(job: _Job, t_a: np.ndarray, t_b: np.ndarray):
+    """The cost matrix of the searches and the modal affinity (eq. 12) it
+    includes, with what :class:`Matching` reports of them."""
+    A, B = job.A, job.B
     na, nb = len(A), len(B)
-    t_a, perimeter_a = _arc_positions(A)
-    t_b, perimeter_b = _arc_positions(B)
-
     # Modal features with a cut common to both spectra, sign-corrected.
     basis_a, basis_b, k = _joint_bases(A, B, job.n_modes, job.model_nodes, job.sigma_factor, job.material)
     fa, fb = _features(basis_a, k), _features(basis_b, k)
@@ -940,15 +980,64 @@ def _run(job: _Job):
     else:
         signs, theta = np.ones(k), 0.0
     Z = _pairwise_sq(fa.reshape(na, -1), fb.reshape(nb, -1))
-    C = Z / k
+    C = job.modal_weight * Z / k
     if job.curvature_weight > 0:
         scales = tuple(sorted({max(sc, 1.0 / min(na, nb)) for sc in _CURVATURE_SCALES}))
         ka = curvature_signature(A, scales)
         kb = curvature_signature(B, scales)
         C = C + job.curvature_weight * _pairwise_sq(ka, kb) / ka.shape[1]
+    if job.context_weight > 0:
+        C = C + job.context_weight * _pairwise_sq(_context_at_nodes(A, t_a), _context_at_nodes(B, t_b))
     if job.displacement_weight > 0:
-        spacing = perimeter_a / na
+        spacing = float(segment_lengths(A).mean())
         C = C + job.displacement_weight * float(np.median(C.min(axis=1))) * _pairwise_sq(A, B) / spacing**2
+    if job.neighbourhood > 0:
+        C = _neighbourhood_cost(C, t_a, t_b, job.neighbourhood)
+    return C, Z, k, signs, theta, basis_a, basis_b
+
+
+def _neighbourhood_cost(C: np.ndarray, t_a: np.ndarray, t_b: np.ndarray, width: float) -> np.ndarray:
+    """``C`` averaged along its diagonals: the cost of pairing ``i`` with
+    ``j`` becomes the Gaussian-weighted mean of the costs of pairing the
+    nodes found the same arc length (fractions ``d`` of the perimeter, ``|d|``
+    up to ``width / 2``) before and after them on each contour.
+
+    A node then matches where its whole neighbourhood matches, which an
+    assignment without order (``global``) otherwise ignores: it swaps the
+    similar sides of a leg, or two similar legs. Parts that slid change the
+    rate locally; the Gaussian weighting (standard deviation ``width / 4``)
+    lets the nearest neighbours count most.
+    """
+    offsets = np.linspace(-0.5 * width, 0.5 * width, _NEIGHBOURHOOD_TERMS)
+    weights = np.exp(-0.5 * (offsets / (0.25 * width)) ** 2)
+    weights /= weights.sum()
+    out = np.zeros_like(C)
+    for d, w in zip(offsets, weights):
+        rows = _nearest_at(t_a, (t_a + d) % 1.0)
+        cols = _nearest_at(t_b, (t_b + d) % 1.0)
+        out += w * C[np.ix_(rows, cols)]
+    return out
+
+
+def _nearest_at(t: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """Index of the node whose arc position (``t``, ascending from 0) is
+    cyclically nearest to each ``wanted`` position."""
+    n = len(t)
+    after = np.searchsorted(t, wanted) % n
+    before = (after - 1) % n
+    d_after = (t[after] - wanted) % 1.0
+    d_before = (wanted - t[before]) % 1.0
+    return np.where(d_after < d_before, after, before)
+
+
+def _run(job: _Job):
+    """The stages of :func:`match`, as a generator (see :func:`iter_match`)."""
+    A, B, method = job.A, job.B, job.method
+    na, nb = len(A), len(B)
+    t_a, _ = _arc_positions(A)
+    t_b, _ = _arc_positions(B)
+
+    C, Z, k, signs, theta, basis_a, basis_b = _matching_cost(job, t_a, t_b)
     detail = job.detail
     if detail is None:
         detail = (method == "order" and min(na, nb) >= _DETAIL_MIN_NODES
