@@ -18,12 +18,21 @@ Pipeline of :func:`match`:
    also searched in steps of 45 degrees.
 3. **Affinity** (eq. 12): ``Z_ij = sum_k |u_a,ik - u_b,jk|^2 + |v_a,ik - v_b,jk|^2``
    (0 is a perfect match), returned as :attr:`Matching.affinity`.
-4. **Matching cost** ``C = Z / n_modes + curvature_weight * Kc``: low modes
-   vary slowly along the contour, so ``Z`` alone is coarse; ``Kc`` compares a
-   multi-scale curvature signature (invariant to similarity transforms).
+4. **Matching cost** ``C = modal_weight * Z / n_modes + curvature_weight * Kc
+   + context_weight * H``: low modes vary slowly along the contour, so ``Z``
+   alone is coarse; ``Kc`` compares a multi-scale curvature signature; ``H``
+   compares inner-distance shape contexts (:mod:`.inner_distance`), which do
+   not change when a part turns about its joint or slides along the body,
+   where the modes of the whole shape do. All are invariant to translation,
+   rotation and scale. For ``global`` the cost is then averaged along its
+   diagonals over a ``neighbourhood`` (a quarter of the perimeter), so that a
+   node matches where its neighbours do.
 5. **Search**: ``local`` (Shapiro & Brady mutual minima), ``global`` (assignment
    with fictitious nodes, Bastos & Tavares 2006) or ``order`` (cyclic
-   order-preserving dynamic programming, Oliveira & Tavares 2008).
+   order-preserving dynamic programming, Oliveira & Tavares 2008). ``order``
+   first runs the DP around every start, on a copy of ``C`` coarsened to at
+   most 100 nodes per contour, then again at full resolution about the best
+   start regions: no start is left untried.
 6. **Refinement** (default for ``order``, optional for the others): the drift
    of the pairs along the contour is smoothed and the search runs again with a
    penalty for leaving the smoothed path, which removes node-to-node jitter
@@ -33,8 +42,11 @@ Pipeline of :func:`match`:
    a few node spacings of the path on curvature at 1-4 node spacings, which
    pins articulated parts the coarser terms leave a few nodes off.
 
-The measured effect of each stage is in ``docs/benchmarks.md`` (section
-"Matching"). Coordinates are ``(row, col)``; contours are closed implicitly.
+Every feature is measured on the positively oriented contours from the node
+farthest from the centroid, so the result does not depend on where the
+caller's numbering starts or which way it runs. The measured effect of each
+stage is in ``docs/benchmarks.md`` (section "Matching"). Coordinates are
+``(row, col)``; contours are closed implicitly.
 """
 
 from __future__ import annotations
@@ -496,30 +508,33 @@ def _order_dp(C: np.ndarray, nb: int, window: int, repeat: float, skip: float, g
     return part, total
 
 
-def _coarse_starts(C: np.ndarray, n: int, penalty: float, gap: float) -> list[int]:
-    """The ``n`` best start nodes of ``b`` for node 0 of ``a``, from the
-    order-preserving search run around *every* start on a coarse copy of ``C``.
+def _iter_every_start(C: np.ndarray, penalty: float, gap: float):
+    """The order-preserving search run around *every* start, on a coarse
+    copy of ``C``: yields the fraction done, returns ``(total, part, step)``
+    for each window of starts, best first (``part`` indexes the coarse
+    copy, whose columns are every ``step``-th node of ``b``).
 
     ``C`` is sub-sampled to at most :data:`_COARSE_NODES` nodes per contour
-    and the DP run once per window of free starts, the windows tiling ``b``;
-    each window's best alignment is scored by the DP's own objective (not by
-    a uniform-rate guess, which a part that slid along the body fools), so
-    no start region is left untried and the candidates are the start nodes of
-    the best whole alignments, at least a window apart.
+    and the DP run once per window of free starts, the windows tiling ``b``.
+    Each window's best alignment is scored by the DP's own objective, not by
+    a uniform-rate guess (which a part that slid along the body fools), so no
+    start region is left untried: the match cannot lock onto a wrong start
+    because the right one was never looked at.
     """
     na, nb = C.shape
     step_a, step_b = max(1, -(-na // _COARSE_NODES)), max(1, -(-nb // _COARSE_NODES))
     Cc = C[::step_a, ::step_b]
     ncb = Cc.shape[1]
     window = max(1, min((ncb - 1) // 2, -(-ncb // _COARSE_WINDOWS) // 2))
+    centres = range(0, ncb, 2 * window + 1)
     found = []
-    for centre in range(0, ncb, 2 * window + 1):
+    for k, centre in enumerate(centres):
         cols = (centre - window + np.arange(ncb + 2 * window)) % ncb
         part, total = _order_dp(Cc[:, cols], ncb, window, penalty, penalty, gap)
-        first = part[np.flatnonzero(part >= 0)[0]] if np.any(part >= 0) else window
-        found.append((total, int(cols[first]) * step_b))
-    found.sort()
-    return [start for _, start in found[:n]]
+        found.append((total, np.where(part >= 0, cols[np.maximum(part, 0)], -1), step_b))
+        yield (k + 1) / len(centres)
+    found.sort(key=lambda item: item[0])
+    return found
 
 
 def _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window):
@@ -555,14 +570,34 @@ def _iter_search(method, C, t_a, t_b, *, arc_weight, n_starts, gap, penalty, sta
         part = _global(C)
     else:
         window = max(2, int(np.ceil(_START_WINDOW * nb)))
-        if start is None:
-            starts = _coarse_starts(C, n_starts, penalty, gap)
-        else:
-            starts = [start]
-        return (yield from _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window))
+        if start is not None:
+            return (yield from _order_search(C, t_a, t_b, [start], arc_weight, penalty, gap, window))
+        full_resolution = max(C.shape) <= _COARSE_NODES and arc_weight == 0
+        share = 1.0 if full_resolution else 0.3
+        found = yield from _scale_fractions(_iter_every_start(C, penalty, gap), 0.0, share)
+        if full_resolution:  # the search over every start was the search itself
+            total, part, _ = found[0]
+            return part, total
+        # Each of the best windows searched again at full resolution, with a
+        # free start of +-2 % of b's nodes about its start node.
+        starts = [int(part[np.flatnonzero(part >= 0)[0]]) * step if np.any(part >= 0) else 0
+                  for _, part, step in found[:n_starts]]
+        return (yield from _scale_fractions(_order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window),
+                                            share, 1.0))
     ok = part >= 0
     yield 1.0
     return part, float(C[ok, part[ok]].sum())
+
+
+def _scale_fractions(run, lo: float, hi: float):
+    """Re-yield a sub-generator's fractions mapped to ``[lo, hi]``; return its value."""
+    try:
+        fraction = next(run)
+        while True:
+            yield lo + (hi - lo) * fraction
+            fraction = next(run)
+    except StopIteration as done:
+        return done.value
 
 
 def _search(method, C, t_a, t_b, **options):
@@ -702,7 +737,7 @@ def _joint_bases(A, B, n_modes, model_nodes, sigma_factor, material):
 def match(a, b, *, method: str = "order", n_modes: int | None = None, model_nodes: int | None = 64,
           sigma_factor: float = 1.0, material: str | Material = "rubber", curvature_weight: float = 8.0,
           arclength_weight: float = 0.0, refine: bool | None = None, sign_correction: bool = True,
-          order_penalty: float = 5.0, n_starts: int = 4, gap_cost: float | None = None,
+          order_penalty: float = 5.0, n_starts: int = 2, gap_cost: float | None = None,
           detail: bool | None = None, displacement_weight: float = 0.0, context_weight: float = 8.0,
           modal_weight: float = 1.0, neighbourhood: float | None = None, callback=None) -> Matching:
     """Match the nodes of contour ``a`` to those of contour ``b`` by modal analysis.
@@ -763,9 +798,10 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
         flat, such as along the straight side of a finger; 0.5 lets the path
         follow the features' noise.
     n_starts : int, optional
-        Number of start regions tried by ``order``: the lowest local minima
-        of the cost of uniform-rate alignments, each searched with a free
-        start of +-2 % of ``b``'s nodes.
+        Number of start regions ``order`` searches at full resolution: the
+        best of its coarse search around every start, each searched again
+        with a free start of +-2 % of ``b``'s nodes (contours of at most 100
+        nodes need no second search).
     gap_cost : float, optional
         Cost of leaving a node of ``a`` unmatched in ``order``, in units of
         the matching cost (default: never).
@@ -785,6 +821,21 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
         shapes are, so a near-circular cell that turned a little could be
         matched a quarter turn off; this term (default 0: invariant matching)
         keeps each node near where it was.
+    context_weight : float, optional
+        Weight of the inner-distance shape context term (0: off). It keeps
+        the match on parts that slid or turned (fingers closing together,
+        swinging legs): on the benchmark's articulated families the mean
+        accuracy of ``order`` rose from 0.97 to 0.99 and its worst pair from
+        0.83 to 0.92 (see ``docs/benchmarks.md``).
+    modal_weight : float, optional
+        Weight of the modal affinity (eq. 12) in the cost (default 1; 0 only
+        to measure what it buys).
+    neighbourhood : float, optional
+        Fraction of the perimeter over which the cost is averaged along its
+        diagonals (a Gaussian of standard deviation a quarter of it) before
+        the search. Default 0.25 for ``global`` (it lets the assignment see
+        the order of the nodes around each one: without it similar sides of
+        a leg or two similar legs are swapped), 0 for the others.
     callback : callable, optional
         ``callback(fraction)`` with the fraction of the work done (0 to 1,
         increasing) after each stage and each start of the ``order`` search;
@@ -804,11 +855,13 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
 
     Notes
     -----
-    The matching cost is ``C = Z / n_modes + curvature_weight * Kc``, with
-    ``Z`` the sign-corrected modal affinity (eq. 12, :attr:`Matching.affinity`)
-    and ``Kc`` the mean squared difference of the nodes' curvature signatures
-    (:func:`curvature_signature`). All terms are invariant to translation,
-    rotation and scale of either contour. ``order`` charges
+    The matching cost is ``C = modal_weight x Z / n_modes + curvature_weight x
+    Kc + context_weight x H``, with ``Z`` the sign-corrected modal affinity
+    (eq. 12, :attr:`Matching.affinity`), ``Kc`` the mean squared difference of
+    the nodes' curvature signatures (:func:`curvature_signature`) and ``H``
+    the squared Hellinger distance of their inner-distance shape contexts
+    (:func:`.inner_distance.inner_distance_context`). All terms are invariant
+    to translation, rotation and scale of either contour. ``order`` charges
     ``order_penalty x median_i(min_j C_ij)`` for each repeated or skipped
     node of ``b``.
 
