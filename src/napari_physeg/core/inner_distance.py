@@ -147,7 +147,8 @@ def inner_distance_context(nodes, n_samples: int = N_SAMPLES):
         the others. The squared Euclidean distance of two rows is the squared
         Hellinger distance of the histograms (0 to 2).
     """
-    samples = resample(np.asarray(nodes, dtype=np.float64), int(n_samples))
+    nodes = np.asarray(nodes, dtype=np.float64)
+    samples = resample(nodes - nodes.mean(axis=0), int(n_samples))  # centred: far-off contours keep their digits
     m = len(samples)
     D, first = inner_distances(samples)
     off = ~np.eye(m, dtype=bool)

@@ -523,7 +523,10 @@ def _iter_every_start(C: np.ndarray, penalty: float, gap: float):
     """
     na, nb = C.shape
     step_a, step_b = max(1, -(-na // _COARSE_NODES)), max(1, -(-nb // _COARSE_NODES))
-    Cc = C[::step_a, ::step_b]
+    # Each coarse entry is the cheapest of its block: a narrow valley of
+    # the cost (one node wide on a dense contour) cannot fall between samples.
+    Cc = np.minimum.reduceat(np.minimum.reduceat(C, np.arange(0, na, step_a), axis=0),
+                             np.arange(0, nb, step_b), axis=1)
     ncb = Cc.shape[1]
     window = max(1, min((ncb - 1) // 2, -(-ncb // _COARSE_WINDOWS) // 2))
     centres = range(0, ncb, 2 * window + 1)
