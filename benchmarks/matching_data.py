@@ -36,35 +36,41 @@ def _unit(angle_deg: float) -> np.ndarray:
     return np.array([np.cos(a), np.sin(a)])
 
 
-def _limb(base, angle, length, width):
-    """A capsule leaving the body at ``base`` along ``angle`` (degrees):
-    (entry point, entry tangent, exit point, exit tangent, [pieces])."""
+def _limb(base, angle, length, width, square=False):
+    """A capsule (or, ``square``, a rectangle) leaving the body at ``base``
+    along ``angle`` (degrees): (entry point, entry tangent, exit point, exit
+    tangent, [pieces])."""
     d = _unit(angle)
     n = np.array([-d[1], d[0]])  # left of d
     base = np.asarray(base, float)
     t = np.linspace(0.0, 1.0, _DENSE)
     out_side = (base - width * n) + t[:, None] * (length * d)
     phi = np.linspace(-np.pi / 2, np.pi / 2, _DENSE)  # from -n round the tip to +n
-    tip = base + length * d + width * (np.cos(phi)[:, None] * d + np.sin(phi)[:, None] * n)
+    if square:
+        tip = base + length * d + width * (np.sin(phi)[:, None] * n)
+    else:
+        tip = base + length * d + width * (np.cos(phi)[:, None] * d + np.sin(phi)[:, None] * n)
     back_side = (base + width * n + length * d) - t[:, None] * (length * d)
     return base - width * n, d, base + width * n, -d, [out_side, tip, back_side]
 
 
-def _web(p, tp, q, tq):
-    """Cubic from ``p`` (leaving along ``tp``) to ``q`` (arriving along ``tq``)."""
-    k = 0.4 * np.linalg.norm(q - p)
+def _web(p, tp, q, tq, straight=False):
+    """Cubic from ``p`` (leaving along ``tp``) to ``q`` (arriving along ``tq``),
+    or the straight segment."""
+    k = 0.0 if straight else 0.4 * np.linalg.norm(q - p)
     c1, c2 = p + k * tp, q - k * tq
     t = np.linspace(0.0, 1.0, _DENSE)[:, None]
     return (1 - t) ** 3 * p + 3 * (1 - t) ** 2 * t * c1 + 3 * (1 - t) * t**2 * c2 + t**3 * q
 
 
-def _chain(anchors):
-    """Dense outline and canonical piece index of a list of anchors
-    (``("limb", base, angle, length, width)`` or ``("via", point)``)."""
+def _chain(anchors, square=False):
+    """Dense outline of a list of anchors (``("limb", base, angle, length,
+    width)`` or ``("via", point)``), as a list of pieces; ``square``: square
+    limb tips and straight joins (a blocky silhouette)."""
     ends = []
     for anchor in anchors:
         if anchor[0] == "limb":
-            ends.append(_limb(*anchor[1:]))
+            ends.append(_limb(*anchor[1:], square=square))
         else:
             ends.append([np.asarray(anchor[1], float), None, np.asarray(anchor[1], float), None, []])
     m = len(ends)
@@ -76,7 +82,7 @@ def _chain(anchors):
     for k, e in enumerate(ends):
         pieces.extend(e[4])
         nxt = ends[(k + 1) % m]
-        pieces.append(_web(e[2], e[3], nxt[0], nxt[1]))
+        pieces.append(_web(e[2], e[3], nxt[0], nxt[1], straight=square))
     return pieces
 
 
@@ -118,8 +124,8 @@ def _crosses(nodes) -> bool:
     return len(_crossing_pairs(nodes)) > 0
 
 
-def _pair(anchors_a, anchors_b, n_a, n_b, scale, centre):
-    pieces_a, pieces_b = _chain(anchors_a), _chain(anchors_b)
+def _pair(anchors_a, anchors_b, n_a, n_b, scale, centre, square=False):
+    pieces_a, pieces_b = _chain(anchors_a, square), _chain(anchors_b, square)
     shares = _shares(pieces_a)  # the canonical parameter is a's arc length, piece by piece
     pa, sa = _parametrised(pieces_a, shares)
     pb, sb = _parametrised(pieces_b, shares)
@@ -151,9 +157,10 @@ def _finger_bases(widths, gaps):
 
 
 def sliding_hand_pair(n_a: int = 67, n_b: int = 66, *, seed: int = 0, reverse: bool = False,
-                      scale: float = 80.0, centre=(128.0, 128.0)):
+                      scale: float = 80.0, centre=(128.0, 128.0), square: bool = False):
     """Fingers that slide together along the palm: ``a`` apart, ``b`` nearly
-    touching (``reverse`` swaps them). Returns ``(a, b, truth)``."""
+    touching (``reverse`` swaps them); ``square``: rectangular fingers on a
+    palm with sharp corners. Returns ``(a, b, truth)``."""
     rng = np.random.default_rng(seed)
     for _ in range(100):
         lengths = rng.uniform(0.5, 0.9, 4)
@@ -164,7 +171,7 @@ def sliding_hand_pair(n_a: int = 67, n_b: int = 66, *, seed: int = 0, reverse: b
         poses = (_hand_anchors(apart, lengths, widths, thumb), _hand_anchors(together, lengths, widths, thumb))
         if reverse:
             poses = poses[::-1]
-        a, b, truth = _pair(*poses, n_a, n_b, scale, centre)
+        a, b, truth = _pair(*poses, n_a, n_b, scale, centre, square)
         if not (_crosses(a) or _crosses(b)):
             return a, b, truth
     raise RuntimeError("no uncrossed hand pair drawn")  # pragma: no cover

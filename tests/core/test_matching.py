@@ -173,6 +173,17 @@ def test_detail_pass_pins_the_turned_thumb_of_a_dense_hand():
     assert plain >= plain_coarse + 0.1
 
 
+@pytest.mark.parametrize("n_a, n_b", [(400, 450), (450, 400), (1000, 700)])
+def test_detail_pass_keeps_dense_pairs_of_unequal_counts(n_a, n_b):
+    """With unequal counts the detail pass used to gather the skips it needs on
+    flat curvature, shifting the nodes between them (0.835 on 400 x 450):
+    it now searches b as len(a) evenly spaced nodes."""
+    a, b, truth = data.hand_pair(n_a, n_b, pose_a="open", pose_b="closed")
+    m = match(a, b)
+    assert m.detail_refined
+    assert within(m.partner, truth, n_b) >= max(0.95, within(match(a, b, detail=False).partner, truth, n_b))
+
+
 def test_detail_pass_only_where_the_nodes_resolve_fine_curvature():
     dense = data.hand_outline("open", n_nodes=600, scale=100.0)
     spacing = np.linalg.norm(np.roll(dense, -1, axis=0) - dense, axis=1).mean()

@@ -59,7 +59,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from ._drain import drain
-from .contour import segment_lengths, signed_area
+from .contour import resample, segment_lengths, signed_area
 from .inner_distance import inner_distance_context
 from .materials import Material
 from ._validation import check_contour
@@ -675,17 +675,35 @@ def _detail_pass(A, B, part, t_a, t_b, opts):
     and the modal and coarse curvature terms, which see the neighbouring
     pieces change shape, shift whole parts by a few nodes. Searched only
     near the first path, the fine scales pin them.
+
+    When the node counts differ, ``b`` is searched as ``len(a)`` nodes evenly
+    spaced along it and the result taken back to its nearest nodes: with one
+    node of ``b`` per node of ``a`` the DP has no skips to place, which on
+    flat curvature it would gather in a few places, shifting the nodes
+    between them.
     """
-    # The coarser of the two node spacings, as a fraction of each perimeter
-    # (absolute lengths would make the pass depend on the contours' scales).
-    spacing = max(1.0 / len(A), 1.0 / len(B))
-    ka = curvature_signature(A, tuple(m * spacing for m in _DETAIL_SCALES))
-    kb = curvature_signature(B, tuple(m * spacing for m in _DETAIL_SCALES))
+    na, nb = len(A), len(B)
+    B_even = B if nb == na else resample(B, na)
+    t_even = t_b if nb == na else np.arange(na) / na
+    part_even = part if nb == na else np.where(part >= 0, np.rint(t_b[part] * na).astype(np.intp) % na, -1)
+    # One length scale on both shapes: a's node spacing, b's units converted
+    # by the ratio of the square roots of the areas (which turning or sliding
+    # parts leave alone, unlike the perimeters; it makes the pass
+    # independent of either scale).
+    ratio = np.sqrt(abs(signed_area(B)) / abs(signed_area(A)))
+    perimeter_a, perimeter_b = float(segment_lengths(A).sum()), float(segment_lengths(B_even).sum())
+    spacing = max(perimeter_a / na, perimeter_b / na / ratio)
+    ka = curvature_signature(A, tuple(m * spacing / perimeter_a for m in _DETAIL_SCALES))
+    kb = curvature_signature(B_even, tuple(m * spacing * ratio / perimeter_b for m in _DETAIL_SCALES))
     C = _pairwise_sq(ka, kb) / ka.shape[1]
     penalty = _DETAIL_PENALTY * float(C.mean()) + 1e-12
-    band = _band_cost(part, t_a, t_b, _DETAIL_BAND * spacing * len(B))
-    start = int(part[0]) if part[0] >= 0 else None
-    return _search("order", C + band, t_a, t_b, **{**opts, "penalty": penalty, "n_starts": 1}, start=start)
+    band = _band_cost(part_even, t_a, t_even, _DETAIL_BAND * spacing * ratio * na / perimeter_b)
+    start = int(part_even[0]) if part_even[0] >= 0 else None
+    found, total = _search("order", C + band, t_a, t_even, **{**opts, "penalty": penalty, "n_starts": 1},
+                           start=start)
+    if nb != na:
+        found = np.where(found >= 0, _nearest_at(t_b, t_even[np.maximum(found, 0)]), -1)
+    return found, total
 
 
 # --------------------------------------------------------------------------
