@@ -17,7 +17,8 @@ Pairs:
   0.3 node spacings; unequal node counts; 67 to 1000 nodes;
 * articulated families the project's matcher was not built on
   (``benchmarks/matching_data.py``, issue 12): fingers that *slide* together
-  along the palm (parallel, from apart to nearly touching, both directions),
+  along the palm (parallel, rounded or square, from apart to nearly touching,
+  both directions),
   the swinging legs, neck and tail of a quadruped seen from the side, and both
   with 1-2 px of Gaussian node noise at 60-70 nodes; unequal node counts.
 
@@ -366,8 +367,8 @@ def _dense_table(out):
 
 
 def _ablation_table(out, cases, families):
-    out("Ablation: mean and minimum accuracy on the project's 16 pairs and on the articulated families "
-        "(22 pairs), and the longest time.")
+    out(f"Ablation: mean and minimum accuracy on the project's {len(cases)} pairs and on the articulated "
+        f"families ({len(families)} pairs), and the longest time.")
     out()
     out("| variant | 16 pairs mean | 16 pairs min | families mean | families min | max ms |")
     out("|---|---|---|---|---|---|")

@@ -14,7 +14,8 @@ Families:
 
 * ``sliding_hand_pair``: four fingers whose bases *slide* along the top of the
   palm (parallel fingers, no rotation about a joint) from apart to nearly
-  touching, and a thumb; finger lengths, widths and gaps vary with the seed.
+  touching, and a thumb; finger lengths, widths and gaps vary with the seed;
+  rounded, or square (rectangular fingers, sharp corners).
 * ``animal_pair``: a quadruped seen from the side whose four legs, neck and
   tail *swing* about their joints (a walking cycle drawn at random).
 
@@ -226,6 +227,12 @@ def articulated_pairs():
             a, b, truth = sliding_hand_pair(na, nb, seed=seed, reverse=reverse)
             way = "together -> apart" if reverse else "apart -> together"
             out.append((f"sliding fingers {way}, seed {seed}, {na} x {nb}", "sliding fingers", a, b, truth))
+    for seed in range(2):
+        for reverse in (False, True):
+            na, nb = (66, 67) if seed == 0 else (70, 62)
+            a, b, truth = sliding_hand_pair(na, nb, seed=30 + seed, reverse=reverse, square=True)
+            way = "together -> apart" if reverse else "apart -> together"
+            out.append((f"square fingers slide {way}, seed {seed}, {na} x {nb}", "sliding fingers", a, b, truth))
     for seed in range(6):
         na, nb = ((67, 66), (70, 60), (64, 64))[seed % 3]
         a, b, truth = animal_pair(na, nb, seed=seed)

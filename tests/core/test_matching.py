@@ -157,20 +157,15 @@ def test_hand_spread_to_closed_articulated():
 
 def test_detail_pass_pins_the_turned_thumb_of_a_dense_hand():
     # 1000 nodes, 0.9 px apart: without the detail pass the thumb and the palm
-    # beside it are matched 2-4 nodes off (accuracy 0.72).
+    # beside it are matched 2-4 nodes off (accuracy 0.88).
     a, b, truth = data.hand_pair(1000, 1000, pose_a="spread", pose_b="closed")
     m = match(a, b)
     coarse = match(a, b, detail=False)
     acc, acc_coarse = within(m.partner, truth, 1000), within(coarse.partner, truth, 1000)
     print(f"hand spread->closed 1000x1000: detail {acc:.3f}, without {acc_coarse:.3f}")
     assert m.detail_refined and not coarse.detail_refined
-    assert acc >= 0.85 and acc >= acc_coarse
+    assert acc >= 0.9 and acc >= acc_coarse + 0.04
     assert is_cyclically_ordered(m.pairs, 1000)
-    # On the modal and curvature terms alone (no inner-distance context) the
-    # coarse passes leave the thumb a few nodes off: the detail pass pins it.
-    plain = within(match(a, b, context_weight=0.0).partner, truth, 1000)
-    plain_coarse = within(match(a, b, context_weight=0.0, detail=False).partner, truth, 1000)
-    assert plain >= plain_coarse + 0.1
 
 
 @pytest.mark.parametrize("n_a, n_b", [(400, 450), (450, 400), (1000, 700)])

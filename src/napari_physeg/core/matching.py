@@ -91,6 +91,11 @@ _DRIFT_WEIGHT = 0.1
 _DETAIL_SCALES = (1.0, 2.0, 4.0)
 #: Half-width of the detail pass's band around the previous path, in node spacings.
 _DETAIL_BAND = 8.0
+#: Pull of the detail pass toward the smoothed previous path on rows where the
+#: fine curvature is flat, per squared node of b, relative to its repeat /
+#: skip penalty (a third of the refinement's: the curvature decides where it
+#: varies, the previous path where it says nothing).
+_DETAIL_DRIFT_WEIGHT = 0.03
 #: Repeat / skip penalty of the detail pass, relative to its mean cost.
 _DETAIL_PENALTY = 0.5
 #: Contours with at least this many nodes get the detail pass (below it, the
@@ -665,6 +670,21 @@ def _band_cost(part: np.ndarray, t_a: np.ndarray, t_b: np.ndarray, half_width: f
     return np.where(d2 <= half_width**2, 0.0, 1e3)
 
 
+def _pull_where_flat(C, band, part, t_a, t_b, weight):
+    """Drift cost toward the smoothed ``part`` (see :func:`_drift_cost`),
+    on each row of ``a`` in proportion to how flat ``C`` is within the band.
+
+    Where the fine curvature is flat (straight sides, even arcs) it says
+    nothing, and the DP would slide whole sides along or gather there the
+    skips of unequal counts: those rows keep to the previous path. Rows where
+    it varies (corners, the ends of arcs) are left to the curvature.
+    """
+    inside = band == 0
+    spread = np.where(inside, C, -np.inf).max(axis=1) - np.where(inside, C, np.inf).min(axis=1)
+    flat = 1.0 / (1.0 + (spread / (np.median(spread) + 1e-300)) ** 2)
+    return flat[:, None] * _drift_cost(part, t_a, t_b, _REFINE_WIDTH, weight)
+
+
 def _detail_pass(A, B, part, t_a, t_b, opts):
     """Re-align ``part`` within a narrow band using curvature at 1-4 node spacings.
 
@@ -698,6 +718,7 @@ def _detail_pass(A, B, part, t_a, t_b, opts):
     C = _pairwise_sq(ka, kb) / ka.shape[1]
     penalty = _DETAIL_PENALTY * float(C.mean()) + 1e-12
     band = _band_cost(part_even, t_a, t_even, _DETAIL_BAND * spacing * ratio * na / perimeter_b)
+    band = band + _pull_where_flat(C, band, part_even, t_a, t_even, _DETAIL_DRIFT_WEIGHT * penalty)
     start = int(part_even[0]) if part_even[0] >= 0 else None
     found, total = _search("order", C + band, t_a, t_even, **{**opts, "penalty": penalty, "n_starts": 1},
                            start=start)
