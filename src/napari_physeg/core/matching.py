@@ -113,6 +113,8 @@ _START_WINDOW = 0.02
 _COARSE_NODES = 100
 #: Windows of free starts the coarse search tiles b with (one DP each).
 _COARSE_WINDOWS = 12
+#: Samples of each contour the inner-distance shape context is computed on.
+_CONTEXT_SAMPLES = 100
 #: Default ``neighbourhood`` of ``global``: the span, as a fraction of the
 #: perimeter, over which the cost is averaged along its diagonals.
 _GLOBAL_NEIGHBOURHOOD = 0.25
@@ -286,11 +288,11 @@ def curvature_signature(nodes, scales=_CURVATURE_SCALES, *, saturation: float = 
     return out
 
 
-def _context_at_nodes(nodes: np.ndarray, t: np.ndarray) -> np.ndarray:
+def _context_at_nodes(nodes: np.ndarray, t: np.ndarray, n_samples: int) -> np.ndarray:
     """Inner-distance shape context of every node: that of the evenly spaced
     samples (:func:`.inner_distance.inner_distance_context`), linearly
     interpolated in arc length (``t``, node 0 at 0, as the samples)."""
-    ctx = inner_distance_context(nodes)
+    ctx = inner_distance_context(nodes, n_samples)
     m = len(ctx)
     pos = t * m
     lo = np.floor(pos).astype(np.intp) % m
@@ -1082,7 +1084,11 @@ def _matching_cost(job: _Job, t_a: np.ndarray, t_b: np.ndarray):
         kb = curvature_signature(B, scales)
         C = C + job.curvature_weight * _pairwise_sq(ka, kb) / ka.shape[1]
     if job.context_weight > 0:
-        C = C + job.context_weight * _pairwise_sq(_context_at_nodes(A, t_a), _context_at_nodes(B, t_b))
+        # 100 samples even on coarser contours: measured, 67 samples (the
+        # nodes of the paper's hands) halved the time but lost 0.002 mean
+        # accuracy on the articulated families.
+        C = C + job.context_weight * _pairwise_sq(_context_at_nodes(A, t_a, _CONTEXT_SAMPLES),
+                                                  _context_at_nodes(B, t_b, _CONTEXT_SAMPLES))
     if job.displacement_weight > 0:
         spacing = float(segment_lengths(A).mean())
         C = C + job.displacement_weight * float(np.median(C.min(axis=1))) * _pairwise_sq(A, B) / spacing**2
