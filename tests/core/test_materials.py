@@ -42,3 +42,16 @@ def test_unknown_preset_lists_the_choices():
     with pytest.raises(ValueError, match="rubber"):
         get_material("unobtainium")
     assert get_material("Soft_Tissue") is MATERIALS["soft tissue"]
+
+
+def test_suggested_stiffness_follows_the_paper_and_the_material_stiffness():
+    from napari_physeg.core import MATERIALS, Material
+    from napari_physeg.core.materials import suggested_stiffness
+
+    assert suggested_stiffness("rubber") == 2e3 and suggested_stiffness("copper") == 1e6  # paper, section 4.1
+    # A custom material gets the r of the preset nearest in Young's modulus.
+    near_copper = Material("custom", young=100e9, poisson=0.3, density=8000.0)
+    assert suggested_stiffness(near_copper) == suggested_stiffness("copper")
+    near_rubber = Material("custom", young=0.05e9, poisson=0.49, density=1000.0)
+    assert suggested_stiffness(near_rubber) == suggested_stiffness("rubber")
+    assert all(suggested_stiffness(name) > 0 for name in MATERIALS)

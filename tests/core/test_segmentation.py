@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 from skimage.draw import polygon2mask
 
 from napari_physeg import data
@@ -426,3 +427,28 @@ def test_iter_segment_has_segment_s_options_and_refuses_unknown_ones():
         iter_segment(obj.image, obj.init_near, stifness=3.0)  # fails at the call, not at the first step
     with pytest.raises(TypeError, match="callback"):
         iter_segment(obj.image, obj.init_near, callback=print)
+
+
+@given(seed=st.integers(0, 2**32 - 1), squeeze=st.floats(0.01, 0.2), jitter=st.floats(0.0, 0.5))
+@settings(max_examples=40, deadline=None)
+def test_remesh_watch_agrees_with_testing_every_pair(seed, squeeze, jitter):
+    # The watch skips the k-d tree while no pair can have come within the
+    # gap; its answer must be the brute-force one at every step. The
+    # contour's waist closes step by step, so its two sides do come within it.
+    from scipy.spatial import cKDTree
+
+    from napari_physeg.core.segmentation import PINCH_GAP, REMESH_STRETCH, _RemeshWatch
+
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    nodes = np.c_[10 * np.sin(t), 30 * np.cos(t)]
+    spacing = float(segment_lengths(nodes).mean())
+    watch = _RemeshWatch(spacing)
+    waist = np.exp(-((nodes[:, 1] / 8) ** 2))
+    for _ in range(60):
+        nodes = nodes * np.c_[1 - squeeze * waist, np.ones(len(nodes))] + rng.normal(0, jitter, nodes.shape)
+        truth = (segment_lengths(nodes).max() > REMESH_STRETCH * spacing
+                 or len(cKDTree(nodes).query_pairs(PINCH_GAP * spacing)) > 0)
+        assert watch.due(nodes) == truth
+        if truth:
+            break

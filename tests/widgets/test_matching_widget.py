@@ -72,7 +72,7 @@ def test_hand_poses_lines_coloured_by_cost(viewer_widget, wait_done, notes, reco
     assert len(viewer.layers) == n_before + 1
     (out,) = matching_layers(viewer)
     assert out is widget.output_layer and isinstance(out, Shapes)
-    assert out.name == "hand open outline → hand closed outline matching"
+    assert out.name == "hand open outline → hand closed outline matching (order)"
     assert out.ndim == 2 and set(out.shape_type) == {"line"}
     m = out.metadata["matching"]
     assert isinstance(m, Matching) and m.method == "order"
@@ -120,9 +120,9 @@ def test_cancel_stops_the_matching(viewer_widget, wait_done, notes, monkeypatch)
     seen = []
     original = MatchingWidget._on_yielded
 
-    def cancel_once(self, percent):
-        original(self, percent)
-        seen.append(percent)
+    def cancel_once(self, state):
+        original(self, state)
+        seen.append(state.fraction)
         if len(seen) == 1:
             assert self._cancel_btn.enabled
             self.cancel()
@@ -134,7 +134,7 @@ def test_cancel_stops_the_matching(viewer_widget, wait_done, notes, monkeypatch)
     assert widget.last_outcome.cancelled and not widget.last_outcome.ok
     assert notes["error"] == [] and any("cancelled" in n for n in notes["info"])
     assert len(viewer.layers) == n_before and not matching_layers(viewer)
-    assert seen and max(seen) < 100  # stopped before the last stage
+    assert seen and max(seen) < 1  # stopped before the last stage
     assert not helper_threads()
     assert widget._run_btn.enabled and not widget._cancel_btn.enabled
     assert "Cancelled" in widget._status.value
@@ -182,7 +182,7 @@ def test_two_shapes_of_one_layer_with_a_transform(viewer_widget, wait_done, note
     wait_done(widget)
     assert notes["error"] == []
     (out,) = matching_layers(viewer)
-    assert out.name == "both #0 → both #1 matching"
+    assert out.name == "both #0 → both #1 matching (order)"
     np.testing.assert_allclose(out.scale, scale)
     np.testing.assert_allclose(out.translate, translate)
     m = out.metadata["matching"]
@@ -343,14 +343,14 @@ def test_pure_functions_match_the_core(make_napari_viewer, poses):
 def test_generator_reports_progress_and_cancels_without_qt(poses):
     a, b, _ = poses
     gen = match_contours(a, b)
-    percents = []
+    fractions = []
     while True:
         try:
-            percents.append(next(gen))
+            fractions.append(next(gen).fraction)
         except StopIteration as stop:
             outcome = stop.value
             break
-    assert outcome.ok and percents == sorted(percents) and percents[-1] == 100
+    assert outcome.ok and fractions == sorted(fractions) and fractions[-1] == 1.0
     np.testing.assert_array_equal(outcome.matching.pairs, match(a, b).pairs)
     cancel = threading.Event()
     cancel.set()
@@ -364,6 +364,55 @@ def test_closing_the_generator_early_stops_the_core():
     a = data.hand_outline("spread", n_nodes=800, scale=100.0)
     b = data.hand_outline("closed", n_nodes=800, scale=100.0)
     gen = match_contours(a, b)
-    assert 0 < next(gen) < 100
+    assert 0 < next(gen).fraction < 1
     gen.close()
     assert not helper_threads()
+
+
+# --------------------------------------------------------------------------
+# Export, Points input, and what the run is named after
+# --------------------------------------------------------------------------
+
+
+def test_pairs_saved_as_csv_match_the_layer(viewer_widget, wait_done, notes, tmp_path):
+    import csv
+
+    viewer, widget = viewer_widget
+    viewer.open_sample("napari-physeg", "hand_poses")
+    assert not widget._export_btn.enabled  # nothing to save before a run
+    widget.run()
+    wait_done(widget)
+    assert widget._export_btn.enabled
+    path = tmp_path / "pairs.csv"
+    widget.export_csv(path)
+    with open(path, newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    (layer,) = matching_layers(viewer)
+    features = layer.features
+    assert len(rows) == len(features) == len(widget.last_outcome.matching.pairs)
+    np.testing.assert_array_equal([int(r["node_a"]) for r in rows], features["node_a"])
+    np.testing.assert_array_equal([int(r["node_b"]) for r in rows], features["node_b"])
+    np.testing.assert_allclose([float(r["cost"]) for r in rows], features["cost"])
+    # the coordinates are those of the paired nodes
+    pair = widget.pair
+    np.testing.assert_allclose([[float(r["a_row"]), float(r["a_col"])] for r in rows], pair.a[features["node_a"]])
+    np.testing.assert_allclose([[float(r["b_row"]), float(r["b_col"])] for r in rows], pair.b[features["node_b"]])
+
+
+def test_a_points_layer_is_a_contour(viewer_widget, wait_done, notes, poses):
+    # Points clicked around an object, in order, are one polygon.
+    viewer, widget = viewer_widget
+    a, b, _ = poses
+    viewer.add_points(a, name="clicked a")
+    viewer.add_shapes([b], shape_type="polygon", name="b")
+    widget.reset_choices()
+    widget._layer_a.value, widget._layer_b.value = viewer.layers["clicked a"], viewer.layers["b"]
+    widget.run()
+    wait_done(widget)
+    assert notes["error"] == [] and widget.last_outcome.ok
+    np.testing.assert_allclose(widget.pair.a, a)
+    np.testing.assert_array_equal(widget.last_outcome.matching.pairs, match(a, b).pairs)
+    viewer.add_points(a[:2], name="two points")
+    widget.reset_choices()
+    widget._layer_a.value = viewer.layers["two points"]
+    assert widget.run() is None and "at least 3" in notes["error"][-1]

@@ -52,8 +52,9 @@ def shown(widget):
 
 
 def output_layers(viewer, kind=Shapes):
-    return [layer for layer in viewer.layers if isinstance(layer, kind) and layer.name.endswith(
-        "segmented" if kind is Shapes else "mask")]
+    # Result layers are named after what made them: "<shapes> segmented (<material>)".
+    return [layer for layer in viewer.layers if isinstance(layer, kind) and " segmented (" in layer.name
+            and layer.name.endswith(")" if kind is Shapes else ") mask")]
 
 
 def record_updates(widget, monkeypatch, on_update=None):
@@ -104,10 +105,11 @@ def test_sample_hand_end_to_end(viewer_widget, wait_done, errors, monkeypatch, r
 
     assert errors == []
     assert widget.last_outcome.ok
-    # live preview: updates arrived while the preview layer was shown, then it was removed
+    # live preview: updates arrived while the preview layer was shown, then it
+    # became the result (removing a layer costs a full gc.collect() in napari)
     assert len(seen) >= 2 and all(shown for _, shown in seen) and widget.n_updates >= 2
     assert any(not u.done for u, _ in seen) and seen[-1][0].done
-    assert preview not in viewer.layers and widget.preview_layer is None
+    assert widget.preview_layer is None and output_layers(viewer) == [preview]
     assert not any(layer.metadata.get(PREVIEW_KEY) for layer in viewer.layers)
     # progress: reported through napari's progress bar, which is closed at the end
     (pbar,) = bars
@@ -115,7 +117,7 @@ def test_sample_hand_end_to_end(viewer_widget, wait_done, errors, monkeypatch, r
     # one new Shapes layer of polygons on the hand
     assert len(viewer.layers) == n_before + 1
     (out,) = output_layers(viewer)
-    assert out.name == "initial contour segmented"
+    assert out.name == "initial contour segmented (rubber)"
     assert out.shape_type == ["polygon"] and out.ndim == 2
     assert out.data[0].dtype == np.float32 and out.data[0].shape[1] == 2
     assert iou(out.data[0], hand.mask) >= 0.9
@@ -372,31 +374,57 @@ def test_real_notification_reaches_napari(viewer_widget, napari_notifications, h
 
 def test_every_parameter_has_a_tooltip_and_materials_work(viewer_widget):
     _, widget = viewer_widget
-    params = [w for w in widget if w not in (widget._buttons, widget._status)]
-    assert len(params) >= 17
+    params = widget.controls()
+    assert len(params) >= 16
     for w in params:
         assert w.tooltip and len(w.tooltip) > 30, w.label
-    assert not shown(widget._young)
-    widget._material.value = "copper"
-    assert widget._stiffness.value == 1e6
+    physics = widget.physics
+    # What people change first is in view: the material, r and the node
+    # spacing; the other physics sits in a collapsed Advanced section.
+    main = list(widget._controls)
+    for w in (physics._material, physics._stiffness, physics._spacing):
+        assert w in main
+    for w in (widget._sigma, widget._max_steps, physics._count, *widget._weights.values()):
+        assert w in list(widget._advanced) and w not in main
+    assert not widget.advanced_section.isExpanded()
+    assert not shown(physics._young)
+    physics._material.value = "copper"
+    assert physics._stiffness.value == 1e6  # the core's suggested r for copper
     assert widget.parameters()["material"] == "copper"
-    widget._material.value = "custom"
-    assert shown(widget._young) and shown(widget._poisson) and shown(widget._density)
-    widget._young.value = 50.0
+    physics._material.value = "custom"
+    assert shown(physics._young) and shown(physics._poisson) and shown(physics._density)
+    physics._young.value = 50.0
     mat = widget.parameters()["material"]
     assert isinstance(mat, Material) and mat.young == 50e6
-    widget._nodes_by.value = "count"
-    assert shown(widget._count) and not shown(widget._spacing)
-    assert widget.parameters()["n_nodes"] == widget._count.value
-    widget._w_distance.value = 0.0
+    physics._count.value = 80
+    assert not physics._spacing.enabled
+    assert widget.parameters()["n_nodes"] == 80 and widget.parameters()["node_spacing"] is None
+    widget._weights["distance"].value = 0.0
     kw = segment_kwargs(np.array([[0, 0], [0, 10.0], [10, 10]]), **widget.parameters())
-    assert kw["forces"] == ("edges", "intensity")
+    assert kw["forces"] == ("edges", "intensity") and kw["n_nodes"] == 80
+
+
+def test_defaults_are_the_cores(viewer_widget):
+    # One set of defaults: the widget shows what segment() does without options.
+    import inspect
+
+    from napari_physeg.core import segment
+    from napari_physeg.core.forces import DEFAULT_WEIGHTS
+
+    _, widget = viewer_widget
+    defaults = {k: v.default for k, v in inspect.signature(segment).parameters.items()}
+    params = widget.parameters()
+    for name in ("material", "stiffness", "sigma_factor", "polarity", "max_steps"):
+        assert params[name] == defaults[name], name
+    assert params["weights"] == DEFAULT_WEIGHTS
+    contour = np.array([[0, 0], [0, 30.0], [30, 30], [30, 0]])
+    assert segment_kwargs(contour, **params)["n_nodes"] == 40  # 120 px at the default 3 px spacing
 
 
 def test_all_weights_zero_is_an_input_error(viewer_widget, errors):
     viewer, widget = viewer_widget
     viewer.open_sample("napari-physeg", "hand_segmentation")
-    for w in (widget._w_edges, widget._w_intensity, widget._w_distance):
+    for w in widget._weights.values():
         w.value = 0.0
     assert widget.run() is None
     assert "weight" in errors[0]
@@ -504,8 +532,8 @@ def test_widget_opens_from_the_plugin_and_runs(make_napari_viewer, wait_done, er
     widget.run()  # through the proxy napari may give plugins: public API only
     wait_done(widget)
     assert errors == [] and widget.last_outcome.ok
-    assert iou(viewer.layers["initial contour segmented"].data[0], hand.mask) >= 0.9
-    assert viewer.layers["initial contour mask"].data.max() == 1
+    assert iou(viewer.layers["initial contour segmented (rubber)"].data[0], hand.mask) >= 0.9
+    assert viewer.layers["initial contour segmented (rubber) mask"].data.max() == 1
 
 
 def test_closing_the_viewer_during_a_run_is_clean(make_napari_viewer, qtbot):
@@ -514,7 +542,7 @@ def test_closing_the_viewer_during_a_run_is_clean(make_napari_viewer, qtbot):
     viewer.window.add_dock_widget(widget)
     viewer.open_sample("napari-physeg", "hand_segmentation")
     widget._max_steps.value = 100000
-    widget._w_edges.value = 0.0  # slower to settle
+    widget._weights["edges"].value = 0.0  # slower to settle
     worker = widget.run()
     qtbot.waitUntil(lambda: widget.n_updates >= 1, timeout=5_000)
     viewer.close()
@@ -541,13 +569,15 @@ def test_headless_scripting(qtbot, hand):
         for layer_data in result_layer_data(outcome, job, labels=True):
             viewer.add_layer(napari.layers.Layer.create(*layer_data))
         assert iou(viewer.layers["initial contour segmented"].data[0], hand.mask) >= 0.9
-        assert viewer.layers["initial contour mask"].data.any()
+        assert viewer.layers["initial contour segmented mask"].data.any()
         # 2. through the widget, undocked
         widget = SegmentationWidget(viewer)
         widget.run()
         qtbot.waitUntil(lambda: not widget.is_running, timeout=30_000)
         assert widget.last_outcome.ok
-        assert len([layer for layer in viewer.layers if layer.name.startswith("initial contour segmented")]) == 2
+        assert [layer.name for layer in viewer.layers if isinstance(layer, napari.layers.Shapes)
+                and layer.name.startswith("initial contour segmented")] == ["initial contour segmented",
+                                                                            "initial contour segmented (rubber)"]
     finally:
         viewer.close()
 
@@ -633,3 +663,63 @@ def test_a_points_layer_with_too_few_points_says_so(viewer_widget, errors, hand)
     widget._shapes.value = viewer.layers["two clicks"]
     assert widget.run() is None
     assert errors and "2 point(s)" in errors[-1] and "at least 3" in errors[-1]
+
+
+# --------------------------------------------------------------------------
+# A long run in a live GUI
+# --------------------------------------------------------------------------
+
+
+def test_a_long_run_keeps_the_gui_live_and_keeps_the_good_shapes(viewer_widget, wait_done, errors, caplog,
+                                                                  monkeypatch):
+    """A multi-second segmentation (a ~600-node contour around the cameraman)
+    with napari's activity dock open: no RecursionError raised or logged, a
+    10 ms GUI timer is never held up for more than 200 ms, and the good shape
+    comes back although another shape of the layer fails."""
+    import time
+
+    from qtpy.QtCore import QTimer
+    from skimage import data as skdata
+
+    viewer, widget = viewer_widget
+    viewer.window._status_bar._toggle_activity_dock(True)
+    viewer.add_image(skdata.camera(), name="camera")
+    t = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+    around_the_man = np.c_[260 + 200 * np.sin(t), 250 + 130 * np.cos(t)]
+    small = np.c_[60 + 15 * np.sin(t), 100 + 15 * np.cos(t)]
+    viewer.add_shapes([around_the_man, small], shape_type="polygon", name="drawn")
+    widget.reset_choices()
+    widget._image.value, widget._shapes.value = viewer.layers["camera"], viewer.layers["drawn"]
+    widget.physics._spacing.value = 1.75  # ~600 nodes
+    real_iter_segment = seg.iter_segment
+
+    def failing_on_the_small_one(image, init, **kwargs):
+        if np.ptp(init[:, 0]) < 60:
+            raise ValueError("the contour collapsed to a point after 12 steps: no object border was found")
+        return real_iter_segment(image, init, **kwargs)
+
+    monkeypatch.setattr(seg, "iter_segment", failing_on_the_small_one)
+    gaps, last = [], [time.perf_counter()]
+
+    def tick():
+        now = time.perf_counter()
+        gaps.append(now - last[0])
+        last[0] = now
+
+    timer = QTimer()
+    timer.setInterval(10)
+    timer.timeout.connect(tick)
+    timer.start()
+    started = time.perf_counter()
+    widget.run()
+    wait_done(widget, timeout=120_000)
+    timer.stop()
+    seconds = time.perf_counter() - started
+    outcome = widget.last_outcome
+    assert seconds > 2.0 and widget.n_updates > 20  # a long run, previewed live
+    assert max(gaps) < 0.2, f"the GUI was held up for {max(gaps):.3f} s"
+    assert not [r for r in caplog.records if "RecursionError" in r.getMessage()]
+    assert len(outcome.results) == 1 and outcome.indices == [0] and len(outcome.results[0].contour) > 500
+    (out,) = output_layers(viewer)
+    assert list(out.features["shape"]) == [0]
+    assert len(errors) == 1 and "shape 1" in errors[0]

@@ -24,6 +24,7 @@ from napari_physeg._widgets.simulation import (  # noqa: E402
     run_to_completion,
     simulate_contours,
 )
+from napari_physeg._widgets._inputs import is_matching_layer  # noqa: E402
 from napari_physeg.core import match  # noqa: E402
 
 pytestmark = [
@@ -88,7 +89,7 @@ def test_hand_poses_time_axis_reuses_the_matching(viewer_widgets, wait_done, not
     assert outcome.matching is mlayer.metadata["matching"]  # reused, not recomputed
     assert len(viewer.layers) == n_before + 2
     (out,) = sim_layers(viewer)
-    assert out.name == "hand open outline → hand closed outline simulation"
+    assert out.name == "hand open outline → hand closed outline simulation (rubber, order)"
     n_frames = widget._n_frames.value
     assert out.ndim == 3 and len(out.data) == n_frames and set(out.shape_type) == {"polygon"}
     for t, poly in enumerate(out.data):  # one polygon per frame, on its own time step
@@ -104,7 +105,7 @@ def test_hand_poses_time_axis_reuses_the_matching(viewer_widgets, wait_done, not
     assert list(out.features["frame"]) == list(range(n_frames))
     # node trajectories
     (tracks,) = sim_layers(viewer, Tracks)
-    assert tracks.name == "hand open outline → hand closed outline tracks"
+    assert tracks.name == "hand open outline → hand closed outline tracks (rubber, order)"
     assert tracks.data.shape == (67 * n_frames, 4)
     node0 = tracks.data[tracks.data[:, 0] == 0]
     np.testing.assert_allclose(node0[:, 1], np.arange(n_frames))
@@ -156,7 +157,7 @@ def test_nd_input_keeps_leading_coordinates_and_transform(viewer_widgets, wait_d
     wait_done(widget)
     assert notes["error"] == []
     (out,) = sim_layers(viewer)
-    assert out.name == "stack #0 → stack #1 simulation"
+    assert out.name == "stack #0 → stack #1 simulation (rubber, order)"
     assert out.ndim == 4 and len(out.data) == 4
     for t, poly in enumerate(out.data):  # (t, leading, row, col)
         assert np.all(poly[:, 0] == t) and np.all(poly[:, 1] == 1)
@@ -176,17 +177,21 @@ def test_cancel_stops_the_simulation(viewer_widgets, wait_done, notes, monkeypat
     viewer, _, widget = viewer_widgets
     viewer.open_sample("napari-physeg", "hand_poses")
     steps = []
-    real_simulate = sim.simulate
+    real_iter_simulate = sim.iter_simulate
 
-    def slow_simulate(a, b, matching, *, callback, **kwargs):
-        def slow_callback(step, shape):
-            steps.append(step)
-            time.sleep(0.01)
-            return callback(step, shape)
+    def slow_iter_simulate(*args, **kwargs):
+        # The core's generator, a little slower, so that Cancel lands mid-run.
+        run = real_iter_simulate(*args, **kwargs)
+        state = next(run)
+        try:
+            while True:
+                steps.append(state.step)
+                time.sleep(0.01)
+                state = run.send((yield state))
+        except StopIteration as done:
+            return done.value
 
-        return real_simulate(a, b, matching, callback=slow_callback, **kwargs)
-
-    monkeypatch.setattr(sim, "simulate", slow_simulate)
+    monkeypatch.setattr(sim, "iter_simulate", slow_iter_simulate)
     cancelled_at = []
     original = SimulationWidget._on_yielded
 
@@ -235,7 +240,7 @@ def test_bad_input_and_core_errors_add_no_layer(viewer_widgets, wait_done, notes
     def diverging(*args, **kwargs):
         raise sim.DivergenceError("the simulation diverged at step 3")
 
-    monkeypatch.setattr(sim, "simulate", diverging)
+    monkeypatch.setattr(sim, "iter_simulate", diverging)
     assert widget.run() is not None
     wait_done(widget)
     assert len(errors) == 4 and "diverged" in errors[-1] and "Lower q" in errors[-1]
@@ -284,7 +289,7 @@ def test_headless_segment_match_simulate(qtbot, mock_app_model):
         segw.run()
         qtbot.waitUntil(lambda: not segw.is_running, timeout=30_000)
         assert segw.last_outcome.ok
-        segmented = viewer.layers["initial contour segmented"]
+        segmented = viewer.layers["initial contour segmented (rubber)"]
         hand = data.hand()
         ok_nodes = outline_distance(segmented.data[0], hand.outline)
         assert np.median(ok_nodes) < 2.0  # on the open hand's outline
@@ -306,7 +311,7 @@ def test_headless_segment_match_simulate(qtbot, mock_app_model):
         outcome = simw.last_outcome
         assert outcome.ok and outcome.matching is mlayer.metadata["matching"]
         (out,) = sim_layers(viewer)
-        assert out.name == "initial contour segmented → hand closed outline simulation"
+        assert out.name == "initial contour segmented (rubber) → hand closed outline simulation (rubber, order)"
         assert out.ndim == 3 and len(out.data) == simw._n_frames.value
         closed = viewer.layers["hand closed outline"].data[0]
         assert outline_distance(out.data[-1][:, 1:], closed).mean() < 1.5
@@ -331,3 +336,50 @@ def test_time_axis_is_prepended_to_any_layer_transform():
         for p in rng.uniform(-10, 10, size=(5, ndim)):
             np.testing.assert_allclose(out.data_to_world(np.r_[4.0, p]), np.r_[4.0, src.data_to_world(p)], atol=1e-9)
         assert out.axis_labels[0] == "frame"
+
+
+# --------------------------------------------------------------------------
+# Which matching is used, crossing frames, and export
+# --------------------------------------------------------------------------
+
+
+def test_the_widget_says_which_matching_it_uses(viewer_widgets, wait_done, notes):
+    viewer, matchw, widget = viewer_widgets
+    viewer.open_sample("napari-physeg", "hand_poses")
+    assert widget._matching.value == sim.COMPUTE_MATCHING
+    widget._method.value = "global"
+    assert "compute" in widget._matching_info.value and "'global'" in widget._matching_info.value
+    matchw._method.value = "local"
+    matchw.run()
+    wait_done(matchw)
+    # the new matching layer is picked, and the widget says so, with its method
+    assert is_matching_layer(widget._matching.value)
+    assert "'local'" in widget._matching_info.value and widget._matching.value.name in widget._matching_info.value
+    assert not widget._method.visible  # the method only matters when one is computed
+
+
+def test_crossing_frames_are_found():
+    from types import SimpleNamespace
+
+    square = np.array([[0.0, 0.0], [0.0, 10.0], [10.0, 10.0], [10.0, 0.0]])
+    bowtie = np.array([[0.0, 0.0], [0.0, 10.0], [10.0, 0.0], [10.0, 10.0]])
+    result = SimpleNamespace(frames=np.stack([square, bowtie, square]))
+    assert sim.crossing_frames(result) == [1]
+
+
+def test_frames_saved_as_csv(viewer_widgets, wait_done, notes, tmp_path):
+    import csv
+
+    viewer, _, widget = viewer_widgets
+    viewer.open_sample("napari-physeg", "hand_poses")
+    widget.run()
+    wait_done(widget)
+    res = widget.last_outcome.result
+    assert widget._export_btn.enabled
+    widget.export_csv(tmp_path / "frames.csv")
+    with open(tmp_path / "frames.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == res.frames.size // 2
+    last = [r for r in rows if int(r["frame"]) == len(res.frames) - 1]
+    np.testing.assert_allclose([[float(r["row"]), float(r["col"])] for r in last], res.frames[-1])
+    assert [int(r["node"]) for r in last] == list(range(res.frames.shape[1]))

@@ -101,14 +101,14 @@ def test_updates_never_re_enter_the_slot(movie_in_viewer):
     seen, depth = [], []
 
     def slot(update):
-        depth.append(widget._in_yield)
+        depth.append(widget._delivering)
         seen.append(update)
         if update < 3:
             widget._on_yielded_once(update + 1)  # what a nested event delivery does
 
     widget._on_yielded = slot
     widget._on_yielded_once(0)
-    assert seen == [0, 1, 2, 3] and widget._in_yield is False and not widget._pending_updates
+    assert seen == [0, 1, 2, 3] and widget._delivering is False and not widget._pending
 
 
 def test_a_run_with_the_activity_dock_open_logs_no_recursion(movie_in_viewer, wait_done, caplog):
@@ -122,8 +122,10 @@ def test_a_run_with_the_activity_dock_open_logs_no_recursion(movie_in_viewer, wa
 
 
 def test_a_result_delivered_inside_the_slot_comes_after_the_updates(movie_in_viewer):
-    """The run's end can be delivered inside the slot too: it must not
-    overtake the updates queued before it (the progress bar would stop short)."""
+    """The run's result and end can be delivered inside a handler too: they
+    must not overtake what came before them (the progress bar would stop
+    short; the end of the run would drop the preview before the result took
+    it over)."""
     _, widget = movie_in_viewer
     order = []
 
@@ -131,9 +133,14 @@ def test_a_result_delivered_inside_the_slot_comes_after_the_updates(movie_in_vie
         order.append(update)
         if update == 0:
             widget._on_yielded_once(1)  # queued
-            widget._on_returned_after_updates("result")  # delivered inside the slot too
+            widget._on_returned_in_order("result")  # delivered inside the slot too
+
+    def returned(result):
+        order.append(result)
+        widget._on_finished_in_order()  # e.g. processed by a progress bar inside this handler
 
     widget._on_yielded = slot
-    widget._on_returned = order.append
+    widget._on_returned = returned
+    widget._on_finished = lambda: order.append("finished")
     widget._on_yielded_once(0)
-    assert order == [0, 1, "result"]
+    assert order == [0, 1, "result", "finished"]

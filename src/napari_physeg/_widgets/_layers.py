@@ -38,7 +38,7 @@ __all__ = [
     "drop_repeated_nodes",
     "ellipse_polygon",
     "image_transform_kwargs",
-    "polygon_perimeter",
+    "write_csv",
     "prepend_axes_transform",
     "shape_in_layer_coords",
     "shape_to_polygon",
@@ -137,17 +137,6 @@ def drop_repeated_nodes(contour) -> np.ndarray:
     if not keep.any():
         keep[0] = True
     return np.ascontiguousarray(c[keep])
-
-
-def polygon_perimeter(contour) -> float:
-    """Length of a closed polyline (last two coordinates)."""
-    c = np.asarray(contour, dtype=np.float64)[:, -2:]
-    return float(np.hypot(*(np.roll(c, -1, axis=0) - c).T).sum())
-
-
-# --------------------------------------------------------------------------
-# Transforms
-# --------------------------------------------------------------------------
 
 
 def affine_matrix(transform, ndim: int) -> np.ndarray:
@@ -453,3 +442,20 @@ def contours_to_labels(contours, shape, leading=()) -> np.ndarray:
         rr, cc = draw_polygon(c[:, 0], c[:, 1], shape=shape[-2:])
         plane[rr, cc] = k
     return labels
+
+
+# --------------------------------------------------------------------------
+# Export
+# --------------------------------------------------------------------------
+
+
+def write_csv(path, columns: dict) -> None:
+    """Write equal-length ``columns`` (name -> 1D array) as a CSV file with a header row."""
+    import csv
+
+    names = list(columns)
+    values = [np.asarray(columns[name]).ravel() for name in names]
+    with open(path, "w", newline="", encoding="utf-8") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(names)
+        writer.writerows(zip(*(v.tolist() for v in values)))

@@ -10,29 +10,39 @@ neither leaves a thread running nor touches deleted Qt widgets.
 
 from __future__ import annotations
 
+import functools
 import threading
+import time
 from collections import deque
+
+import numpy as np
 
 from magicgui.widgets import Container
 from napari.qt.threading import GeneratorWorker, thread_worker
 from napari.utils.notifications import show_error
+from threadpoolctl import threadpool_limits
 
-__all__ = ["WorkerWidget", "run_to_completion"]
+__all__ = ["WorkerWidget", "ask_save_path", "relay", "run_to_completion"]
+
+
+#: Least height of a widget's scroll area (px): a row or two of controls.
+SCROLL_MIN_HEIGHT = 40
 
 
 class WorkerWidget(Container):
     """A magicgui ``Container`` that runs its computation in a background worker.
 
     A subclass builds its controls, among them ``_run_btn``, ``_status`` (a
-    Label) and, if its computation can be stopped, ``_cancel_btn``; then it
-    calls :meth:`_connect_signals`. Its ``run`` reads the input, then calls
+    Label) and, if its computation can be stopped, ``_cancel_btn``; it lays
+    them out with :meth:`_lay_out` and calls :meth:`_connect_signals`. Its ``run`` reads the input, then calls
     :meth:`_begin` and :meth:`_start`; it handles the results in
     ``_on_returned`` and ``_on_errored`` and, for a generator, the updates in
     ``_on_yielded``. The widget's ``_on_layers_changed`` is called when the
     viewer's layers change.
 
     A computation that can be cancelled takes ``cancel=self._cancel`` (a
-    ``threading.Event``) and returns early once it is set.
+    ``threading.Event``) and returns early once it is set: it runs the core's
+    generators through :func:`relay`, which tells them to stop.
     """
 
     #: Widgets whose computation cannot be stopped have no Cancel button.
@@ -47,8 +57,82 @@ class WorkerWidget(Container):
         self._progress_value = 0
         self.n_updates = 0  # progress updates shown in the last run
         self._running = False
-        self._in_yield = False
-        self._pending_updates = deque()
+        self._delivering = False
+        self._pending = deque()  # worker signals waiting for the one before to be handled
+
+    def _lay_out(self, controls, advanced=(), buttons=()):
+        """``controls``, then a collapsed "Advanced" section holding ``advanced``,
+        in a scroll area (so that every widget docked fits a laptop screen);
+        below it, always in view, Run, Cancel and ``buttons`` in a row, and the status.
+
+        napari docks a magicgui widget's ``native`` widget, which for a
+        ``scrollable`` Container is the scrolled content, not the scroll area
+        (magicgui#431): so the scroll area is placed inside this Container.
+        """
+        from qtpy.QtCore import Qt
+        from qtpy.QtWidgets import QFrame, QScrollArea
+        from superqt import QCollapsible
+
+        self._controls = Container(widgets=list(controls), labels=True)
+        self._advanced = Container(widgets=list(advanced), labels=True)
+        self.advanced_section = None
+        if advanced:
+            self.advanced_section = QCollapsible("Advanced")
+            self.advanced_section.addWidget(self._advanced.native)
+            self._controls.native.layout().addWidget(self.advanced_section)
+        self._controls.native.layout().addStretch(1)
+        self.scroll_area = QScrollArea()
+        self.scroll_area.setWidgetResizable(True)
+        self.scroll_area.setFrameShape(QFrame.Shape.NoFrame)
+        self.scroll_area.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        self.scroll_area.setWidget(self._controls.native)
+        # Compact footer: with all four widgets docked on a 1366 x 768 screen
+        # each gets ~150 px; the scroll area takes what is left.
+        self.scroll_area.setMinimumHeight(SCROLL_MIN_HEIGHT)
+        buttons = [self._run_btn] + ([self._cancel_btn] if self._cancel_btn is not None else []) + list(buttons)
+        self._buttons = Container(widgets=buttons, layout="horizontal", labels=False)
+        self._buttons.margins = (0, 0, 0, 0)
+        self.margins = (4, 2, 4, 2)
+        self.extend([self._buttons, self._status])
+        self.native.layout().insertWidget(0, self.scroll_area, 1)
+        self.native.layout().setSpacing(2)
+        self._status.native.setWordWrap(True)  # long reports must not widen the dock
+
+    def controls(self) -> list:
+        """The parameter widgets: those in the scroll area, then the Advanced ones."""
+        return [*self._controls, *self._advanced]
+
+    def reset_choices(self, *_):
+        """Refresh every layer choice, in the scroll area and the Advanced section too."""
+        super().reset_choices()
+        for part in (getattr(self, "_controls", None), getattr(self, "_advanced", None)):
+            if part is not None:
+                part.reset_choices()
+
+    def _add_result(self, data, meta: dict, kind: str, preview=None):
+        """Add a result layer; a Shapes result takes over the run's ``preview`` layer, if any.
+
+        napari runs a full ``gc.collect()`` whenever a layer is removed (a
+        third of a second in a busy viewer, with the GUI frozen), so the
+        preview is not removed and replaced: it becomes the result, with its
+        data, style, features, metadata and name.
+        """
+        from napari.layers import Layer
+
+        if kind != "shapes" or preview is None or preview not in self.viewer.layers:
+            return self.viewer.add_layer(Layer.create(data, meta, kind))
+        from napari.utils.colormaps.standardize_color import transform_color
+
+        shape_type = meta.get("shape_type", "polygon")
+        preview.data = (data, [shape_type] * len(data) if isinstance(shape_type, str) else shape_type)
+        for key in ("edge_color", "face_color"):
+            if key in meta:  # one colour, or one per shape
+                colours = transform_color(meta[key])
+                setattr(preview, key, colours[0] if len(colours) == 1 else colours)
+        for key in ("edge_width", "features", "metadata", "name"):
+            if key in meta:
+                setattr(preview, key, meta[key])
+        return preview
 
     def _connect_signals(self):
         self._run_btn.changed.connect(self.run)
@@ -68,7 +152,8 @@ class WorkerWidget(Container):
         return self._running
 
     def _fail(self, message: str):
-        self._status.value = "Error (see notification)"
+        """Say what went wrong, in full, in the widget (and as a notification)."""
+        self._status.value = message
         show_error(message)
 
     # ------------------------------------------------------------ run
@@ -86,12 +171,12 @@ class WorkerWidget(Container):
     def _start(self, pbar, function, *args, **kwargs):
         """Run ``function(*args, **kwargs)`` in a worker that ``pbar`` reports on; return the worker."""
         self._pbar = pbar
-        worker = thread_worker(function, start_thread=False)(*args, **kwargs)
+        worker = thread_worker(_with_one_blas_thread(function), start_thread=False)(*args, **kwargs)
         if isinstance(worker, GeneratorWorker):  # only generators report progress
             worker.yielded.connect(self._on_yielded_once)
-        worker.returned.connect(self._on_returned_after_updates)
-        worker.errored.connect(self._on_errored)
-        worker.finished.connect(self._on_finished)
+        worker.returned.connect(self._on_returned_in_order)
+        worker.errored.connect(self._on_errored_in_order)
+        worker.finished.connect(self._on_finished_in_order)
         self.worker = worker
         worker.start()
         return worker
@@ -111,31 +196,35 @@ class WorkerWidget(Container):
             return False
         return True
 
-    def _on_yielded_once(self, update):
-        """``_on_yielded``, never re-entered: napari's progress bar (with the
-        activity dock open) processes Qt events, which can deliver the next
-        update inside this one. That one waits in a queue and is handled
-        after, in order, instead of recursing until RecursionError."""
-        self._pending_updates.append(update)
-        if self._in_yield:
+    def _deliver(self, slot, *args):
+        """Run the worker's signal handlers one at a time, in the order the
+        signals came. napari's progress bar (with the activity dock open)
+        processes Qt events, so the next update, the run's result or its end
+        can be delivered inside a handler; it waits here and runs after,
+        instead of recursing (until RecursionError) or overtaking the updates
+        before it (the end of a run handled before its result)."""
+        self._pending.append((slot, args))
+        if self._delivering:
             return
-        self._in_yield = True
+        self._delivering = True
         try:
-            while self._pending_updates:
-                self._on_yielded(self._pending_updates.popleft())
+            while self._pending:
+                slot, args = self._pending.popleft()
+                slot(*args)
         finally:
-            self._in_yield = False
+            self._delivering = False
 
-    def _flush_updates(self):
-        """Handle the updates still queued: the run's ``returned`` and
-        ``finished`` can be delivered inside the yielded slot too, and must
-        not overtake the updates that came before them."""
-        while self._pending_updates:
-            self._on_yielded(self._pending_updates.popleft())
+    def _on_yielded_once(self, update):
+        self._deliver(self._on_yielded, update)
 
-    def _on_returned_after_updates(self, result):
-        self._flush_updates()
-        self._on_returned(result)
+    def _on_returned_in_order(self, result):
+        self._deliver(self._on_returned, result)
+
+    def _on_errored_in_order(self, err):
+        self._deliver(self._on_errored, err)
+
+    def _on_finished_in_order(self):
+        self._deliver(self._on_finished)
 
     def _on_destroyed(self, *_):
         self._cancel.set()
@@ -157,7 +246,6 @@ class WorkerWidget(Container):
         self._move_pbar(self._record_progress(value))
 
     def _on_finished(self):
-        self._flush_updates()
         self._cancel.set()  # stops a helper thread of the computation too if the worker was aborted
         self.worker = None
         self._running = False
@@ -170,6 +258,55 @@ class WorkerWidget(Container):
                 self._cancel_btn.enabled = False
         except RuntimeError:  # the viewer or this widget was closed during the run
             pass
+
+
+def _with_one_blas_thread(generator_function):
+    """``generator_function`` run with BLAS/LAPACK limited to one thread.
+
+    The core's dense problems are small (at most a few hundred unknowns):
+    OpenBLAS's threads only spin against the GUI thread and the worker, and
+    a LAPACK call holds the GIL meanwhile. On a busy 2-core machine a
+    128 x 128 eigenproblem took 0.5 s instead of 2 ms, and the GUI froze
+    that long.
+    """
+
+    @functools.wraps(generator_function)
+    def run(*args, **kwargs):
+        with threadpool_limits(limits=1, user_api="blas"):
+            return (yield from generator_function(*args, **kwargs))
+
+    return run
+
+
+def ask_save_path(widget, title: str, suggestion: str) -> str:
+    """A file name from Qt's save dialog ("" when the user cancels)."""
+    from qtpy.QtWidgets import QFileDialog
+
+    path, _ = QFileDialog.getSaveFileName(widget.native, title, suggestion, "CSV files (*.csv)")
+    return path
+
+
+def relay(run, cancel: threading.Event, interval: float = 0.0, wrap=None):
+    """Drive the core's generator ``run`` (``iter_segment``, ``iter_match``,
+    ``iter_simulate``) in this thread, the worker's: no helper thread, no queue.
+
+    Yields its states, ``wrap(state)`` if given, at most one every ``interval``
+    seconds (so that the GUI draws previews at the pace it can); once
+    ``cancel`` is set the core is sent ``True`` (stop) after its current step,
+    and its result then says ``stop_reason="cancelled"``. Returns the core's
+    result; the core's errors propagate.
+    """
+    last = -np.inf
+    try:
+        state = next(run)
+        while True:
+            now = time.perf_counter()
+            if now - last >= interval:
+                last = now
+                yield state if wrap is None else wrap(state)
+            state = run.send(cancel.is_set())
+    except StopIteration as done:
+        return done.value
 
 
 def run_to_completion(generator, on_progress=None):

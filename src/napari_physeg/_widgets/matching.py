@@ -2,47 +2,54 @@
 
 Three parts, from the least to the most napari-specific:
 
-* :func:`compute_matching` - a plain function that matches two ``(N, 2)``
-  contours with the core and returns a :class:`MatchingOutcome` (errors are
-  caught and returned, never raised; a ``threading.Event`` cancels it); it
-  runs in a worker thread, a script or a test alike. :func:`match_contours`
-  is the same as a generator of progress percentages, for a worker thread.
-* :func:`read_contour_pair` - reads shape ``i`` of one Shapes layer and shape
-  ``j`` of another (or the same) layer into a :class:`ContourPair`: two
-  contours in the data coordinates of the first layer, raising
-  :class:`~napari_physeg._widgets.segmentation.InputError` with the fix for bad
-  input. :func:`matching_layer_data` turns a matching into a napari layer data
+* :func:`match_contours` - a generator for a worker thread that runs the
+  core's :func:`~napari_physeg.core.iter_match` in that thread and returns a
+  :class:`MatchingOutcome` (errors are caught and returned, never raised; a
+  ``threading.Event`` cancels it). :func:`compute_matching` runs it to its
+  end, for scripts and tests.
+* :func:`matching_layer_data` turns a matching into a napari layer data
   tuple: one line (or vector) per pair, from ``a`` to ``b``, coloured by the
   pair's matching cost, with the Matching itself in ``metadata["matching"]``
-  (the simulation widget reuses it). The simulation widget uses
-  :func:`read_contour_pair` too.
+  (the simulation widget reuses it); :func:`matching_table` gives the pairs
+  and their costs as rows for a CSV file. The two contours are read by
+  :func:`~._inputs.read_contour_pair`.
 * :class:`MatchingWidget` - a magicgui ``Container`` (a
   :class:`~napari_physeg._widgets._worker.WorkerWidget`); Run matches in a
   ``napari.qt.threading.thread_worker`` with a napari progress bar; Cancel
-  stops it.
+  stops it; "Save pairs as CSV" writes the last matching.
 
 All physics lives in :mod:`napari_physeg.core`.
 """
 
 from __future__ import annotations
 
-import queue
 import threading
 import time
 from dataclasses import dataclass
 
 import napari
 import numpy as np
-from magicgui.widgets import ComboBox, Container, Label, PushButton, SpinBox
-from napari.layers import Layer, Shapes, Vectors
+from magicgui.widgets import ComboBox, Label, PushButton, SpinBox
+from napari.layers import Layer
 from napari.utils import progress
 from napari.utils.colormaps import Colormap
 from napari.utils.notifications import show_info
 
-from ..core import MatchingCancelled, match
-from ._layers import contours_to_shapes_data, image_transform_kwargs, shape_in_layer_coords
-from ._worker import WorkerWidget
-from .segmentation import PREVIEW_KEY, InputError
+from ..core import iter_match, match
+from ._inputs import (
+    MATCHING_KEY,
+    ContourPair,
+    InputError,
+    contour_layer_choices,
+    core_default,
+    is_matching_layer,
+    matching_fits,
+    pick_default_b,
+    read_contour_pair,
+)
+from ._layers import contours_to_shapes_data
+from ._layers import write_csv
+from ._worker import WorkerWidget, ask_save_path, relay, run_to_completion
 
 __all__ = [
     "COST_COLORMAP",
@@ -58,13 +65,10 @@ __all__ = [
     "is_matching_layer",
     "matching_fits",
     "matching_layer_data",
+    "matching_table",
     "read_contour_pair",
 ]
 
-#: Key of the Matching in the output layer's metadata.
-MATCHING_KEY = "matching"
-#: Key in a layer's metadata that marks a simulation output (not a contour input).
-SIMULATION_KEY = "simulation"
 #: Colours of the match cost, low (good) to high (poor): ColorBrewer's RdYlBu
 #: reversed, readable with the common colour-vision deficiencies and on a dark canvas.
 COST_COLORMAP = Colormap(["#2c7bb6", "#abd9e9", "#ffffbf", "#fdae61", "#d7191c"], name="physeg match cost")
@@ -82,145 +86,6 @@ METHOD_TIPS = {
              "node j of b match only when each is the other's best. Fewer, surer pairs; the rest are "
              "reported as unmatched (the simulation moves them by eq. 18).",
 }
-
-
-def contour_layer_choices(viewer) -> list:
-    """``(name, layer)`` of the Shapes layers that can hold input contours
-    (not the outputs of the matching and simulation widgets, nor previews)."""
-    skip = {MATCHING_KEY, SIMULATION_KEY, PREVIEW_KEY}
-    return [(layer.name, layer) for layer in viewer.layers
-            if isinstance(layer, Shapes) and not (set(layer.metadata) & skip)]
-
-
-def pick_default_b(layer_a, index_a, layer_b, index_b, candidates) -> None:
-    """Make a and b two different shapes when the choice is obvious.
-
-    With b's layer equal to a's: another layer for b when a's layer holds a
-    single shape, else another index. (magicgui widgets; changed in place.)
-    """
-    a, b = layer_a.value, layer_b.value
-    if a is None or b is not a:
-        return
-    others = [layer for _, layer in candidates if layer is not a]
-    if len(a.data) < 2 and others:
-        layer_b.value = others[0]
-    elif len(a.data) >= 2 and index_a.value == index_b.value:
-        index_b.value = 1 if index_a.value == 0 else 0
-
-
-class MatchingInputError(InputError):
-    """Bad input to the matching (or simulation) widget."""
-
-
-# --------------------------------------------------------------------------
-# Reading two contours
-# --------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class ContourPair:
-    """Two contours read from Shapes layers, in the first layer's data coordinates.
-
-    Attributes
-    ----------
-    a, b : (N, 2) float64 ndarray
-        ``(row, col)`` contours, closed, no repeated vertex.
-    leading : tuple of float
-        Leading (non-spatial) data coordinates of ``a`` in its layer (``()`` for 2D).
-    transform : dict
-        The first layer's transform, for output layers.
-    a_layer, b_layer : str
-        Names of the source layers.
-    a_index, b_index : int
-        Indices of the shapes in them.
-    a_label, b_label : str
-        Short names for output layers: the layer name, plus ``#index`` when
-        the layer holds several shapes.
-    """
-
-    a: np.ndarray
-    b: np.ndarray
-    leading: tuple
-    transform: dict
-    a_layer: str
-    a_index: int
-    b_layer: str
-    b_index: int
-    a_label: str
-    b_label: str
-
-
-def _label(layer, index: int) -> str:
-    return layer.name if len(layer.data) == 1 else f"{layer.name} #{index}"
-
-
-def _read_one(layer, index: int, role: str, reference=None, world_point=None):
-    if layer is None:
-        raise MatchingInputError(
-            f"no Shapes layer for contour {role}: open File > Open Sample > napari-physeg > Hand poses "
-            "(matching), or draw closed shapes (polygon, ellipse, rectangle) in a Shapes layer and select it "
-            f"in '{role}'")
-    if not isinstance(layer, Shapes):
-        raise MatchingInputError(f"{getattr(layer, 'name', layer)!r} is not a Shapes layer; select the layer "
-                                 f"with contour {role}")
-    n = len(layer.data)
-    if n == 0:
-        raise MatchingInputError(f"the Shapes layer {layer.name!r} ({role}) is empty: draw a closed shape "
-                                 "(polygon, lasso, ellipse or rectangle) in it, then press Run again")
-    if not 0 <= int(index) < n:
-        raise MatchingInputError(f"{layer.name!r} has {n} shape(s), numbered 0 to {n - 1}: set the shape index "
-                                 f"of {role} to one of them (got {index})")
-    try:
-        contour, leading = shape_in_layer_coords(layer, int(index), reference, world_point)
-    except ValueError as err:
-        raise MatchingInputError(f"contour {role}: {err}") from None
-    if len(contour) < 3:
-        raise MatchingInputError(f"contour {role} (shape {index} of {layer.name!r}) has {len(contour)} distinct "
-                                 "vertices: a contour needs at least 3; redraw it as a polygon or ellipse")
-    if not np.all(np.isfinite(contour)):
-        raise MatchingInputError(f"contour {role} (shape {index} of {layer.name!r}) has non-finite "
-                                 "coordinates (NaN); redraw it")
-    return contour, leading
-
-
-def read_contour_pair(layer_a, index_a: int, layer_b, index_b: int, *, world_point=None,
-                      roles=("a", "b")) -> ContourPair:
-    """Read two closed contours for matching or simulation.
-
-    Both are expressed in the DATA coordinates of ``layer_a`` (``b`` goes
-    through world coordinates, so the layers may have different transforms),
-    so output layers with ``layer_a``'s transform overlay the inputs.
-
-    Parameters
-    ----------
-    layer_a, layer_b : napari.layers.Shapes
-        May be the same layer (then with different indices).
-    index_a, index_b : int
-        Which shape of each layer.
-    world_point : sequence of float, optional
-        The viewer's current position, for world axes a layer lacks.
-    roles : tuple of str
-        What to call the two contours in messages.
-
-    Raises
-    ------
-    InputError
-        With a message that says how to fix the input: no or empty layer, an
-        index out of range, a line or a shape with fewer than 3 vertices, the
-        same shape twice.
-    """
-    ra, rb = roles
-    if layer_a is not None and layer_a is layer_b and int(index_a) == int(index_b):
-        raise MatchingInputError(
-            f"{ra} and {rb} are the same shape (shape {index_a} of {layer_a.name!r}): choose another shape "
-            f"index for {rb}, or another layer (e.g. the sample 'Hand poses' gives two outlines)")
-    a, leading = _read_one(layer_a, index_a, ra, None, world_point)
-    b, _ = _read_one(layer_b, index_b, rb, layer_a, world_point)
-    return ContourPair(
-        a=a, b=b, leading=leading, transform=image_transform_kwargs(layer_a),
-        a_layer=layer_a.name, a_index=int(index_a), b_layer=layer_b.name, b_index=int(index_b),
-        a_label=_label(layer_a, index_a), b_label=_label(layer_b, index_b),
-    )
 
 
 # --------------------------------------------------------------------------
@@ -254,65 +119,34 @@ class MatchingOutcome:
         return self.error is None and not self.cancelled and self.matching is not None
 
 
-def compute_matching(a, b, *, method: str = "order", n_modes: int | None = None,
-                     cancel: threading.Event | None = None, on_progress=None) -> MatchingOutcome:
-    """Match contour ``a`` to contour ``b`` with :func:`napari_physeg.core.match`.
+def match_contours(a, b, *, method: str = core_default(match, "method"), n_modes: int | None = None,
+                   cancel: threading.Event | None = None):
+    """Match contour ``a`` to contour ``b``; a generator for a worker thread.
 
-    ``n_modes`` of 0 or None chooses the number of modes automatically.
-    ``on_progress(fraction)`` (optional) receives the core's progress, 0 to 1;
-    setting ``cancel`` stops the core at its next stage. Errors of the core
-    are returned in the outcome, not raised.
+    The core's :func:`~napari_physeg.core.iter_match` runs right here (see
+    :func:`~._worker.relay`): it yields the core's
+    :class:`~napari_physeg.core.MatchingProgress` and stops at its next stage
+    once ``cancel`` is set. ``n_modes`` of 0 or None chooses the number of
+    modes automatically. Returns a :class:`MatchingOutcome`: the core's
+    errors are caught and returned in it, not raised.
     """
+    cancel = cancel if cancel is not None else threading.Event()
     t0 = time.perf_counter()
-
-    def callback(fraction):
-        if on_progress is not None:
-            on_progress(fraction)
-        return not (cancel is not None and cancel.is_set())  # False stops the core
-
     try:
-        m = match(a, b, method=method, n_modes=int(n_modes) if n_modes else None, callback=callback)
-    except MatchingCancelled:
-        return MatchingOutcome(cancelled=True, seconds=time.perf_counter() - t0)
+        m = yield from relay(iter_match(a, b, method=method, n_modes=int(n_modes) if n_modes else None), cancel)
     except Exception as err:  # reported to the user by the caller
         return MatchingOutcome(error=err, seconds=time.perf_counter() - t0)
+    if m.stop_reason == "cancelled":
+        return MatchingOutcome(cancelled=True, seconds=time.perf_counter() - t0)
     return MatchingOutcome(matching=m, seconds=time.perf_counter() - t0)
 
 
-def match_contours(a, b, *, method: str = "order", n_modes: int | None = None,
-                   cancel: threading.Event | None = None):
-    """:func:`compute_matching` as a generator for a worker thread.
-
-    The core runs in a helper thread and hands its progress over a queue;
-    this generator yields it as whole percentages (so a worker can show it
-    and be quit between two of them) and returns the
-    :class:`MatchingOutcome`.
-    """
-    cancel = cancel if cancel is not None else threading.Event()
-    updates: queue.SimpleQueue = queue.SimpleQueue()
-
-    def target():
-        try:
-            outcome = compute_matching(a, b, method=method, n_modes=n_modes, cancel=cancel,
-                                       on_progress=lambda f: updates.put(("progress", f)))
-        except BaseException as err:  # never lost in this thread
-            outcome = MatchingOutcome(error=err)
-        updates.put(("done", outcome))
-
-    helper = threading.Thread(target=target, name="napari-physeg match", daemon=True)
-    helper.start()
-    settled = False
-    try:
-        while True:
-            kind, payload = updates.get()
-            if kind == "done":
-                settled = True
-                return payload
-            yield int(round(100 * payload))
-    finally:
-        if not settled:  # closed early (the worker was aborted): stop the helper as well
-            cancel.set()
-        helper.join()
+def compute_matching(a, b, *, method: str = core_default(match, "method"), n_modes: int | None = None,
+                     cancel: threading.Event | None = None, on_progress=None) -> MatchingOutcome:
+    """:func:`match_contours` run to its end, for scripts and tests;
+    ``on_progress(fraction)`` (optional) sees the core's progress, 0 to 1."""
+    report = None if on_progress is None else (lambda state: on_progress(state.fraction))
+    return run_to_completion(match_contours(a, b, method=method, n_modes=n_modes, cancel=cancel), report)
 
 
 def error_message(err: Exception) -> str:
@@ -375,7 +209,7 @@ def matching_layer_data(m, pair: ContourPair, *, kind: str = OUTPUT_LINES, name:
         "leading": tuple(pair.leading),
     }
     meta = {
-        "name": name or f"{pair.a_label} → {pair.b_label} matching",
+        "name": name or f"{pair.a_label} → {pair.b_label} matching ({m.method})",
         "features": features,
         "edge_color": "cost",
         "edge_colormap": COST_COLORMAP,
@@ -395,21 +229,15 @@ def matching_layer_data(m, pair: ContourPair, *, kind: str = OUTPUT_LINES, name:
     return lines, {**meta, "shape_type": "line"}, "shapes"
 
 
-def is_matching_layer(layer) -> bool:
-    """A layer made by :func:`matching_layer_data` (it holds a Matching in its metadata)."""
-    return isinstance(layer, (Shapes, Vectors)) and layer.metadata.get(MATCHING_KEY) is not None
-
-
-def matching_fits(metadata: dict, a, b, atol: float = 1e-3) -> bool:
-    """Whether a matching layer's metadata was computed for the contours ``a`` and ``b``."""
-    m = metadata.get(MATCHING_KEY)
-    ca, cb = metadata.get("a_contour"), metadata.get("b_contour")
-    if m is None or ca is None or cb is None:
-        return False
-    ca, cb = np.asarray(ca), np.asarray(cb)
-    a, b = np.asarray(a), np.asarray(b)
-    return (ca.shape == a.shape and cb.shape == b.shape and np.asarray(m.affinity).shape == (len(a), len(b))
-            and bool(np.allclose(ca, a, atol=atol)) and bool(np.allclose(cb, b, atol=atol)))
+def matching_table(m, pair: ContourPair) -> dict:
+    """The pairs of ``m`` as columns for a CSV file: ``node_a``, ``node_b``,
+    the nodes' coordinates (``a_row``, ``a_col``, ``b_row``, ``b_col``, in
+    ``a``'s layer data coordinates), ``cost`` and ``affinity`` (eq. 12)."""
+    pairs = np.asarray(m.pairs, dtype=int)
+    a, b = pair.a[pairs[:, 0]], pair.b[pairs[:, 1]]
+    return {"node_a": pairs[:, 0], "node_b": pairs[:, 1], "a_row": a[:, 0], "a_col": a[:, 1],
+            "b_row": b[:, 0], "b_col": b[:, 1], "cost": np.asarray(m.cost, dtype=float),
+            "affinity": np.asarray(m.affinity, dtype=float)[pairs[:, 0], pairs[:, 1]]}
 
 
 def _hex(rgba) -> str:
@@ -432,7 +260,8 @@ def cost_legend_html(lo: float | None = None, hi: float | None = None, n: int = 
 
 _TIPS = {
     "layer_a": "Shapes layer holding contour a (the one whose nodes are matched). Any closed shape: polygon, "
-               "lasso, ellipse, rectangle or path. The lines are drawn in this layer's coordinates.",
+               "lasso, ellipse, rectangle or path; or a Points layer, its points in the order clicked. The "
+               "lines are drawn in this layer's coordinates.",
     "index_a": "Which shape of layer a is contour a (0 = the first shape drawn).",
     "layer_b": "Shapes layer holding contour b (the target). May be the same layer as a, with another shape "
                "index.",
@@ -449,6 +278,8 @@ _TIPS = {
               "are in the layer's features (cost, affinity, node_a, node_b).",
     "run": "Match the nodes of a to those of b in the background and add a layer of correspondences.",
     "cancel": "Stop the running matching; no layer is added.",
+    "export": "Save the last matching's pairs as a CSV file: node_a, node_b, their coordinates, cost and "
+              "affinity, one row per pair (napari's own CSV export of the lines drops these columns).",
 }
 
 
@@ -482,20 +313,20 @@ class MatchingWidget(WorkerWidget):
         self._index_a = SpinBox(label="shape of a", value=0, min=0, max=100000, tooltip=_TIPS["index_a"])
         self._layer_b = ComboBox(label="contour b (layer)", choices=self._shapes_choices, tooltip=_TIPS["layer_b"])
         self._index_b = SpinBox(label="shape of b", value=0, min=0, max=100000, tooltip=_TIPS["index_b"])
-        self._method = ComboBox(label="method", choices=list(METHOD_TIPS), value="order", tooltip=_TIPS["method"])
+        self._method = ComboBox(label="method", choices=list(METHOD_TIPS), value=core_default(match, "method"),
+                                tooltip=_TIPS["method"])
         self._n_modes = SpinBox(label="modes (0 = auto)", value=0, min=0, max=60, tooltip=_TIPS["n_modes"])
         self._output = ComboBox(label="output as", choices=[OUTPUT_LINES, OUTPUT_VECTORS], value=OUTPUT_LINES,
                                 tooltip=_TIPS["output"])
         self._run_btn = PushButton(text="Run", tooltip=_TIPS["run"])
         self._cancel_btn = PushButton(text="Cancel", tooltip=_TIPS["cancel"], enabled=False)
-        self._buttons = Container(widgets=[self._run_btn, self._cancel_btn], layout="horizontal", labels=False)
+        self._export_btn = PushButton(text="Save CSV…", tooltip=_TIPS["export"], enabled=False)
         self._legend = Label(value=cost_legend_html(), tooltip=_TIPS["legend"])
         self._status = Label(value="")
-        self.extend([self._layer_a, self._index_a, self._layer_b, self._index_b, self._method, self._n_modes,
-                     self._output, self._buttons, self._legend, self._status])
+        self._lay_out([self._layer_a, self._index_a, self._layer_b, self._index_b, self._method, self._output,
+                       self._legend], advanced=[self._n_modes], buttons=[self._export_btn])
+        self._export_btn.changed.connect(self._ask_export)
         self._set_item_tooltips()
-        self._status.native.setWordWrap(True)  # long reports must not widen the dock
-
         self._connect_signals()
         self._pick_defaults()
 
@@ -547,17 +378,18 @@ class MatchingWidget(WorkerWidget):
         self.pair = pair
         self.last_outcome = None
         self.output_layer = None
+        self._export_btn.enabled = False
         self._begin(f"Matching {len(pair.a)} to {len(pair.b)} nodes…")
         pbar = progress(total=100, desc=f"Matching {pair.a_label!r} to {pair.b_label!r}")
         return self._start(pbar, match_contours, pair.a, pair.b, **self.parameters(), cancel=self._cancel)
 
     # ------------------------------------------------------------ worker signals (GUI thread)
-    def _on_yielded(self, percent: int):
+    def _on_yielded(self, state):
         if not self._gui_alive():
             self._on_destroyed()
             return
         self.n_updates += 1
-        self._advance(percent)
+        self._advance(int(round(100 * state.fraction)))
 
     def _on_returned(self, outcome: MatchingOutcome):
         self.last_outcome = outcome
@@ -577,6 +409,7 @@ class MatchingWidget(WorkerWidget):
         except Exception as err:  # never leave the user with a silent failure
             self._fail(f"Could not add the matching layer: {type(err).__name__}: {err}")
             return
+        self._export_btn.enabled = True
         lo, hi = cost_limits(m.cost)
         self._legend.value = cost_legend_html(lo, hi)
         na = len(pair.a)
@@ -588,3 +421,16 @@ class MatchingWidget(WorkerWidget):
         # compute_matching catches the core's errors itself; this is a last resort.
         self.last_outcome = MatchingOutcome(error=err)
         self._fail(error_message(err))
+
+    # ------------------------------------------------------------ export
+    def _ask_export(self, *_):
+        path = ask_save_path(self, "Save the pairs as CSV", f"{self.pair.a_label} to {self.pair.b_label} pairs.csv")
+        if path:
+            self.export_csv(path)
+
+    def export_csv(self, path) -> None:
+        """Write the last matching's pairs (see :func:`matching_table`) to ``path``."""
+        if self.last_outcome is None or not self.last_outcome.ok:
+            raise InputError("no matching to save yet: press Run first")
+        write_csv(path, matching_table(self.last_outcome.matching, self.pair))
+        self._status.value = f"Saved {len(self.last_outcome.matching.pairs)} pairs to {path}"

@@ -30,7 +30,6 @@ import numpy as np
 from magicgui.widgets import (
     CheckBox,
     ComboBox,
-    Container,
     FloatSpinBox,
     Label,
     PushButton,
@@ -40,17 +39,28 @@ from napari.layers import Image, Layer, Points, Shapes
 from napari.utils import progress
 from napari.utils.notifications import show_info, show_warning
 
-from ..core import MATERIALS, DivergenceError, Material, iter_segment
+from ..core import DivergenceError, iter_segment, segment
+from ..core.forces import DEFAULT_WEIGHTS
+from ._inputs import (
+    PREVIEW_COLOR,
+    PHYSICS_TIPS,
+    PREVIEW_KEY,
+    InputError,
+    PhysicsControls,
+    contour_layer_choices,
+    core_default,
+    image_layer_choices,
+    node_count,
+)
 from ._layers import (
     contours_to_labels,
     contours_to_shapes_data,
     PointsAsPolygon,
     image_transform_kwargs,
-    polygon_perimeter,
     shapes_to_image_coords,
     slice_index,
 )
-from ._worker import WorkerWidget, run_to_completion
+from ._worker import WorkerWidget, relay, run_to_completion
 
 __all__ = [
     "InputError",
@@ -58,8 +68,6 @@ __all__ = [
     "SegmentationOutcome",
     "SegmentationProgress",
     "SegmentationWidget",
-    "SUGGESTED_STIFFNESS",
-    "make_material",
     "prepare_segmentation",
     "result_layer_data",
     "run_to_completion",
@@ -67,25 +75,9 @@ __all__ = [
     "segment_kwargs",
 ]
 
-#: Stiffness constant r (N/m) suggested for each preset: the paper's 2e3 for
-#: rubber and 1e6 for copper; stiffer metals get a little more.
-SUGGESTED_STIFFNESS = {
-    "rubber": 2e3,
-    "soft tissue": 2e3,
-    "aluminium": 1e6,
-    "copper": 1e6,
-    "steel": 2e6,
-}
-CUSTOM = "custom"
 #: Choices of the RGB channel selector.
 RGB_CHOOSE = "(choose a channel)"
 RGB_CHANNELS = {"grey (luminance)": None, "red": 0, "green": 1, "blue": 2}
-#: Key in a layer's metadata that marks the temporary preview layer.
-PREVIEW_KEY = "napari_physeg_preview"
-
-
-class InputError(ValueError):
-    """Bad input to the widget; the message says what is wrong and how to fix it."""
 
 
 # --------------------------------------------------------------------------
@@ -213,8 +205,9 @@ def segment_contours(image, contours, kwargs_list, *, cancel: threading.Event | 
                 return outcome(cancelled=True)
             max_steps = int(kwargs.get("max_steps", 1000))
             try:
-                result = yield from _throttled_steps(iter_segment(image, init, **kwargs), i, total, max_steps,
-                                                     cancel, preview_interval)
+                result = yield from relay(
+                    iter_segment(image, init, **kwargs), cancel, preview_interval,
+                    wrap=lambda state, i=i: SegmentationProgress(i, total, state.step, max_steps, state.contour))
             except Exception as err:  # this contour failed: say why, go on with the others
                 failures.append((i, err))
                 continue
@@ -229,49 +222,22 @@ def segment_contours(image, contours, kwargs_list, *, cancel: threading.Event | 
     return outcome()
 
 
-def _throttled_steps(run, index, total, max_steps, cancel, interval):
-    """Drive the core's generator ``run``, yielding a progress update at most
-    every ``interval`` seconds; return its result."""
-    last = -np.inf
-    try:
-        state = next(run)
-        while True:
-            now = time.perf_counter()
-            if now - last >= interval:
-                last = now
-                yield SegmentationProgress(index, total, state.step, max_steps, state.contour)
-            state = run.send(cancel.is_set())
-    except StopIteration as done:
-        return done.value
-
-
 # --------------------------------------------------------------------------
 # Layers <-> job
 # --------------------------------------------------------------------------
 
 
-def make_material(name: str, young_mpa: float = 100.0, poisson: float = 0.49,
-                  density: float = 1100.0) -> str | Material:
-    """The ``material`` argument of :func:`segment`: a preset name, or a custom
-    :class:`Material` (``young_mpa`` in MPa, ``density`` in kg/m^3)."""
-    if name != CUSTOM:
-        return name
-    return Material(CUSTOM, young=float(young_mpa) * 1e6, poisson=float(poisson), density=float(density))
-
-
-def segment_kwargs(contour, *, material="rubber", stiffness=2000.0, node_spacing=None, n_nodes=None,
-                   sigma_factor=1.0, weights=None, polarity="auto", max_steps=1000) -> dict:
+def segment_kwargs(contour, *, material=core_default(segment, "material"),
+                   stiffness=core_default(segment, "stiffness"), node_spacing=None, n_nodes=None,
+                   sigma_factor=core_default(segment, "sigma_factor"), weights=None,
+                   polarity=core_default(segment, "polarity"), max_steps=core_default(segment, "max_steps")) -> dict:
     """Keyword arguments of :func:`segment` for one initial contour.
 
     ``node_spacing`` (px) is turned into a node count for this contour's
-    perimeter; ``n_nodes`` is used as is. Force weights of 0 leave that force
-    out.
+    perimeter; ``n_nodes`` is used as is; with neither, the core's default.
+    Force weights of 0 leave that force out; with none given, the core's.
     """
-    if node_spacing is not None:
-        if not node_spacing > 0:
-            raise InputError(f"node spacing must be positive, got {node_spacing!r} px")
-        n_nodes = int(np.clip(round(polygon_perimeter(contour) / float(node_spacing)), 3, 5000))
-    weights = dict(weights) if weights is not None else {"edges": 0.4, "intensity": 0.3, "distance": 0.3}
+    weights = dict(weights) if weights is not None else dict(DEFAULT_WEIGHTS)
     forces = tuple(name for name, w in weights.items() if w > 0)
     if not forces:
         raise InputError("every force weight is 0: give at least one force (edges, intensity or distance) "
@@ -279,7 +245,7 @@ def segment_kwargs(contour, *, material="rubber", stiffness=2000.0, node_spacing
     return {
         "material": material,
         "stiffness": float(stiffness),
-        "n_nodes": None if n_nodes is None else int(n_nodes),
+        "n_nodes": node_count(contour, node_spacing, n_nodes),
         "sigma_factor": float(sigma_factor),
         "forces": forces,
         "weights": {name: float(weights[name]) for name in forces},
@@ -524,7 +490,7 @@ def result_layer_data(outcome: SegmentationOutcome, job: SegmentationJob, *, lab
     out = [(contours_to_shapes_data(contours, job.leading), shapes_meta, "shapes")]
     if labels:
         mask = contours_to_labels(contours, job.image_shape, job.leading)
-        out.append((mask, {"name": f"{job.shapes_name} mask", **job.transform}, "labels"))
+        out.append((mask, {"name": f"{name} mask", **job.transform}, "labels"))
     return out
 
 
@@ -533,27 +499,12 @@ def result_layer_data(outcome: SegmentationOutcome, job: SegmentationJob, *, lab
 # --------------------------------------------------------------------------
 
 _TIPS = {
+    **PHYSICS_TIPS,
     "image": "Image layer to segment. On a stack (e.g. T, Y, X) the current 2D slice is segmented.",
     "channel": "Which channel of an RGB image to segment: red, green, blue, or grey (the luminance).",
     "shapes": "Shapes layer with the initial contours: polygons, lassos, ellipses, rectangles or paths drawn "
               "around (or inside) the objects. Each shape on the current slice is segmented. A Points layer "
               "works too: its points on the current slice, in the order clicked, are one contour.",
-    "material": "Virtual material of the contour. Soft materials (rubber, soft tissue) move fast and follow "
-                "details; stiff metals (aluminium, copper, steel) keep the contour smooth and need a larger "
-                "stiffness r. Picking a preset sets a suggested r.",
-    "young": "Young's modulus E of the custom material in MPa (rubber ~100, soft tissue ~0.1, "
-             "copper ~117000). Higher E: stiffer, smoother, slower contour.",
-    "poisson": "Poisson's ratio nu of the custom material, typically 0.25-0.49 (rubber 0.49, metals ~0.3). "
-               "Couples stretching along and across the contour.",
-    "density": "Mass density rho of the custom material in kg/m^3, typically 1000-9000 (rubber 1100, "
-               "copper 8960). More mass: more inertia.",
-    "stiffness": "Stiffness constant r (N/m) that scales the image forces: the force on a node is r times "
-                 "its feature force. Typical: 2000 for rubber, 1e6 for copper or steel. Too low: the contour "
-                 "barely moves; far too high: it may diverge.",
-    "nodes_by": "Set the contour's resolution by the distance between nodes or by their number.",
-    "spacing": "Distance between nodes in pixels, typically 2-5. Smaller follows finer detail but is slower. "
-               "The spacing is kept as the contour grows or shrinks.",
-    "count": "Number of nodes of the initial contour, typically 50-500.",
     "sigma": "Width of the interaction between nodes relative to the node spacing, typically 0.75-1.5 "
              "(max 2). Larger couples more nodes: a smoother, stiffer contour.",
     "w_edges": "Weight of the edge force (Shen-Castan edges pull nodes onto the border), 0-1, typically 0.4. "
@@ -600,65 +551,36 @@ class SegmentationWidget(WorkerWidget):
         self.preview_layer: Shapes | None = None
         self.preview_interval = 0.05
 
-        presets = list(MATERIALS)
         self._image = ComboBox(label="image", choices=self._image_choices, tooltip=_TIPS["image"])
         self._channel = ComboBox(label="RGB channel", choices=[RGB_CHOOSE, *RGB_CHANNELS], value=RGB_CHOOSE,
                                  tooltip=_TIPS["channel"], visible=False)
         self._shapes = ComboBox(label="initial contours", choices=self._shapes_choices, tooltip=_TIPS["shapes"])
-        self._material = ComboBox(label="material", choices=[*presets, CUSTOM], value="rubber",
-                                  tooltip=_TIPS["material"])
-        rubber = MATERIALS["rubber"]
-        self._young = FloatSpinBox(label="E (MPa)", value=rubber.young / 1e6, min=0.01, max=1e6, step=10.0,
-                                   tooltip=_TIPS["young"], visible=False)
-        self._poisson = FloatSpinBox(label="Poisson ratio", value=rubber.poisson, min=-0.99, max=0.5, step=0.01,
-                                     tooltip=_TIPS["poisson"], visible=False)
-        self._density = FloatSpinBox(label="density (kg/m³)", value=rubber.density, min=1.0, max=30000.0,
-                                     step=100.0, tooltip=_TIPS["density"], visible=False)
-        self._stiffness = FloatSpinBox(label="stiffness r (N/m)", value=SUGGESTED_STIFFNESS["rubber"], min=1.0,
-                                       max=1e9, step=100.0, tooltip=_TIPS["stiffness"])
-        self._nodes_by = ComboBox(label="nodes by", choices=["spacing", "count"], value="spacing",
-                                  tooltip=_TIPS["nodes_by"])
-        self._spacing = FloatSpinBox(label="node spacing (px)", value=3.0, min=0.5, max=50.0, step=0.5,
-                                     tooltip=_TIPS["spacing"])
-        self._count = SpinBox(label="node count", value=100, min=3, max=5000, step=10, tooltip=_TIPS["count"],
-                              visible=False)
-        self._sigma = FloatSpinBox(label="σ factor", value=1.0, min=0.1, max=2.0, step=0.05,
-                                   tooltip=_TIPS["sigma"])
-        self._w_edges = FloatSpinBox(label="edge weight", value=0.4, min=0.0, max=1.0, step=0.05,
-                                     tooltip=_TIPS["w_edges"])
-        self._w_intensity = FloatSpinBox(label="intensity weight", value=0.3, min=0.0, max=1.0, step=0.05,
-                                         tooltip=_TIPS["w_intensity"])
-        self._w_distance = FloatSpinBox(label="distance weight", value=0.3, min=0.0, max=1.0, step=0.05,
-                                        tooltip=_TIPS["w_distance"])
-        self._polarity = ComboBox(label="object is", choices=["auto", "bright", "dark"], value="auto",
-                                  tooltip=_TIPS["polarity"])
-        self._max_steps = SpinBox(label="max steps", value=1000, min=1, max=100000, step=100,
-                                  tooltip=_TIPS["max_steps"])
+        self.physics = PhysicsControls(segment)
+        self._sigma = FloatSpinBox(label="σ factor", value=core_default(segment, "sigma_factor"), min=0.1, max=2.0,
+                                   step=0.05, tooltip=_TIPS["sigma"])
+        self._weights = {name: FloatSpinBox(label=f"{name} weight", value=DEFAULT_WEIGHTS[name], min=0.0, max=1.0,
+                                            step=0.05, tooltip=_TIPS[f"w_{name}"]) for name in DEFAULT_WEIGHTS}
+        self._polarity = ComboBox(label="object is", choices=["auto", "bright", "dark"],
+                                  value=core_default(segment, "polarity"), tooltip=_TIPS["polarity"])
+        self._max_steps = SpinBox(label="max steps", value=core_default(segment, "max_steps"), min=1, max=100000,
+                                  step=100, tooltip=_TIPS["max_steps"])
         self._labels = CheckBox(text="also add Labels mask", value=False, tooltip=_TIPS["labels"])
         self._run_btn = PushButton(text="Run", tooltip=_TIPS["run"])
         self._cancel_btn = PushButton(text="Cancel", tooltip=_TIPS["cancel"], enabled=False)
-        self._buttons = Container(widgets=[self._run_btn, self._cancel_btn], layout="horizontal", labels=False)
         self._status = Label(value="")
-        self.extend([
-            self._image, self._channel, self._shapes, self._material, self._young, self._poisson,
-            self._density, self._stiffness, self._nodes_by, self._spacing, self._count, self._sigma,
-            self._w_edges, self._w_intensity, self._w_distance, self._polarity, self._max_steps,
-            self._labels, self._buttons, self._status,
-        ])
-
+        self._lay_out([self._image, self._channel, self._shapes, *self.physics.main, self._labels],
+                      advanced=[self._polarity, *self.physics.advanced, self._sigma, *self._weights.values(),
+                                self._max_steps])
         self._image.changed.connect(self._on_image_changed)
-        self._material.changed.connect(self._on_material_changed)
-        self._nodes_by.changed.connect(self._on_nodes_by_changed)
         self._connect_signals()
         self._on_image_changed()
 
     # ------------------------------------------------------------ choices
     def _image_choices(self, _widget=None):
-        return [(layer.name, layer) for layer in self.viewer.layers if isinstance(layer, Image)]
+        return image_layer_choices(self.viewer)
 
     def _shapes_choices(self, _widget=None):
-        return [(layer.name, layer) for layer in self.viewer.layers
-                if isinstance(layer, (Shapes, Points)) and not layer.metadata.get(PREVIEW_KEY)]
+        return contour_layer_choices(self.viewer)
 
     def _on_layers_changed(self, event=None):
         try:
@@ -670,36 +592,13 @@ class SegmentationWidget(WorkerWidget):
         layer = self._image.value
         self._channel.visible = bool(layer is not None and getattr(layer, "rgb", False))
 
-    def _on_material_changed(self, *_):
-        name = self._material.value
-        custom = name == CUSTOM
-        for w in (self._young, self._poisson, self._density):
-            w.visible = custom
-        if not custom:
-            m = MATERIALS[name]
-            self._young.value = min(max(m.young / 1e6, self._young.min), self._young.max)
-            self._poisson.value = m.poisson
-            self._density.value = m.density
-            self._stiffness.value = SUGGESTED_STIFFNESS.get(name, self._stiffness.value)
-
-    def _on_nodes_by_changed(self, *_):
-        by_spacing = self._nodes_by.value == "spacing"
-        self._spacing.visible = by_spacing
-        self._count.visible = not by_spacing
-
     # ------------------------------------------------------------ state
     def parameters(self) -> dict:
         """The current settings as keyword arguments of :func:`segment_kwargs`."""
-        by_spacing = self._nodes_by.value == "spacing"
         return {
-            "material": make_material(self._material.value, self._young.value, self._poisson.value,
-                                      self._density.value),
-            "stiffness": self._stiffness.value,
-            "node_spacing": self._spacing.value if by_spacing else None,
-            "n_nodes": None if by_spacing else self._count.value,
+            **self.physics.parameters(),
             "sigma_factor": self._sigma.value,
-            "weights": {"edges": self._w_edges.value, "intensity": self._w_intensity.value,
-                        "distance": self._w_distance.value},
+            "weights": {name: w.value for name, w in self._weights.items()},
             "polarity": self._polarity.value,
             "max_steps": self._max_steps.value,
         }
@@ -729,6 +628,9 @@ class SegmentationWidget(WorkerWidget):
 
         self.job = job
         self.last_outcome = None
+        # Named after what made it: two runs with other materials are told apart.
+        material = kwargs_list[0]["material"]
+        self._result_name = f"{job.shapes_name} segmented ({getattr(material, 'name', material)})"
         self._begin(f"Segmenting {len(job.contours)} shape(s)…")
 
         # Closed paths, not polygons: napari triangulates the faces of polygons
@@ -736,7 +638,7 @@ class SegmentationWidget(WorkerWidget):
         preview_meta = {
             "name": f"{job.shapes_name} preview",
             "shape_type": "path",
-            "edge_color": "yellow",
+            "edge_color": PREVIEW_COLOR,
             "face_color": "transparent",
             "edge_width": 1.0,
             "metadata": {PREVIEW_KEY: True},
@@ -789,8 +691,10 @@ class SegmentationWidget(WorkerWidget):
             show_info("Segmentation cancelled: no layer added")
             return
         try:
-            for data, meta, kind in result_layer_data(outcome, job, labels=self._labels.value):
-                self.viewer.add_layer(Layer.create(data, meta, kind))
+            preview, self.preview_layer = self.preview_layer, None
+            for data, meta, kind in result_layer_data(outcome, job, labels=self._labels.value,
+                                                      name=self._result_name):
+                self._add_result(data, meta, kind, preview)
         except Exception as err:  # never leave the user with a silent failure
             self._fail(f"Could not add the result layers: {type(err).__name__}: {err}")
             return

@@ -25,31 +25,33 @@ computed for these contours.
 
 from __future__ import annotations
 
-import queue
 import threading
 import time
 from dataclasses import dataclass
 
 import napari
 import numpy as np
-from magicgui.widgets import CheckBox, ComboBox, Container, FloatSpinBox, Label, PushButton, SpinBox
+from magicgui.widgets import CheckBox, ComboBox, FloatSpinBox, Label, PushButton, SpinBox
 from napari.layers import Layer
 from napari.utils import progress
 from napari.utils.notifications import show_info, show_warning
 
-from ..core import MATERIALS, DivergenceError, MatchingCancelled, match, simulate
-from ._layers import contours_to_shapes_data, prepend_axes_transform
-from ._worker import WorkerWidget, run_to_completion
-from .matching import (
+from ..core import MATERIALS, DivergenceError, iter_match, iter_simulate, match, simulate
+from ..core.contour import crosses_itself
+from ._inputs import (
     MATCHING_KEY,
     SIMULATION_KEY,
     ContourPair,
+    InputError,
     contour_layer_choices,
+    core_default,
     is_matching_layer,
     matching_fits,
     pick_default_b,
     read_contour_pair,
 )
+from ._layers import contours_to_shapes_data, prepend_axes_transform, write_csv
+from ._worker import WorkerWidget, ask_save_path, relay, run_to_completion
 
 __all__ = [
     "COMPUTE_MATCHING",
@@ -57,15 +59,18 @@ __all__ = [
     "SimulationProgress",
     "SimulationWidget",
     "choose_matching",
+    "crossing_frames",
+    "frames_table",
     "run_to_completion",
     "simulate_contours",
     "simulation_layer_data",
 ]
 
-#: Choice of the matching selector that computes a matching (method "order").
-COMPUTE_MATCHING = "(none: compute, method 'order')"
-#: Method used when no (fitting) matching is given.
-DEFAULT_METHOD = "order"
+#: Choice of the matching selector that computes a matching (with the chosen method).
+COMPUTE_MATCHING = "(compute one)"
+#: Method used when no (fitting) matching is given: match()'s default.
+DEFAULT_METHOD = core_default(match, "method")
+SIMULATE_MAX_STEPS = core_default(simulate, "max_steps")
 
 
 # --------------------------------------------------------------------------
@@ -131,10 +136,11 @@ def simulate_contours(a, b, matching=None, kwargs: dict | None = None, *, cancel
                       preview_interval: float = 0.02, method: str = DEFAULT_METHOD):
     """Simulate the deformation of contour ``a`` into ``b``; a generator for a worker thread.
 
-    The core runs in a helper thread; :func:`~napari_physeg.core.simulate`'s
-    callback hands the step over a queue (at most one every
-    ``preview_interval`` seconds) and returns False (stop) once ``cancel`` is
-    set. This generator yields those updates.
+    The core's :func:`~napari_physeg.core.iter_match` (when no matching is
+    given) and :func:`~napari_physeg.core.iter_simulate` run right here (see
+    :func:`~._worker.relay`): at most one step every ``preview_interval``
+    seconds is yielded, and once ``cancel`` is set the core stops at its next
+    step.
 
     Parameters
     ----------
@@ -165,76 +171,47 @@ def simulate_contours(a, b, matching=None, kwargs: dict | None = None, *, cancel
     """
     cancel = cancel if cancel is not None else threading.Event()
     kwargs = dict(kwargs or {})
-    max_steps = int(kwargs.get("max_steps", 2000))
+    max_steps = int(kwargs.get("max_steps", SIMULATE_MAX_STEPS))
     t0 = time.perf_counter()
-    updates: queue.SimpleQueue = queue.SimpleQueue()
-    last = [-np.inf]
-    computed = matching is None
+    computed, used = matching is None, matching
 
-    def callback(step, shape):
-        if cancel.is_set():
-            return False
-        now = time.perf_counter()
-        if now - last[0] >= preview_interval:
-            last[0] = now
-            updates.put(("step", step, shape))
-        return None
+    def outcome(**fields):
+        return SimulationOutcome(matching=used, matching_computed=computed, seconds=time.perf_counter() - t0,
+                                 **fields)
 
-    def target():
-        try:
-            m = matching
-            if m is None:
-                updates.put(("matching",))
-                try:
-                    m = match(a, b, method=method, callback=lambda fraction: not cancel.is_set())
-                except MatchingCancelled:
-                    updates.put(("cancelled",))
-                    return
-                updates.put(("matched", m))
-                if cancel.is_set():
-                    updates.put(("cancelled",))
-                    return
-            updates.put(("done", m, simulate(a, b, m, callback=callback, **kwargs)))
-        except Exception as err:  # reported to the caller, never lost in this thread
-            updates.put(("error", err))
-
-    helper = threading.Thread(target=target, name="napari-physeg simulate", daemon=True)
-    helper.start()
-    settled = False
-    used = matching
     try:
-        while True:
-            kind, *payload = updates.get()
-            if kind == "step":
-                step, shape = payload
-                yield SimulationProgress("simulating", int(step), max_steps, shape)
-            elif kind == "matching":
-                yield SimulationProgress("matching", 0, max_steps)
-            elif kind == "matched":
-                used = payload[0]
-            elif kind == "cancelled":
-                settled = True
-                return SimulationOutcome(matching=used, matching_computed=computed, cancelled=True,
-                                         seconds=time.perf_counter() - t0)
-            elif kind == "done":
-                settled = True
-                used, result = payload
-                if cancel.is_set():
-                    return SimulationOutcome(matching=used, matching_computed=computed, cancelled=True,
-                                             seconds=time.perf_counter() - t0)
-                return SimulationOutcome(result=result, matching=used, matching_computed=computed,
-                                         seconds=time.perf_counter() - t0)
-            else:
-                settled = True
-                return SimulationOutcome(matching=used, matching_computed=computed, error=payload[0],
-                                         seconds=time.perf_counter() - t0)
-    finally:
-        if not settled:  # closed early (the worker was aborted): stop the helper as well
-            cancel.set()
-        helper.join()
+        if used is None:
+            used = yield from relay(iter_match(a, b, method=method), cancel,
+                                    wrap=lambda state: SimulationProgress("matching", 0, max_steps))
+            if used.stop_reason == "cancelled":
+                return outcome(cancelled=True)
+        result = yield from relay(iter_simulate(a, b, used, **kwargs), cancel, preview_interval,
+                                  wrap=lambda state: SimulationProgress("simulating", state.step, max_steps,
+                                                                        state.shape))
+    except Exception as err:  # reported to the user by the caller
+        return outcome(error=err)
+    if result.stop_reason == "cancelled":
+        return outcome(cancelled=True)
+    return outcome(result=result)
 
 
-def choose_matching(layer, pair: ContourPair):
+def frames_table(result) -> dict:
+    """The frames of a simulation as columns for a CSV file: ``frame``,
+    ``node``, ``row``, ``col`` (one row per node and frame) and ``time``
+    (simulated seconds)."""
+    frames = np.asarray(result.frames, dtype=np.float64)
+    n_frames, n_nodes = frames.shape[:2]
+    return {"frame": np.repeat(np.arange(n_frames), n_nodes), "node": np.tile(np.arange(n_nodes), n_frames),
+            "row": frames[..., 0].ravel(), "col": frames[..., 1].ravel(),
+            "time": np.repeat(np.asarray(result.times, dtype=float), n_nodes)}
+
+
+def crossing_frames(result) -> list[int]:
+    """The frames of a simulation whose contour crosses itself."""
+    return [t for t, frame in enumerate(result.frames) if crosses_itself(frame)]
+
+
+def choose_matching(layer, pair: ContourPair, method: str = DEFAULT_METHOD):
     """The Matching stored in ``layer`` if it was computed for ``pair``'s contours.
 
     Returns ``(matching or None, reason)``: ``reason`` says why a stored
@@ -248,7 +225,7 @@ def choose_matching(layer, pair: ContourPair):
     src = f"{meta.get('a_layer', '?')} #{meta.get('a_index', '?')} → {meta.get('b_layer', '?')} " \
           f"#{meta.get('b_index', '?')}"
     return None, (f"the matching in {layer.name!r} was computed for other contours ({src}); a new matching is "
-                  f"computed with method {DEFAULT_METHOD!r}. To reuse one, match these two contours with the "
+                  f"computed with method {method!r}. To reuse one, match these two contours with the "
                   "matching widget first")
 
 
@@ -268,7 +245,7 @@ def error_message(err: Exception) -> str:
 
 
 def simulation_layer_data(outcome: SimulationOutcome, pair: ContourPair, *, tracks: bool = False,
-                          name: str | None = None) -> list:
+                          name: str | None = None, material=None) -> list:
     """napari layer data tuples of a finished simulation.
 
     * A Shapes layer "<a> → <b> simulation": one polygon per frame, vertices
@@ -284,11 +261,15 @@ def simulation_layer_data(outcome: SimulationOutcome, pair: ContourPair, *, trac
     res = outcome.result
     frames = np.asarray(res.frames, dtype=np.float64)
     n_frames = len(frames)
+    # Named after what made them: the material, and the matching's method.
+    method = getattr(outcome.matching, "method", None)
+    made_by = ", ".join(str(x) for x in (getattr(material, "name", material), method) if x is not None)
+    made_by = f" ({made_by})" if made_by else ""
     base = name or f"{pair.a_label} → {pair.b_label}"
     transform = prepend_axes_transform(pair.transform, labels=("frame",))
     polys = [contours_to_shapes_data([f], (float(t), *pair.leading))[0] for t, f in enumerate(frames)]
     meta = {
-        "name": f"{base} simulation",
+        "name": f"{base} simulation{made_by}",
         "shape_type": "polygon",
         "edge_color": "orange",
         "face_color": "transparent",
@@ -313,7 +294,7 @@ def simulation_layer_data(outcome: SimulationOutcome, pair: ContourPair, *, trac
         xy = frames.transpose(1, 0, 2).reshape(-1, 2)
         data = np.column_stack([node, t, lead, xy]).astype(np.float64)
         track_meta = {
-            "name": f"{base} tracks",
+            "name": f"{base} tracks{made_by}",
             "tail_length": n_frames,
             "head_length": 0,
             "tail_width": 1.5,
@@ -336,8 +317,10 @@ _TIPS = {
     "layer_b": "Shapes layer holding the target contour b. May be the same layer as a, with another index.",
     "index_b": "Which shape of the target layer is contour b.",
     "matching": "Node correspondences to use: a layer made by the matching widget (its metadata holds the "
-                "matching). If it was computed for other contours, or none is chosen, a matching is computed "
-                "with method 'order'.",
+                "matching and its method), or '(compute one)' with the method below. A layer computed for "
+                "other contours is not used: a matching is computed instead.",
+    "method": "Method of the matching computed when none is chosen (or the chosen one does not fit). 'order' "
+              "keeps the nodes' order, so the frames never cross themselves; 'global' and 'local' may.",
     "q": "The paper's global stiffness constant q (N/m) of the forces pulling each node of a toward its "
          "partner on b (eq. 17); the paper uses 30000 N/m. Larger q: a stronger pull, the contour ends closer "
          "to b (stiff materials such as copper need ~1e6-1e8 to reach it). Smaller q: the material's elasticity "
@@ -352,6 +335,8 @@ _TIPS = {
     "run": "Simulate the deformation of a into b in the background and add a Shapes layer with one polygon per "
            "frame on a new leading 'frame' axis.",
     "cancel": "Stop the running simulation; no layer is added.",
+    "export": "Save the last simulation's frames as a CSV file: frame, node, row, col, one row per node and "
+              "frame.",
 }
 
 
@@ -387,24 +372,33 @@ class SimulationWidget(WorkerWidget):
         self._index_b = SpinBox(label="shape of b", value=0, min=0, max=100000, tooltip=_TIPS["index_b"])
         self._matching = ComboBox(label="matching", choices=self._matching_choices, value=COMPUTE_MATCHING,
                                   tooltip=_TIPS["matching"])
-        self._q = FloatSpinBox(label="q (N/m)", value=30000.0, min=1.0, max=1e10, step=1000.0, tooltip=_TIPS["q"])
-        self._material = ComboBox(label="material", choices=list(MATERIALS), value="rubber",
+        self._method = ComboBox(label="method", choices=["order", "global", "local"], value=DEFAULT_METHOD,
+                                tooltip=_TIPS["method"])
+        self._matching_info = Label(value="")
+        self._q = FloatSpinBox(label="q (N/m)", value=core_default(simulate, "q"), min=1.0, max=1e10, step=1000.0,
+                               tooltip=_TIPS["q"])
+        self._material = ComboBox(label="material", choices=list(MATERIALS), value=core_default(simulate, "material"),
                                   tooltip=_TIPS["material"])
-        self._n_frames = SpinBox(label="frames", value=6, min=2, max=1000, tooltip=_TIPS["n_frames"])
-        self._max_steps = SpinBox(label="max steps", value=2000, min=1, max=100000, step=100,
-                                  tooltip=_TIPS["max_steps"])
+        self._n_frames = SpinBox(label="frames", value=core_default(simulate, "n_frames"), min=2, max=1000,
+                                 tooltip=_TIPS["n_frames"])
+        self._max_steps = SpinBox(label="max steps", value=core_default(simulate, "max_steps"), min=1, max=100000,
+                                  step=100, tooltip=_TIPS["max_steps"])
         self._tracks = CheckBox(text="also add node Tracks layer", value=False, tooltip=_TIPS["tracks"])
         self._run_btn = PushButton(text="Run", tooltip=_TIPS["run"])
         self._cancel_btn = PushButton(text="Cancel", tooltip=_TIPS["cancel"], enabled=False)
-        self._buttons = Container(widgets=[self._run_btn, self._cancel_btn], layout="horizontal", labels=False)
+        self._export_btn = PushButton(text="Save CSV…", tooltip=_TIPS["export"], enabled=False)
         self._status = Label(value="")
-        self.extend([self._layer_a, self._index_a, self._layer_b, self._index_b, self._matching, self._q,
-                     self._material, self._n_frames, self._max_steps, self._tracks, self._buttons, self._status])
-
+        self._lay_out([self._layer_a, self._index_a, self._layer_b, self._index_b, self._matching, self._method,
+                       self._matching_info, self._q, self._material, self._n_frames],
+                      advanced=[self._max_steps, self._tracks], buttons=[self._export_btn])
+        self._matching_info.native.setWordWrap(True)
+        for w in (self._matching, self._method):
+            w.changed.connect(self._show_matching_info)
+        self._export_btn.changed.connect(self._ask_export)
         self._connect_signals()
-        self._status.native.setWordWrap(True)  # long reports must not widen the dock
         self._pick_defaults()
         self._select_newest_matching()
+        self._show_matching_info()
 
     # ------------------------------------------------------------ choices
     def _shapes_choices(self, _widget=None):
@@ -416,6 +410,16 @@ class SimulationWidget(WorkerWidget):
 
     def _pick_defaults(self, *_):
         pick_default_b(self._layer_a, self._index_a, self._layer_b, self._index_b, self._shapes_choices())
+
+    def _show_matching_info(self, *_):
+        """Say which matching Run will use, and with which method."""
+        chosen = self._matching.value
+        self._method.visible = chosen == COMPUTE_MATCHING
+        if chosen == COMPUTE_MATCHING or chosen is None:
+            self._matching_info.value = f"Run computes a matching with method {self._method.value!r}."
+        else:
+            method = getattr(chosen.metadata.get(MATCHING_KEY), "method", "?")
+            self._matching_info.value = f"Run uses the matching in {chosen.name!r} (method {method!r})."
 
     def _select_newest_matching(self):
         layers = [layer for layer in self.viewer.layers if is_matching_layer(layer)]
@@ -430,6 +434,7 @@ class SimulationWidget(WorkerWidget):
             value = getattr(event, "value", None) if getattr(event, "type", "") == "inserted" else None
             if value is not None and is_matching_layer(value):
                 self._matching.value = value
+            self._show_matching_info()
         except RuntimeError:  # the Qt widget is gone (viewer closing)
             return
 
@@ -457,19 +462,21 @@ class SimulationWidget(WorkerWidget):
             return None
         chosen = self._matching.value
         layer = None if chosen == COMPUTE_MATCHING else chosen
-        matching, reason = choose_matching(layer, pair)
+        matching, reason = choose_matching(layer, pair, self._method.value)
         if reason:
             show_warning(reason)
 
         self.pair = pair
         self.last_outcome = None
         self.output_layers = []
-        self._begin("Simulating…" if matching is not None else f"Matching ({DEFAULT_METHOD}), then simulating…")
+        self._export_btn.enabled = False
+        method = self._method.value
+        self._begin("Simulating…" if matching is not None else f"Matching ({method}), then simulating…")
         params = self.parameters()
         self._max_steps_run = params["max_steps"]
         pbar = progress(total=self._max_steps_run, desc=f"Simulating {pair.a_label!r} → {pair.b_label!r}")
         return self._start(pbar, simulate_contours, pair.a, pair.b, matching, params, cancel=self._cancel,
-                           preview_interval=self.preview_interval)
+                           preview_interval=self.preview_interval, method=method)
 
     # ------------------------------------------------------------ worker signals (GUI thread)
     def _on_yielded(self, update: SimulationProgress):
@@ -478,7 +485,7 @@ class SimulationWidget(WorkerWidget):
             return
         self.n_updates += 1
         if update.stage == "matching":
-            self._status.value = f"Matching ({DEFAULT_METHOD})…"
+            self._status.value = f"Matching ({self._method.value})…"
             return
         if not self._cancel.is_set():
             self._status.value = f"Step {update.step}"
@@ -502,22 +509,42 @@ class SimulationWidget(WorkerWidget):
             show_warning("no Tracks layer: napari's tracks have at most 3 spatial axes and the contours have "
                          f"{len(pair.leading) + 2}")
         try:
-            for data, meta, kind in simulation_layer_data(outcome, pair, tracks=self._tracks.value):
+            for data, meta, kind in simulation_layer_data(outcome, pair, tracks=self._tracks.value,
+                                                          material=self._material.value):
                 self.output_layers.append(self.viewer.add_layer(Layer.create(data, meta, kind)))
         except Exception as err:  # never leave the user with a silent failure
             self._fail(f"Could not add the simulation layers: {type(err).__name__}: {err}")
             return
         gap = float(np.linalg.norm(res.frames[-1] - res.targets, axis=1).mean())
         how = "came to rest" if res.converged else "did NOT come to rest"
-        via = f"matching computed ({DEFAULT_METHOD})" if outcome.matching_computed else "matching reused"
+        method = outcome.matching.method
+        via = f"matching computed ({method})" if outcome.matching_computed else f"matching reused ({method})"
+        self._export_btn.enabled = True
         self._status.value = (f"{len(res.frames)} frames, {res.steps} steps, {how}; last frame {gap:.2f} px from "
                               f"the targets on b ({via}, {outcome.seconds:.2f} s)")
         show_info(f"Simulation {pair.a_label!r} → {pair.b_label!r}: {self._status.value}. Move the 'frame' "
                   "slider to play it")
         if not res.converged:
             show_warning(f"the simulation did not come to rest within max steps ({res.steps}); raise 'max steps'")
+        crossing = crossing_frames(res)
+        if crossing:
+            show_warning(f"frame(s) {', '.join(map(str, crossing))} cross themselves: the {method!r} matching pairs "
+                         "nodes out of their order along the contours. Use a matching made with method 'order'")
 
     def _on_errored(self, err: Exception):
         # simulate_contours catches the core's errors itself; this is a last resort.
         self.last_outcome = SimulationOutcome(error=err)
         self._fail(error_message(err))
+
+    # ------------------------------------------------------------ export
+    def _ask_export(self, *_):
+        path = ask_save_path(self, "Save the frames as CSV", f"{self.pair.a_label} to {self.pair.b_label} frames.csv")
+        if path:
+            self.export_csv(path)
+
+    def export_csv(self, path) -> None:
+        """Write the last simulation's frames (see :func:`frames_table`) to ``path``."""
+        if self.last_outcome is None or not self.last_outcome.ok:
+            raise InputError("no simulation to save yet: press Run first")
+        write_csv(path, frames_table(self.last_outcome.result))
+        self._status.value = f"Saved {len(self.last_outcome.result.frames)} frames to {path}"

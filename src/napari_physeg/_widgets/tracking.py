@@ -23,14 +23,15 @@ import time
 
 import napari
 import numpy as np
-from magicgui.widgets import ComboBox, Container, FloatSpinBox, Label, PushButton, SpinBox
-from napari.layers import Image, Layer, Shapes
+from magicgui.widgets import ComboBox, Label, PushButton, SpinBox
+from napari.layers import Shapes
 from napari.utils import progress
 from napari.utils.notifications import show_info, show_warning
 
-from ..core import LOST, MATERIALS, TRACKED, TrackingProgress, TrackingResult, iter_track
+from ..core import LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, segment, track
+from ._inputs import PHYSICS_TIPS, PREVIEW_COLOR, PREVIEW_KEY, PhysicsControls, core_default, image_layer_choices
 from ._layers import image_transform_kwargs, shapes_to_image_coords, slice_index
-from ._worker import WorkerWidget
+from ._worker import WorkerWidget, relay
 
 __all__ = ["TrackingWidget", "tracking_layer_data", "node_trajectories"]
 
@@ -118,10 +119,9 @@ def tracking_layer_data(result: TrackingResult, transform: dict, *, name: str, n
 
 
 _TIPS = {
+    **PHYSICS_TIPS,
     "image": "An image with a time axis: its first axis is time, its last two the frame.",
     "shapes": "Contours drawn on one frame of the movie (around or inside each object). Stand on that frame.",
-    "material": "Virtual material of the contours.",
-    "stiffness": "Stiffness constant r (N/m): rubber ~2e3, copper ~1e6.",
     "max_steps": "Time steps per object and frame (each frame starts from the previous result).",
     "run": "Track the contours of the current frame through the whole movie (forward, then backward).",
     "cancel": "Stop: the frames tracked so far become layers.",
@@ -141,30 +141,28 @@ class TrackingWidget(WorkerWidget):
         self._run_info = None
         self._image = ComboBox(label="movie (image)", choices=self._image_choices, tooltip=_TIPS["image"])
         self._shapes = ComboBox(label="contours (shapes)", choices=self._shapes_choices, tooltip=_TIPS["shapes"])
-        self._material = ComboBox(label="material", choices=list(MATERIALS), value="rubber", tooltip=_TIPS["material"])
-        self._stiffness = FloatSpinBox(label="r (N/m)", value=2000.0, min=1.0, max=1e10, step=100.0,
-                                       tooltip=_TIPS["stiffness"])
-        self._max_steps = SpinBox(label="steps per frame", value=300, min=10, max=10000, step=50,
-                                  tooltip=_TIPS["max_steps"])
+        self.physics = PhysicsControls(segment, nodes=False)
+        self._max_steps = SpinBox(label="steps per frame", value=core_default(track, "max_steps"), min=10,
+                                  max=10000, step=50, tooltip=_TIPS["max_steps"])
         self._run_btn = PushButton(text="Run", tooltip=_TIPS["run"])
         self._cancel_btn = PushButton(text="Cancel", tooltip=_TIPS["cancel"], enabled=False)
-        self._buttons = Container(widgets=[self._run_btn, self._cancel_btn], layout="horizontal", labels=False)
         self._status = Label(value="")
-        self.extend([self._image, self._shapes, self._material, self._stiffness, self._max_steps, self._buttons,
-                     self._status])
+        self._lay_out([self._image, self._shapes, *self.physics.main], advanced=[self._max_steps])
         self._connect_signals()
 
     # ------------------------------------------------------------ inputs
     def _image_choices(self, _widget=None):
-        return [layer for layer in self.viewer.layers if isinstance(layer, Image) and layer.ndim >= 3]
+        return image_layer_choices(self.viewer, min_ndim=3)
 
     def _shapes_choices(self, _widget=None):
-        return [layer for layer in self.viewer.layers
-                if isinstance(layer, Shapes) and layer.metadata.get("tracking") is None and layer is not self._preview]
+        return [(layer.name, layer) for layer in self.viewer.layers if isinstance(layer, Shapes)
+                and layer.metadata.get("tracking") is None and not layer.metadata.get(PREVIEW_KEY)]
 
     def _on_layers_changed(self, event=None):
-        for combo in (self._image, self._shapes):
-            combo.reset_choices()
+        try:
+            self.reset_choices()
+        except RuntimeError:  # the Qt widget is gone (viewer closing)
+            return
 
     def _read_input(self):
         image, shapes = self._image.value, self._shapes.value
@@ -196,19 +194,14 @@ class TrackingWidget(WorkerWidget):
             return None
         self.last_result = None
         self.output_layers = []
-        self._run_info = dict(transform=image_transform_kwargs(image), name=f"{image.name} tracked "
-                              f"({self._material.value})")
+        options = {k: v for k, v in self.physics.parameters().items() if k in ("material", "stiffness")}
+        material = getattr(options["material"], "name", options["material"])
+        self._run_info = dict(transform=image_transform_kwargs(image), name=f"{image.name} tracked ({material})")
         self._begin(f"Tracking {len(contours)} object(s) from frame {start}…")
         pbar = progress(total=len(contours) * frames.shape[0], desc=f"Tracking in {image.name!r}")
-        options = dict(material=self._material.value, stiffness=float(self._stiffness.value))
-        return self._start(pbar, iter_track, frames, contours, start=start, max_steps=int(self._max_steps.value),
-                           segment_options=options)
-
-    def cancel(self, *_):
-        """Stop after the current object and frame; what was tracked is kept."""
-        if self._running and self.worker is not None:
-            self.worker.send(True)
-            self._status.value = "Cancelling…"
+        # Cancel stops after the current object and frame; what was tracked is kept.
+        run = iter_track(frames, contours, start=start, max_steps=int(self._max_steps.value), segment_options=options)
+        return self._start(pbar, relay, run, self._cancel)
 
     # ------------------------------------------------------------ worker signals (GUI thread)
     def _on_yielded(self, update: TrackingProgress):
@@ -228,8 +221,9 @@ class TrackingWidget(WorkerWidget):
         if self._preview is None or self._preview not in self.viewer.layers:
             transform = self._run_info["transform"]
             common = {key: transform[key] for key in ("scale", "translate", "rotate", "shear", "affine")}
-            self._preview = self.viewer.add_shapes(data, shape_type="polygon", edge_color="#00ff00",
-                                                   face_color="transparent", name="tracking preview", **common)
+            self._preview = self.viewer.add_shapes(data, shape_type="polygon", edge_color=PREVIEW_COLOR,
+                                                   face_color="transparent", name="tracking preview",
+                                                   metadata={PREVIEW_KEY: True}, **common)
         else:
             self._preview.data = data
 
@@ -242,10 +236,10 @@ class TrackingWidget(WorkerWidget):
         self.last_result = result
         if not self._gui_alive():
             return
-        self._remove_preview()
+        preview, self._preview = self._preview, None
         try:
             for data, meta, kind in tracking_layer_data(result, **self._run_info):
-                self.output_layers.append(self.viewer.add_layer(Layer.create(data, meta, kind)))
+                self.output_layers.append(self._add_result(data, meta, kind, preview))
         except Exception as err:  # never a silent failure
             self._fail(f"Could not add the tracking layers: {type(err).__name__}: {err}")
             return

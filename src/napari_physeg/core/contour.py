@@ -15,6 +15,8 @@ __all__ = [
     "perimeter",
     "segment_lengths",
     "resample",
+    "nodes_for_spacing",
+    "crosses_itself",
     "outward_normals",
     "mean_nearest_neighbour_distance",
     "polygon_mask",
@@ -95,13 +97,24 @@ def positively_oriented(contour) -> np.ndarray:
 
 def segment_lengths(contour: np.ndarray) -> np.ndarray:
     """Length of each edge ``i -> i+1`` (the last edge closes the contour)."""
-    edge = np.diff(contour, axis=0, append=contour[:1])
+    # Written out rather than np.diff(append=...): this runs every time step.
+    edge = np.empty_like(contour, dtype=np.float64)
+    edge[:-1] = contour[1:] - contour[:-1]
+    edge[-1] = contour[0] - contour[-1]
     return np.hypot(edge[:, 0], edge[:, 1])
 
 
 def perimeter(contour: np.ndarray) -> float:
     """Length of the closed polyline."""
     return float(segment_lengths(contour).sum())
+
+
+def nodes_for_spacing(contour, spacing: float) -> int:
+    """How many evenly spaced nodes lie ``spacing`` px apart on the closed
+    ``contour`` (at least 3): what "node spacing" means everywhere."""
+    if not (np.isfinite(spacing) and spacing > 0):
+        raise ValueError(f"node spacing must be a positive number of pixels, got {spacing!r}")
+    return max(int(round(perimeter(np.asarray(contour, dtype=np.float64)) / float(spacing))), 3)
 
 
 def resample(contour: np.ndarray, n_nodes: int | None = None, *, spacing: float | None = None) -> np.ndarray:
@@ -251,3 +264,8 @@ def cut_pinches(contour: np.ndarray, gap: float, max_cuts: int = 100) -> np.ndar
         inner, outer = contour[i: j + 1], np.vstack([contour[j:], contour[: i + 1]])
         contour = inner if abs(signed_area(inner)) >= abs(signed_area(outer)) else outer
     return contour
+
+
+def crosses_itself(contour) -> bool:
+    """Whether two non-adjacent edges of the closed ``contour`` cross (it is not a simple polygon)."""
+    return len(_crossing_pairs(np.asarray(contour, dtype=np.float64))) > 0

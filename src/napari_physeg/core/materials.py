@@ -24,7 +24,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Literal
 
-__all__ = ["Material", "MATERIALS", "DEFAULT_THICKNESS", "get_material"]
+__all__ = ["Material", "MATERIALS", "DEFAULT_THICKNESS", "SUGGESTED_STIFFNESS", "get_material",
+           "suggested_stiffness"]
 
 #: Membrane thickness (m) that relates the paper's force constants to pixels.
 DEFAULT_THICKNESS = 5e-6
@@ -142,3 +143,32 @@ def get_material(material: str | Material) -> Material:
             f"Unknown material {material!r}; choose one of {sorted(MATERIALS)} or pass a Material"
         )
     raise TypeError(f"material must be a preset name or a Material, got {type(material).__name__}")
+
+
+#: Image-force constant r (N/m) suggested for each preset: the paper's 2e3 for
+#: rubber and 1e6 for copper (section 4.1); the stiffer metals get a little more.
+#: A stiffer material needs a larger r to move the same distance per step.
+SUGGESTED_STIFFNESS: dict[str, float] = {
+    "rubber": 2e3,
+    "soft tissue": 2e3,
+    "aluminium": 1e6,
+    "copper": 1e6,
+    "steel": 2e6,
+}
+
+
+def suggested_stiffness(material: str | Material) -> float:
+    """The image-force constant ``r`` (N/m) that suits ``material``.
+
+    A preset gets its entry of :data:`SUGGESTED_STIFFNESS`. A custom material
+    gets the preset value of the nearest preset in Young's modulus (on a log
+    scale), since r must grow with the material's stiffness for the contour to
+    move as far.
+    """
+    material = get_material(material)
+    if material.name in SUGGESTED_STIFFNESS and MATERIALS.get(material.name) == material:
+        return SUGGESTED_STIFFNESS[material.name]
+    import math
+
+    nearest = min(MATERIALS.values(), key=lambda m: abs(math.log(m.young / material.young)))
+    return SUGGESTED_STIFFNESS[nearest.name]

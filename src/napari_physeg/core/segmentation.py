@@ -18,7 +18,8 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .contour import as_contour, cut_pinches, outward_normals, perimeter, remove_loops, resample, segment_lengths, signed_area
+from .contour import (as_contour, cut_pinches, nodes_for_spacing, outward_normals, perimeter, remove_loops, resample,
+                      segment_lengths, signed_area)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
@@ -29,6 +30,12 @@ from .region import _disk, drawing_levels, object_region, objectness
 from .subpixel import polish
 
 __all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "FrameFeatures", "region_features"]
+
+#: With ``n_nodes=None`` the nodes are DEFAULT_NODE_SPACING px apart, and
+#: at least MIN_NODES and at most MAX_DEFAULT_NODES of them.
+DEFAULT_NODE_SPACING = 3.0
+MIN_NODES = 24
+MAX_DEFAULT_NODES = 1000
 
 #: Nodes are redistributed (and the element rebuilt) when an edge of the
 #: contour grows past this many target spacings (see also PINCH_GAP).
@@ -235,12 +242,52 @@ def _distance_with_image_border(edges: np.ndarray, window, shape) -> np.ndarray:
     return distance[pad[0][0]: distance.shape[0] - pad[0][1], pad[1][0]: distance.shape[1] - pad[1][1]]
 
 
-def _needs_remesh(nodes: np.ndarray, spacing: float) -> bool:
-    """An edge stretched past REMESH_STRETCH spacings, or two nodes (neighbours
-    or not) closer than PINCH_GAP spacings: the element would lose resolution
-    or become ill-conditioned."""
-    return bool(segment_lengths(nodes).max() > REMESH_STRETCH * spacing
-                or len(cKDTree(nodes).query_pairs(PINCH_GAP * spacing)) > 0)
+class _RemeshWatch:
+    """Whether the nodes need a remesh: an edge stretched past REMESH_STRETCH
+    spacings, or two nodes (neighbours or not) closer than PINCH_GAP spacings,
+    where the element would lose resolution or become ill-conditioned.
+
+    Neighbours are tested every step through the edge lengths. Other pairs
+    need a k-d tree, built only when one of them may have come within the gap:
+    no pair comes closer by more than twice the largest node motion since the
+    last tree, so until that motion uses up the clearance (the closest such
+    pair's distance minus the gap) the tree would find nothing.
+    """
+
+    def __init__(self, spacing: float):
+        self.spacing, self.gap = spacing, PINCH_GAP * spacing
+        self.forget()
+
+    def forget(self) -> None:
+        """The nodes were replaced (remeshed): test them afresh."""
+        self.reference, self.clearance = None, -np.inf
+
+    def shift(self, offset: np.ndarray) -> None:
+        if self.reference is not None:
+            self.reference = self.reference + offset
+
+    def due(self, nodes: np.ndarray) -> bool:
+        lengths = segment_lengths(nodes)
+        if lengths.max() > REMESH_STRETCH * self.spacing or lengths.min() <= self.gap:
+            return True
+        if self.reference is not None and len(nodes) == len(self.reference):
+            motion = nodes - self.reference
+            if 2.0 * np.sqrt((motion * motion).sum(1).max()) < self.clearance:
+                return False
+        closest = _closest_non_neighbours(nodes)
+        self.reference, self.clearance = nodes.copy(), closest - self.gap
+        return bool(closest <= self.gap)  # as cKDTree.query_pairs(gap): distances <= gap
+
+
+def _closest_non_neighbours(nodes: np.ndarray) -> float:
+    """The smallest distance between two nodes that are not neighbours along the contour."""
+    n = len(nodes)
+    if n < 4:
+        return np.inf
+    # The 4 nearest of each node hold at most itself and its 2 neighbours.
+    distance, index = cKDTree(nodes).query(nodes, k=4)
+    offset = (index - np.arange(n)[:, None]) % n
+    return float(distance[(offset > 1) & (offset < n - 1)].min())
 
 
 class _Plateau:
@@ -261,7 +308,7 @@ class _Plateau:
     def reached(self, nodes: np.ndarray) -> bool:
         area = signed_area(nodes)
         length = max(perimeter(nodes), 1e-9)
-        self.trace.append((area / length, *nodes.mean(0)))
+        self.trace.append((area / length, *(nodes.sum(0) / len(nodes))))
         if len(self.trace) <= PLATEAU_STEPS:
             return False
         window = np.array(self.trace)
@@ -402,6 +449,7 @@ class _ElasticBody:
         self.model_time = 0.0
         self.nodes = nodes
         self.rest = nodes.copy()
+        self.remesh_watch = _RemeshWatch(spacing)
         self._build()
         self._reset_caps()
 
@@ -472,6 +520,7 @@ class _ElasticBody:
         nearest = cKDTree(old).query(nodes)[1]
         cap, last_sign = self.cap[nearest], self.last_sign[nearest]
         self.nodes = self.rest = nodes
+        self.remesh_watch.forget()
         if not self.collapsed:
             self._build()
         self.cap, self.last_sign = cap, last_sign
@@ -495,6 +544,7 @@ class _ElasticBody:
 
     def shift(self, offset: np.ndarray) -> None:
         self.nodes, self.rest = self.nodes + offset, self.rest + offset
+        self.remesh_watch.shift(offset)
 
 
 class _RestDetector:
@@ -551,7 +601,7 @@ def _initial_nodes(init, n_nodes, sigma, sigma_factor):
     """Evenly spaced nodes on ``init``, their spacing and the element's sigma."""
     length = perimeter(init)
     if n_nodes is None:
-        n_nodes = int(np.clip(round(length / 3.0), 24, 1000))
+        n_nodes = int(np.clip(nodes_for_spacing(init, DEFAULT_NODE_SPACING), MIN_NODES, MAX_DEFAULT_NODES))
     spacing = length / int(n_nodes)
     sigma_used = float(sigma) if sigma is not None else sigma_factor * spacing
     if not (np.isfinite(sigma_used) and 0 < sigma_used <= 2.0 * spacing):
@@ -726,7 +776,7 @@ def _time_step(body: _ElasticBody, field: ForceField, stiffness: float, bounds: 
     moved = float(np.abs(new_nodes - body.nodes).max())
     if not np.isfinite(moved) or moved > body.divergence_limit:
         raise _divergence(step, stiffness, repaired=False)
-    if body.reference == "incremental" and _needs_remesh(new_nodes, body.spacing):
+    if body.reference == "incremental" and body.remesh_watch.due(new_nodes):
         _remesh(body, new_nodes, bounds, step, stiffness)
     else:
         body.nodes = new_nodes

@@ -1,0 +1,326 @@
+"""Inputs the widgets share: layer choices, the physics controls, and defaults.
+
+Every default shown in a widget is read from the core function that uses it
+(:func:`core_default`), and every physical meaning (what "node spacing" is,
+which r suits a material) lives in the core; the widgets only lay them out.
+No widget module imports another: what two widgets share lives here or in
+:mod:`._layers`.
+"""
+
+from __future__ import annotations
+
+import inspect
+from dataclasses import dataclass
+
+import numpy as np
+from magicgui.widgets import ComboBox, FloatSpinBox, SpinBox
+from napari.layers import Image, Points, Shapes, Vectors
+
+from ..core import MATERIALS, Material
+from ..core.contour import nodes_for_spacing
+from ..core.materials import suggested_stiffness
+from ..core.segmentation import DEFAULT_NODE_SPACING
+from ._layers import PointsAsPolygon, image_transform_kwargs, shape_in_layer_coords
+
+__all__ = [
+    "CUSTOM",
+    "ContourPair",
+    "MATCHING_KEY",
+    "MatchingInputError",
+    "SIMULATION_KEY",
+    "InputError",
+    "PHYSICS_TIPS",
+    "PREVIEW_COLOR",
+    "PREVIEW_KEY",
+    "PhysicsControls",
+    "contour_layer_choices",
+    "core_default",
+    "image_layer_choices",
+    "is_matching_layer",
+    "matching_fits",
+    "pick_default_b",
+    "read_contour_pair",
+    "node_count",
+]
+
+#: Key in a layer's metadata that marks a temporary preview layer.
+PREVIEW_KEY = "napari_physeg_preview"
+#: Colour of the live previews: unlike the drawn contours (often yellow) and the results (cyan).
+PREVIEW_COLOR = "magenta"
+#: Key of the Matching in the output layer's metadata.
+MATCHING_KEY = "matching"
+#: Key in a layer's metadata that marks a simulation output (not a contour input).
+SIMULATION_KEY = "simulation"
+#: The material choice that shows Young's modulus, Poisson's ratio and density.
+CUSTOM = "custom"
+
+
+#: Tooltips of the physics controls: what each parameter does, and typical values.
+PHYSICS_TIPS = {
+    "material": "Virtual material of the contour. Soft materials (rubber, soft tissue) move fast and follow "
+                "details; stiff metals (aluminium, copper, steel) keep the contour smooth and need a larger "
+                "stiffness r. Picking a preset sets a suggested r.",
+    "young": "Young's modulus E of the custom material in MPa (rubber ~100, soft tissue ~0.1, "
+             "copper ~117000). Higher E: stiffer, smoother, slower contour.",
+    "poisson": "Poisson's ratio nu of the custom material, typically 0.25-0.49 (rubber 0.49, metals ~0.3). "
+               "Couples stretching along and across the contour.",
+    "density": "Mass density rho of the custom material in kg/m^3, typically 1000-9000 (rubber 1100, "
+               "copper 8960). More mass: more inertia.",
+    "stiffness": "Stiffness constant r (N/m) that scales the image forces: the force on a node is r times "
+                 "its feature force. Typical: 2000 for rubber, 1e6 for copper or steel. Too low: the contour "
+                 "barely moves; far too high: it may diverge.",
+    "spacing": "Distance between nodes in pixels, typically 2-5. Smaller follows finer detail but is slower. "
+               "The spacing is kept as the contour grows or shrinks.",
+    "count": "Number of nodes of the initial contour, typically 50-500; 0 sets it from the node spacing.",
+}
+
+
+class InputError(ValueError):
+    """Bad input to a widget; the message says what is wrong and how to fix it."""
+
+
+def core_default(function, name: str):
+    """The default of keyword ``name`` of the core ``function``: the one source of defaults."""
+    return inspect.signature(function).parameters[name].default
+
+
+def image_layer_choices(viewer, min_ndim: int = 2) -> list:
+    """(name, layer) of the viewer's Image layers with at least ``min_ndim`` dimensions."""
+    return [(layer.name, layer) for layer in viewer.layers if isinstance(layer, Image) and layer.ndim >= min_ndim]
+
+
+def contour_layer_choices(viewer) -> list:
+    """(name, layer) of the layers that can hold contours: Shapes, and Points
+    (read as one polygon); not the widgets' previews, matchings or simulations."""
+    skip = {PREVIEW_KEY, MATCHING_KEY, SIMULATION_KEY}
+    return [(layer.name, layer) for layer in viewer.layers
+            if isinstance(layer, (Shapes, Points)) and not (set(layer.metadata) & skip)]
+
+
+class PhysicsControls:
+    """The contour's physics as widgets: first the material preset, the
+    image-force constant r and the node spacing; in :attr:`advanced` the
+    custom material's constants and the node count.
+
+    Choosing a preset sets r to :func:`~napari_physeg.core.materials.suggested_stiffness`.
+    """
+
+    def __init__(self, function, tips: dict = PHYSICS_TIPS, *, nodes: bool = True):
+        self._material = ComboBox(label="material", choices=[*MATERIALS, CUSTOM],
+                                  value=core_default(function, "material"), tooltip=tips["material"])
+        rubber = MATERIALS["rubber"]
+        self._young = FloatSpinBox(label="E (MPa)", value=rubber.young / 1e6, min=0.01, max=1e6, step=10.0,
+                                   tooltip=tips["young"], visible=False)
+        self._poisson = FloatSpinBox(label="Poisson ratio", value=rubber.poisson, min=-0.99, max=0.5, step=0.01,
+                                     tooltip=tips["poisson"], visible=False)
+        self._density = FloatSpinBox(label="density (kg/m³)", value=rubber.density, min=1.0, max=30000.0,
+                                     step=100.0, tooltip=tips["density"], visible=False)
+        self._stiffness = FloatSpinBox(label="stiffness r (N/m)", value=core_default(function, "stiffness"),
+                                       min=1.0, max=1e10, step=100.0, tooltip=tips["stiffness"])
+        self._spacing = FloatSpinBox(label="node spacing (px)", value=DEFAULT_NODE_SPACING, min=0.5, max=50.0,
+                                     step=0.5, tooltip=tips["spacing"])
+        self._count = SpinBox(label="node count (0 = by spacing)", value=0, min=0, max=5000, step=10,
+                              tooltip=tips["count"])
+        # The custom constants sit right under the material, shown only for "custom".
+        self.main = [self._material, self._young, self._poisson, self._density, self._stiffness]
+        self.main += [self._spacing] if nodes else []
+        self.advanced = [self._count] if nodes else []
+        self._material.changed.connect(self._on_material_changed)
+        self._count.changed.connect(self._on_count_changed)
+
+    def _on_material_changed(self, *_):
+        name = self._material.value
+        custom = name == CUSTOM
+        for w in (self._young, self._poisson, self._density):
+            w.visible = custom
+        if not custom:
+            m = MATERIALS[name]
+            self._young.value = min(max(m.young / 1e6, self._young.min), self._young.max)
+            self._poisson.value = m.poisson
+            self._density.value = m.density
+        self._stiffness.value = suggested_stiffness(self.material())
+
+    def _on_count_changed(self, *_):
+        self._spacing.enabled = self._count.value == 0
+
+    def material(self) -> str | Material:
+        """The ``material`` argument of the core: a preset name, or the custom :class:`Material`."""
+        if self._material.value != CUSTOM:
+            return self._material.value
+        return Material(CUSTOM, young=float(self._young.value) * 1e6, poisson=float(self._poisson.value),
+                        density=float(self._density.value))
+
+    def parameters(self) -> dict:
+        """``material`` and ``stiffness`` of the core, and the node ``node_spacing``
+        (px) or ``n_nodes`` (None for the other), see :func:`node_count`."""
+        count = int(self._count.value)
+        return {"material": self.material(), "stiffness": float(self._stiffness.value),
+                "node_spacing": None if count else float(self._spacing.value), "n_nodes": count or None}
+
+
+def node_count(contour, node_spacing: float | None = None, n_nodes: int | None = None) -> int | None:
+    """The ``n_nodes`` argument of the core for one ``contour``: ``n_nodes`` as
+    given, else as many as ``node_spacing`` px apart, else None (the core's default)."""
+    if n_nodes is not None:
+        return int(n_nodes)
+    if node_spacing is None:
+        return None
+    try:
+        return nodes_for_spacing(contour, node_spacing)
+    except ValueError as err:
+        raise InputError(str(err)) from None
+
+
+def pick_default_b(layer_a, index_a, layer_b, index_b, candidates) -> None:
+    """Make a and b two different shapes when the choice is obvious.
+
+    With b's layer equal to a's: another layer for b when a's layer holds a
+    single shape, else another index. (magicgui widgets; changed in place.)
+    """
+    a, b = layer_a.value, layer_b.value
+    if a is None or b is not a:
+        return
+    others = [layer for _, layer in candidates if layer is not a]
+    n_shapes = 1 if isinstance(a, Points) else len(a.data)  # a Points layer is one polygon
+    if n_shapes < 2 and others:
+        layer_b.value = others[0]
+    elif n_shapes >= 2 and index_a.value == index_b.value:
+        index_b.value = 1 if index_a.value == 0 else 0
+
+
+class MatchingInputError(InputError):
+    """Bad input to the matching (or simulation) widget."""
+
+
+# --------------------------------------------------------------------------
+# Two contours, and a matching made for them
+# --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ContourPair:
+    """Two contours read from Shapes layers, in the first layer's data coordinates.
+
+    Attributes
+    ----------
+    a, b : (N, 2) float64 ndarray
+        ``(row, col)`` contours, closed, no repeated vertex.
+    leading : tuple of float
+        Leading (non-spatial) data coordinates of ``a`` in its layer (``()`` for 2D).
+    transform : dict
+        The first layer's transform, for output layers.
+    a_layer, b_layer : str
+        Names of the source layers.
+    a_index, b_index : int
+        Indices of the shapes in them.
+    a_label, b_label : str
+        Short names for output layers: the layer name, plus ``#index`` when
+        the layer holds several shapes.
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    leading: tuple
+    transform: dict
+    a_layer: str
+    a_index: int
+    b_layer: str
+    b_index: int
+    a_label: str
+    b_label: str
+
+
+def _label(layer, index: int) -> str:
+    one = isinstance(layer, Points) or len(layer.data) == 1
+    return layer.name if one else f"{layer.name} #{index}"
+
+
+def _read_one(layer, index: int, role: str, reference=None, world_point=None):
+    if layer is None:
+        raise MatchingInputError(
+            f"no Shapes layer for contour {role}: open File > Open Sample > napari-physeg > Hand poses "
+            "(matching), or draw closed shapes (polygon, ellipse, rectangle) in a Shapes layer and select it "
+            f"in '{role}'")
+    if isinstance(layer, Points):  # its points, in the order added, are one polygon
+        layer = PointsAsPolygon(layer, world_point)
+        if not layer.data:
+            raise MatchingInputError(f"the Points layer {layer.name!r} ({role}) has {layer.n_points} point(s) on "
+                                     "this slice: click at least 3 around the object, in order")
+    elif not isinstance(layer, Shapes):
+        raise MatchingInputError(f"{getattr(layer, 'name', layer)!r} is not a Shapes or Points layer; select "
+                                 f"the layer with contour {role}")
+    n = len(layer.data)
+    if n == 0:
+        raise MatchingInputError(f"the Shapes layer {layer.name!r} ({role}) is empty: draw a closed shape "
+                                 "(polygon, lasso, ellipse or rectangle) in it, then press Run again")
+    if not 0 <= int(index) < n:
+        raise MatchingInputError(f"{layer.name!r} has {n} shape(s), numbered 0 to {n - 1}: set the shape index "
+                                 f"of {role} to one of them (got {index})")
+    try:
+        contour, leading = shape_in_layer_coords(layer, int(index), reference, world_point)
+    except ValueError as err:
+        raise MatchingInputError(f"contour {role}: {err}") from None
+    if len(contour) < 3:
+        raise MatchingInputError(f"contour {role} (shape {index} of {layer.name!r}) has {len(contour)} distinct "
+                                 "vertices: a contour needs at least 3; redraw it as a polygon or ellipse")
+    if not np.all(np.isfinite(contour)):
+        raise MatchingInputError(f"contour {role} (shape {index} of {layer.name!r}) has non-finite "
+                                 "coordinates (NaN); redraw it")
+    return contour, leading
+
+
+def read_contour_pair(layer_a, index_a: int, layer_b, index_b: int, *, world_point=None,
+                      roles=("a", "b")) -> ContourPair:
+    """Read two closed contours for matching or simulation.
+
+    Both are expressed in the DATA coordinates of ``layer_a`` (``b`` goes
+    through world coordinates, so the layers may have different transforms),
+    so output layers with ``layer_a``'s transform overlay the inputs.
+
+    Parameters
+    ----------
+    layer_a, layer_b : napari.layers.Shapes
+        May be the same layer (then with different indices).
+    index_a, index_b : int
+        Which shape of each layer.
+    world_point : sequence of float, optional
+        The viewer's current position, for world axes a layer lacks.
+    roles : tuple of str
+        What to call the two contours in messages.
+
+    Raises
+    ------
+    InputError
+        With a message that says how to fix the input: no or empty layer, an
+        index out of range, a line or a shape with fewer than 3 vertices, the
+        same shape twice.
+    """
+    ra, rb = roles
+    if layer_a is not None and layer_a is layer_b and int(index_a) == int(index_b):
+        raise MatchingInputError(
+            f"{ra} and {rb} are the same shape (shape {index_a} of {layer_a.name!r}): choose another shape "
+            f"index for {rb}, or another layer (e.g. the sample 'Hand poses' gives two outlines)")
+    a, leading = _read_one(layer_a, index_a, ra, None, world_point)
+    b, _ = _read_one(layer_b, index_b, rb, layer_a, world_point)
+    return ContourPair(
+        a=a, b=b, leading=leading, transform=image_transform_kwargs(layer_a),
+        a_layer=layer_a.name, a_index=int(index_a), b_layer=layer_b.name, b_index=int(index_b),
+        a_label=_label(layer_a, index_a), b_label=_label(layer_b, index_b),
+    )
+
+
+def is_matching_layer(layer) -> bool:
+    """A layer made by :func:`matching_layer_data` (it holds a Matching in its metadata)."""
+    return isinstance(layer, (Shapes, Vectors)) and layer.metadata.get(MATCHING_KEY) is not None
+
+
+def matching_fits(metadata: dict, a, b, atol: float = 1e-3) -> bool:
+    """Whether a matching layer's metadata was computed for the contours ``a`` and ``b``."""
+    m = metadata.get(MATCHING_KEY)
+    ca, cb = metadata.get("a_contour"), metadata.get("b_contour")
+    if m is None or ca is None or cb is None:
+        return False
+    ca, cb = np.asarray(ca), np.asarray(cb)
+    a, b = np.asarray(a), np.asarray(b)
+    return (ca.shape == a.shape and cb.shape == b.shape and np.asarray(m.affinity).shape == (len(a), len(b))
+            and bool(np.allclose(ca, a, atol=atol)) and bool(np.allclose(cb, b, atol=atol)))
