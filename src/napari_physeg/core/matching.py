@@ -154,8 +154,10 @@ class Matching:
     method : str
         ``"local"``, ``"global"`` or ``"order"``.
     cost_matrix : ndarray of float, shape (Na, Nb)
-        The matrix the final search minimised: ``affinity / n_modes`` plus the
-        curvature term, plus the drift penalty after a refinement.
+        The matrix the final search (before the detail pass) minimised:
+        ``modal_weight x affinity / n_modes`` plus the curvature and
+        inner-distance context terms (averaged over the ``neighbourhood``
+        for ``global``), plus the drift penalty after a refinement.
     unmatched_b : ndarray of int
         Nodes of ``b`` that no node of ``a`` is matched to (ascending).
     n_modes : int
