@@ -584,7 +584,7 @@ def _iter_search(method, C, t_a, t_b, *, arc_weight, n_starts, gap, penalty, sta
         window = max(2, int(np.ceil(_START_WINDOW * nb)))
         if start is not None:
             return (yield from _order_search(C, t_a, t_b, [start], arc_weight, penalty, gap, window))
-        share = 0.3
+        share = 0.3  # of the progress: the coarse DPs are small
         found = yield from _scale_fractions(_iter_every_start(C, penalty, gap), 0.0, share)
         # Each of the best windows searched again at full resolution, with a
         # narrow free start (+-2 % of b's nodes) about its start node: the DP
@@ -843,8 +843,7 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
     n_starts : int, optional
         Number of start regions ``order`` searches at full resolution: the
         best of its coarse search around every start, each searched again
-        with a free start of +-2 % of ``b``'s nodes (contours of at most 100
-        nodes need no second search).
+        with a free start of +-2 % of ``b``'s nodes.
     gap_cost : float, optional
         Cost of leaving a node of ``a`` unmatched in ``order``, in units of
         the matching cost (default: never).
