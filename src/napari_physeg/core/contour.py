@@ -68,8 +68,10 @@ def as_contour(points, *, name: str = "contour", min_nodes: int = 3) -> np.ndarr
         raise ValueError(
             f"{name} has {len(arr)} distinct node(s); at least {min_nodes} are needed for a closed contour"
         )
-    scale = max(np.ptp(arr, axis=0).max(), 1e-300)
-    if abs(signed_area(arr)) <= 1e-9 * scale**2:
+    # Centred rank test, not the area: a figure-8 encloses no net area but is
+    # no line, and far from the origin the area's products lose every digit.
+    singular = np.linalg.svd(arr - arr.mean(axis=0), compute_uv=False)
+    if singular[1] <= 1e-9 * singular[0]:
         raise ValueError(f"{name} is degenerate: its nodes lie on one line and enclose no area")
     return np.ascontiguousarray(arr)
 
@@ -77,7 +79,10 @@ def as_contour(points, *, name: str = "contour", min_nodes: int = 3) -> np.ndarr
 def signed_area(contour: np.ndarray) -> float:
     """Shoelace area with rows as the first axis; positive when the nodes run
     counter-clockwise in the (row, col) frame."""
-    r, c = contour[:, 0], contour[:, 1]
+    # Measured from the first node: the shoelace sum is translation invariant
+    # but its products are not, and far from the origin they would cancel
+    # catastrophically (a contour at 1e10 px would get a random sign).
+    r, c = contour[:, 0] - contour[0, 0], contour[:, 1] - contour[0, 1]
     # np.roll-free: this runs several times per time step on small arrays.
     return 0.5 * float(r[:-1] @ c[1:] - r[1:] @ c[:-1] + r[-1] * c[0] - r[0] * c[-1])
 

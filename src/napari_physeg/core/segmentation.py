@@ -670,7 +670,9 @@ def _evolve(
 
     t_start = time.perf_counter()
     image = _validate_image(image)
-    init = as_contour(init, name="init")
+    from ._validation import check_contour  # the one validation of segment, match and simulate
+
+    init = check_contour(init, "init")
     material, weights = _checked_options(material, forces, weights, stiffness, reference, integrator, polarity,
                                          max_step_length, tol, max_steps, n_nodes)
     # The drawing as the user made it (partly beyond the image, maybe) tells

@@ -33,7 +33,8 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
 from ._drain import drain
-from .contour import as_contour, segment_lengths
+from ._validation import check_contour
+from .contour import segment_lengths
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import (
     coefficient_system,
@@ -281,8 +282,8 @@ def iter_simulate(a, b, matching=None, **options):
 
 def _prepare(a, b, matching, *, q, material, n_frames, sigma_factor, damping_ratio, max_steps, tol):
     """Check every argument of :func:`simulate` (before any heavy work)."""
-    a = as_contour(a, name="a")
-    b = as_contour(b, name="b")
+    a = check_contour(a, "a")
+    b = check_contour(b, "b")
     material = get_material(material)
     if not (np.isfinite(q) and q > 0):
         raise ValueError(f"q must be a positive number, got {q!r}")
@@ -307,61 +308,112 @@ def _run(a, b, matching, options):
         if matching.stop_reason == "cancelled":
             return _cancelled_before_start(a, t_start)
     pairs, affinity = _check_matching(matching, len(a), len(b))
+    # Centred on a: the element and the springs see the shapes, not where
+    # they lie (a contour at 1e10 px keeps its precision).
+    given, centre = a, a.mean(axis=0)
+    a, b = a - centre, b - centre
     targets = node_targets(a, b, pairs, affinity)
-
-    m = len(a)
-    sigma = default_sigma(a, sigma_factor)
-    system = coefficient_system(a, sigma, material)
-    # Every node is held by a spring of stiffness q toward its target: in
-    # coefficient coordinates the nodal q I becomes q G G.
-    spring = q * (system.G @ system.G)
-    stiffness = sp.csc_matrix(system.K + spring)
-    if m <= DENSE_NODES:
-        lo, hi = natural_frequency_range(system.M, stiffness)
-    else:  # the band of a reference ring: no large eigenproblem
-        lo, hi = reference_frequency_range(float(np.mean(segment_lengths(a))), sigma, material, spring=q)
-    mu, gamma = rayleigh_coefficients(damping_ratio, lo, hi)
-    # Resolve the slowest motion with ~40 steps per period; both schemes are
-    # unconditionally stable for the fast ones.
-    dt = 2.0 * np.pi / lo / 40.0
-    if m <= DENSE_NODES:
-        # Small models: exact mode superposition (the load is constant) costs
-        # two small products per step.
-        sim = ModalIntegrator(system.M, stiffness, mu=mu, gamma=gamma, dt=dt)
-    else:
-        sim = NewmarkIntegrator(system.M, stiffness, mu * system.M + gamma * stiffness, dt=dt)
+    model = _Model(a, targets, q=q, material=material, sigma_factor=sigma_factor, damping_ratio=damping_ratio)
     t_model = time.perf_counter()
+    path, steps, stop_reason = yield from _evolve(a, model, max_steps, tol, centre)
+    frames, times = _even_frames(path, model.dt, n_frames)
+    frames += centre
+    frames[0] = given  # exactly
+    t_end = time.perf_counter()
+    return SimulationResult(
+        frames=frames,
+        targets=targets + centre,
+        times=times,
+        steps=steps,
+        converged=stop_reason == "converged",
+        rest=model.at_rest + centre,
+        timings={"model": t_model - t_start, "evolution": t_end - t_model, "total": t_end - t_start},
+        stop_reason=stop_reason,
+    )
 
-    # The initial contour is the rest shape (total reference): the targets'
-    # pull is balanced by the elastic force of the deformation from ``a``, so
-    # a stiff material (or a weak q) comes to rest short of ``b``, as it should.
-    gap = targets - a
-    load = system.G @ (q * np.concatenate([gap[:, 0], gap[:, 1]]))
-    c_rest = spsolve(stiffness, load)
-    U_rest = system.G @ c_rest
-    at_rest = a + np.column_stack([U_rest[:m], U_rest[m:]])
-    X = a.copy()
-    path = [X.copy()]
-    stop_reason = "max_steps"
-    steps = 0
+
+class _Model:
+    """``a``'s element held by springs toward its targets, with its integrator
+    and its equilibrium (where it comes to rest)."""
+
+    def __init__(self, a, targets, *, q, material, sigma_factor, damping_ratio):
+        m = len(a)
+        sigma = default_sigma(a, sigma_factor)
+        try:
+            system = coefficient_system(a, sigma, material)
+            # Every node is held by a spring of stiffness q toward its target:
+            # in coefficient coordinates the nodal q I becomes q G G.
+            spring = q * (system.G @ system.G)
+            stiffness = sp.csc_matrix(system.K + spring)
+            if m <= DENSE_NODES:
+                lo, hi = natural_frequency_range(system.M, stiffness)
+            else:  # the band of a reference ring: no large eigenproblem
+                lo, hi = reference_frequency_range(float(np.mean(segment_lengths(a))), sigma, material, spring=q)
+            mu, gamma = rayleigh_coefficients(damping_ratio, lo, hi)
+            # Resolve the slowest motion with ~40 steps per period; both
+            # schemes are unconditionally stable for the fast ones.
+            self.dt = 2.0 * np.pi / lo / 40.0
+            if m <= DENSE_NODES:
+                # Small models: exact mode superposition (the load is
+                # constant) costs two small products per step.
+                self.integrator = ModalIntegrator(system.M, stiffness, mu=mu, gamma=gamma, dt=self.dt)
+            else:
+                self.integrator = NewmarkIntegrator(system.M, stiffness, mu * system.M + gamma * stiffness,
+                                                    dt=self.dt)
+            # The initial contour is the rest shape (total reference): the
+            # targets' pull is balanced by the elastic force of the
+            # deformation from ``a``, so a stiff material (or a weak q) comes
+            # to rest short of ``b``, as it should.
+            gap = targets - a
+            self.load = system.G @ (q * np.concatenate([gap[:, 0], gap[:, 1]]))
+            U_rest = system.G @ spsolve(stiffness, self.load)
+        except (np.linalg.LinAlgError, ArithmeticError) as err:
+            raise _singular(err) from None
+        if not (np.all(np.isfinite(U_rest)) and np.isfinite(self.dt) and self.dt > 0):
+            raise _singular("non-finite equilibrium")
+        self.G, self.m = system.G, m
+        self.at_rest = a + np.column_stack([U_rest[:m], U_rest[m:]])
+
+    def step(self) -> np.ndarray:
+        """Displacement of every node after one more time step, ``(m, 2)``."""
+        U = self.G @ self.integrator.step(self.load)
+        return np.column_stack([U[: self.m], U[self.m:]])
+
+
+def _singular(reason) -> ValueError:
+    return ValueError(
+        f"a's element is numerically singular ({reason}): some of its nodes nearly coincide or the contour "
+        "folds onto itself; resample it (contour.resample) or pass fewer, evenly spaced nodes"
+    )
+
+
+def _evolve(a, model: _Model, max_steps: int, tol: float, centre: np.ndarray):
+    """Time steps until at rest (within ``tol`` of the equilibrium), stopped
+    or ``max_steps``; yields :class:`SimulationProgress` (shapes moved back by
+    ``centre``), returns the path, the steps taken and the stop reason."""
+    path = [a.copy()]
+    stop_reason, steps = "max_steps", 0
     for steps in range(1, int(max_steps) + 1):
         try:
-            U = system.G @ sim.step(load)
+            X = a + model.step()
         except DivergenceError as err:  # pragma: no cover - implicit springs make this unreachable
             raise DivergenceError(f"{err} at step {steps}") from None
-        X = a + np.column_stack([U[:m], U[m:]])
         if not np.all(np.isfinite(X)):
             raise DivergenceError(f"the simulation diverged at step {steps}")
-        path.append(X.copy())
-        if (yield SimulationProgress(steps, X.copy())):
+        path.append(X)
+        if (yield SimulationProgress(steps, X + centre)):
             stop_reason = "cancelled"
             break
-        if np.abs(at_rest - X).max() < tol:
+        if np.abs(model.at_rest - X).max() < tol:
             stop_reason = "converged"
             break
-    path = np.asarray(path)
-    # Frames at even intervals of the path travelled (mean node displacement),
-    # interpolated between the two steps that bracket each.
+    return np.asarray(path), steps, stop_reason
+
+
+def _even_frames(path: np.ndarray, dt: float, n_frames: int):
+    """Frames at even intervals of the path travelled (mean node
+    displacement), interpolated between the two steps that bracket each, and
+    their times."""
     travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=2).mean(1))])
     wanted = np.linspace(0.0, travelled[-1], int(n_frames))
     after = np.clip(np.searchsorted(travelled, wanted, side="left"), 1, len(path) - 1)
@@ -371,17 +423,7 @@ def _run(a, b, matching, options):
     frames[0], frames[-1] = path[0], path[-1]
     times = (after - 1 + frac) * dt
     times[0], times[-1] = 0.0, (len(path) - 1) * dt
-    t_end = time.perf_counter()
-    return SimulationResult(
-        frames=frames,
-        targets=targets,
-        times=times,
-        steps=steps,
-        converged=stop_reason == "converged",
-        rest=at_rest,
-        timings={"model": t_model - t_start, "evolution": t_end - t_model, "total": t_end - t_start},
-        stop_reason=stop_reason,
-    )
+    return frames, times
 
 
 def _cancelled_before_start(a: np.ndarray, t_start: float) -> SimulationResult:

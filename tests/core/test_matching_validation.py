@@ -1,0 +1,124 @@
+"""One contour validation for segment(), match() and simulate() (issue 12):
+repeated nodes are refused alike everywhere, the tests are centred, and no
+numerical exception of scipy escapes."""
+
+import re
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from napari_physeg import data
+from napari_physeg.core import match, segment, simulate
+from napari_physeg.core._validation import check_contour
+from napari_physeg.core.contour import as_contour, signed_area
+
+HAND = data.hand_outline("open", n_nodes=67)
+B66 = data.hand_pair(67, 66)[1]
+
+
+def figure_eight(n=80, size=40.0):
+    """A symmetric lemniscate: it crosses itself and encloses no net area."""
+    t = 2 * np.pi * (np.arange(n) + 0.5) / n  # no node on the crossing (it would be there twice)
+    return np.column_stack([size * np.sin(t) * np.cos(t), size * np.sin(t)]) + 100.0
+
+
+def _everywhere(contour):
+    """The error (type, message) each public call gives for this contour as its first argument."""
+    obj = data.ellipse()
+    calls = {
+        "segment": lambda: segment(obj.image, contour, max_steps=1),
+        "match": lambda: match(contour, B66),
+        "simulate": lambda: simulate(contour, B66),
+    }
+    out = {}
+    for name, call in calls.items():
+        try:
+            call()
+            out[name] = None
+        except ValueError as err:
+            out[name] = str(err)
+    return out
+
+
+@pytest.mark.parametrize(
+    "contour, pattern",
+    [
+        (np.vstack([HAND[:5], HAND[4:]]), r"repeated consecutive nodes \(nodes 4 and 5 coincide"),
+        (np.vstack([HAND, HAND[:1]]), r"repeats its first node at the end"),
+        (np.vstack([HAND, HAND[30:31]]), r"1 identical node\(s\) \(nodes 30 and 67 coincide"),
+        (np.insert(HAND, 11, HAND[10] + 1e-9 * (HAND[11] - HAND[10]), axis=0), r"repeated consecutive nodes"),
+        (np.column_stack([np.arange(10.0), 2 * np.arange(10.0) + 1e12]), r"lie on one line"),
+    ],
+)
+def test_repeated_nodes_and_lines_are_refused_alike_everywhere(contour, pattern):
+    errors = _everywhere(contour)
+    assert all(message is not None for message in errors.values()), errors
+    # The same message in every call, but for the argument's name.
+    stripped = {message.replace("init", "a") for message in errors.values()}
+    assert len(stripped) == 1, errors
+    assert all(re.search(pattern, m) for m in errors.values()), errors
+
+
+def test_no_node_is_dropped_silently():
+    """The frames have as many nodes as the contour: none was dropped on the way."""
+    a, b, _ = data.hand_pair(68, 66)
+    sim = simulate(a, b, n_frames=3)
+    assert sim.frames.shape == (3, 68, 2)
+    assert match(a, b).affinity.shape == (68, 66)
+
+
+def test_degeneracy_test_is_centred():
+    a = data.hand_outline("open", n_nodes=67)
+    for offset in (1e6, 1e10, -1e12):
+        m = match(a, a + offset)
+        assert np.mean(m.partner == np.arange(67)) >= 0.99
+        assert np.array_equal(check_contour(a + offset, "a"), a + offset)
+        assert as_contour(a + offset).shape == a.shape
+    # The shoelace area is measured from a node: far from the origin it keeps its sign and value.
+    assert np.isclose(signed_area(a + 1e10), signed_area(a), rtol=1e-6)
+
+
+def test_a_figure_eight_is_no_line():
+    eight = figure_eight()
+    assert abs(signed_area(eight)) < 1e-6 * np.ptp(eight) ** 2  # no net area
+    assert check_contour(eight).shape == (80, 2)
+    assert as_contour(eight).shape == (80, 2)
+    m = match(eight, eight)
+    assert m.pairs.shape == (80, 2)
+
+
+def test_far_off_contours_match_and_simulate_as_at_the_origin():
+    a, b, truth = data.hand_pair(67, 66)
+    ref = match(a, b)
+    for offset in (1e10, 1e12):
+        moved = match(a, b + offset)
+        assert np.mean(moved.partner == ref.partner) >= 0.99
+    sim = simulate(a, b, ref)
+    far = simulate(a + 1e10, b + 1e10, ref)
+    assert far.stop_reason == "converged"
+    assert np.abs(far.frames - 1e10 - sim.frames).max() < 1e-3
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    node=st.integers(0, 66),
+    log_gap=st.floats(-14, -1),
+    offset=st.sampled_from([0.0, 1e6, 1e10]),
+    scale=st.sampled_from([1e-3, 1.0, 1e3]),
+)
+def test_nearly_repeated_nodes_raise_a_clear_error_or_simulate(node, log_gap, offset, scale):
+    """No LinAlgError or other numerical exception: a ValueError that names the
+    nodes, or a result with a frame node for every node."""
+    a = HAND * scale + offset
+    nxt = a[(node + 1) % 67]
+    a = np.insert(a, node + 1, a[node] + 10.0**log_gap * (nxt - a[node]), axis=0)
+    b = B66 * scale + offset
+    try:
+        m = match(a, b)
+    except ValueError as err:
+        assert "coincide" in str(err)
+        return
+    sim = simulate(a, b, m, n_frames=3)
+    assert sim.frames.shape == (3, 68, 2) and np.all(np.isfinite(sim.frames))
