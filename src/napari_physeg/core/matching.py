@@ -1157,7 +1157,12 @@ def _run(job: _Job):
         return result(empty, np.inf, C, "cancelled")
     penalty = job.order_penalty * float(np.median(C.min(axis=1))) + 1e-6 * float(np.median(C))
     opts = dict(arc_weight=job.arclength_weight, n_starts=job.n_starts, gap=job.gap, penalty=penalty)
-    found, stopped = yield from _scaled(_iter_search(method, C, t_a, t_b, **opts), work[0], work[1], "search")
+    # Two contours in one frame of reference (displacement_weight > 0, e.g.
+    # consecutive frames of a movie): a's first node starts near its nearest
+    # node of b, so the search around every start is not needed.
+    near = int(np.argmin(_pairwise_sq(A[:1], B)[0])) if job.displacement_weight > 0 else None
+    found, stopped = yield from _scaled(_iter_search(method, C, t_a, t_b, start=near, **opts), work[0], work[1],
+                                        "search")
     if stopped:
         return result(empty, np.inf, C, "cancelled")
     part, total = found

@@ -397,7 +397,8 @@ def node_origins(contour: np.ndarray, previous: np.ndarray, **match_options) -> 
     # modes: between consecutive frames the displacement term decides the
     # fine detail (on the deforming cell both left the errors unchanged and
     # the matching ~30 % faster).
-    options = {"displacement_weight": DISPLACEMENT_WEIGHT, "n_starts": 1, "model_nodes": 32, **match_options}
+    options = {"displacement_weight": DISPLACEMENT_WEIGHT, "n_starts": 1, "model_nodes": 32, "context_weight": 0.0,
+               **match_options}
     pairs = match(back, previous, method="order", **options).pairs
     partner = np.full(len(contour), -1)
     partner[pairs[:, 0]] = pairs[:, 1]
