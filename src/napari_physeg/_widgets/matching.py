@@ -270,8 +270,8 @@ _TIPS = {
                "of both spectra). Fewer modes: coarser, more robust; more: finer, more sensitive to noise.",
     "output": "Draw the correspondences as a Shapes layer of lines (can be saved as napari's shapes CSV) or "
               "as a Vectors layer of arrows from a to b (lighter for thousands of pairs).",
-    "legend": "Colour of each line: its matching cost (modal affinity eq. 12 over the number of modes plus a "
-              "curvature-difference term); 0 would be a perfect match. Blue = low cost = a confident match, "
+    "legend": "Colour of each line: its matching cost (modal affinity eq. 12 over the number of modes plus "
+              "curvature-difference and inner-distance shape-context terms); 0 would be a perfect match. Blue = low cost = a confident match, "
               "red = high cost = doubtful. The scale spans this matching's lowest to highest cost; the values "
               "are in the layer's features (cost, affinity, node_a, node_b).",
     "run": "Match the nodes of a to those of b in the background and add a layer of correspondences.",
