@@ -145,3 +145,15 @@ def test_a_result_delivered_inside_the_slot_comes_after_the_updates(movie_in_vie
     widget._on_finished = lambda: order.append("finished")
     widget._on_yielded_once(0)
     assert order == [0, 1, "result", "finished"]
+
+
+def test_points_clicked_around_a_cell_are_a_contour(movie_in_viewer, wait_done):
+    # A Points layer, its points on the frame in the order clicked, seeds the tracking as a polygon would.
+    viewer, widget = movie_in_viewer
+    drawn = np.asarray(viewer.layers["contour on frame 0"].data[0])
+    viewer.add_points(drawn[::4], name="clicked")
+    widget.reset_choices()
+    widget._shapes.value = viewer.layers["clicked"]
+    widget.run()
+    wait_done(widget)
+    assert widget.last_result.status == [["tracked"] * 8]

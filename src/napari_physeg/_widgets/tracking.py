@@ -24,12 +24,13 @@ import time
 import napari
 import numpy as np
 from magicgui.widgets import ComboBox, Label, PushButton, SpinBox
-from napari.layers import Shapes
+from napari.layers import Points
 from napari.utils.notifications import show_info, show_warning
 
 from ..core import LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, segment, track
-from ._inputs import PHYSICS_TIPS, PREVIEW_COLOR, PREVIEW_KEY, PhysicsControls, core_default, image_layer_choices
-from ._layers import image_transform_kwargs, shapes_to_image_coords, slice_index
+from ._inputs import (PHYSICS_TIPS, PREVIEW_COLOR, PREVIEW_KEY, PhysicsControls, contour_layer_choices,
+                      core_default, image_layer_choices)
+from ._layers import PointsAsPolygon, image_transform_kwargs, shapes_to_image_coords, slice_index
 from ._worker import WorkerWidget, relay
 
 __all__ = ["TrackingWidget", "tracking_layer_data", "node_trajectories"]
@@ -156,8 +157,8 @@ class TrackingWidget(WorkerWidget):
         return image_layer_choices(self.viewer, min_ndim=3)
 
     def _shapes_choices(self, _widget=None):
-        return [(layer.name, layer) for layer in self.viewer.layers if isinstance(layer, Shapes)
-                and layer.metadata.get("tracking") is None and not layer.metadata.get(PREVIEW_KEY)]
+        return [(name, layer) for name, layer in contour_layer_choices(self.viewer)
+                if layer.metadata.get("tracking") is None]
 
     def _on_layers_changed(self, event=None):
         try:
@@ -176,6 +177,8 @@ class TrackingWidget(WorkerWidget):
             raise ValueError(f"the movie {image.name!r} has shape {tuple(frames.shape)}: the Tracking widget needs "
                              "(time, rows, cols); for a z-stack movie pick one z first")
         point = tuple(self.viewer.dims.point)
+        if isinstance(shapes, Points):  # its points on this frame, in the order clicked: one contour
+            shapes = PointsAsPolygon(shapes, point)
         sliced = shapes_to_image_coords(shapes, image, world_point=point)
         if not sliced.contours:
             raise ValueError(f"no contour of {shapes.name!r} lies on the current frame: go to the frame the "
