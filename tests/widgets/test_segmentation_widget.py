@@ -714,7 +714,8 @@ def test_a_long_run_keeps_the_gui_live_and_keeps_the_good_shapes(viewer_widget, 
     timer.stop()
     seconds = time.perf_counter() - started
     outcome = widget.last_outcome
-    assert seconds > 2.0 and widget.n_updates >= 3  # a long run, previewed live (at the pace the GUI affords)
+    # A long run, previewed live at the pace the GUI affords: shown while it ran, the rest dropped.
+    assert seconds > 1.5 and widget.n_updates >= 2 and widget.n_received > widget.n_updates
     assert max(gaps) < 0.2, f"the GUI was held up for {max(gaps):.3f} s"
     assert not [r for r in caplog.records if "RecursionError" in r.getMessage()]
     assert len(outcome.results) == 1 and outcome.indices == [0] and len(outcome.results[0].contour) > 500
