@@ -12,7 +12,7 @@ import inspect
 import time
 import warnings
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -36,6 +36,10 @@ __all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgres
 DEFAULT_NODE_SPACING = 3.0
 MIN_NODES = 24
 MAX_DEFAULT_NODES = 1000
+
+#: Elements of at most this many nodes are held as dense matrices (and
+#: factored by Cholesky), larger ones sparse (and factored by SuperLU).
+DENSE_MAX_NODES = 100
 
 #: Nodes are redistributed (and the element rebuilt) when an edge of the
 #: contour grows past this many target spacings (see also PINCH_GAP).
@@ -461,8 +465,13 @@ class _ElasticBody:
         """Assemble and factor the element for the current nodes."""
         t0 = time.perf_counter()
         try:
-            self.system = coefficient_system(self.nodes, self.sigma, self.material)
-            M, K = self.system.M, self.system.K
+            system = coefficient_system(self.nodes, self.sigma, self.material)
+            if len(self.nodes) <= DENSE_MAX_NODES:
+                # A small element is faster dense: scipy.sparse's per-call
+                # overhead was most of a 45-node build (1 ms) and of each step.
+                system = replace(system, G=system.G.toarray(), M=system.M.toarray(), K=system.K.toarray())
+            self.system = system
+            M, K = system.M, system.K
             mu, gamma = self.rayleigh
             if self.integrator == "newmark":
                 self.sim = NewmarkIntegrator(M, K, mu * M + gamma * K, dt=self.dt,
