@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["check_contour", "NEAR_DUPLICATE"]
+__all__ = ["check_contour", "node_array", "NEAR_DUPLICATE"]
 
 #: Two nodes closer than this fraction of the mean node spacing count as one
 #: repeated node: the element's interpolation matrix becomes numerically
@@ -26,6 +26,25 @@ NEAR_DUPLICATE = 1e-5
 #: Smallest ratio of the second to the first singular value of the centred
 #: nodes: below it they lie on one line.
 _COLLINEAR = 1e-9
+
+
+def node_array(points, name: str = "contour", *, min_nodes: int = 3) -> np.ndarray:
+    """``points`` as a float64 ``(N, 2)`` copy; ValueError if it cannot be
+    one: empty, another shape, NaN or infinite values."""
+    try:
+        arr = np.array(points, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{name} must be an (N, 2) array of (row, col) nodes: {err}") from None
+    if arr.size == 0:
+        raise ValueError(f"{name} is empty: draw a contour with at least {min_nodes} nodes")
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(
+            f"{name} must be an (N, 2) array of (row, col) nodes, got shape {arr.shape}"
+            + ("; for nD layers pass only the last two coordinates" if arr.ndim == 2 else "")
+        )
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or infinite coordinates")
+    return arr
 
 
 def check_contour(points, name: str = "contour", *, min_nodes: int = 3) -> np.ndarray:
@@ -54,19 +73,7 @@ def check_contour(points, name: str = "contour", *, min_nodes: int = 3) -> np.nd
         message names them), or has all its nodes on one line. A contour that
         crosses itself (a figure-8) is accepted.
     """
-    try:
-        arr = np.array(points, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"{name} must be an (N, 2) array of (row, col) nodes: {err}") from None
-    if arr.size == 0:
-        raise ValueError(f"{name} is empty: draw a contour with at least {min_nodes} nodes")
-    if arr.ndim != 2 or arr.shape[1] != 2:
-        raise ValueError(
-            f"{name} must be an (N, 2) array of (row, col) nodes, got shape {arr.shape}"
-            + ("; for nD layers pass only the last two coordinates" if arr.ndim == 2 else "")
-        )
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contains NaN or infinite coordinates")
+    arr = node_array(points, name, min_nodes=min_nodes)
     # Centred: the tests below then see the shape, not where it lies.
     centred = arr - arr.mean(axis=0)
     distinct = len(np.unique(arr, axis=0))

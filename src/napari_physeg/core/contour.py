@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._validation import node_array
+
 __all__ = [
     "as_contour",
     "signed_area",
@@ -46,19 +48,7 @@ def as_contour(points, *, name: str = "contour", min_nodes: int = 3) -> np.ndarr
         has fewer than ``min_nodes`` distinct nodes, or encloses no area
         (all nodes on one line).
     """
-    try:
-        arr = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"{name} must be an (N, 2) array of (row, col) nodes: {err}") from None
-    if arr.size == 0:
-        raise ValueError(f"{name} is empty: draw a contour with at least {min_nodes} nodes")
-    if arr.ndim != 2 or arr.shape[1] != 2:
-        raise ValueError(
-            f"{name} must be an (N, 2) array of (row, col) nodes, got shape {arr.shape}"
-            + ("; for nD layers pass only the last two coordinates" if arr.ndim == 2 else "")
-        )
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contains NaN or infinite coordinates")
+    arr = node_array(points, name, min_nodes=min_nodes)
     # Drop consecutive duplicates, including a closing node equal to the first.
     keep = np.any(arr != np.roll(arr, -1, axis=0), axis=1)
     if not keep.any():  # every node identical
