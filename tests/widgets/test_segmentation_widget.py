@@ -130,6 +130,7 @@ def test_sample_hand_end_to_end(viewer_widget, wait_done, errors, monkeypatch, r
     assert len(viewer.layers) == n_before + 1
     (out,) = output_layers(viewer)
     assert out.name == "initial contour segmented (rubber)"
+    assert out.current_edge_color in ("cyan", "#00ffff")  # what is drawn next in it is cyan too, not magenta
     assert out.shape_type == ["polygon"] and out.ndim == 2
     assert out.data[0].dtype == np.float32 and out.data[0].shape[1] == 2
     assert iou(out.data[0], hand.mask) >= 0.9

@@ -55,6 +55,7 @@ def test_round_trip_adds_contours_tracks_and_maps(movie_in_viewer, wait_done):
         found = polygon_mask(np.asarray(polygon[:, 1:], float), movie.masks[t].shape)
         assert (found & movie.masks[t]).sum() / (found | movie.masks[t]).sum() > 0.97
     assert maps[0].data.shape == (1, 8, 100) and not maps[0].visible  # object x frame x arc
+    assert "object" not in viewer.dims.axis_labels  # the movie's time axis keeps its name
     # The centroid track, then the node trajectories, each over the 8 frames.
     assert len(np.unique(tracks[0].data[:, 0])) == 13 and tracks[0].data[:, 1].max() == 7
     assert "tracking preview" not in [layer.name for layer in viewer.layers]

@@ -153,9 +153,10 @@ class WorkerWidget(Container):
         shape_type = meta.get("shape_type", "polygon")
         preview.data = (data, [shape_type] * len(data) if isinstance(shape_type, str) else shape_type)
         for key in ("edge_color", "face_color"):
-            if key in meta:  # one colour, or one per shape
+            if key in meta:  # one colour, or one per shape; shapes drawn next get the first
                 colours = transform_color(meta[key])
                 setattr(preview, key, colours[0] if len(colours) == 1 else colours)
+                setattr(preview, f"current_{key}", colours[0])
         for key in ("edge_width", "features", "metadata", "name"):
             if key in meta:
                 setattr(preview, key, meta[key])

@@ -107,16 +107,17 @@ def tracking_layer_data(result: TrackingResult, transform: dict, *, name: str, n
                 tracks.append(np.column_stack([np.full(len(path), len(tracks)), path]))
     if tracks:
         layers.append((np.vstack(tracks), dict(name=f"{name} tracks", tail_length=10, **common), "tracks"))
-    # One layer per quantity, the objects stacked on a leading "object" axis
-    # (its slider picks one): 13 nuclei made 26 layers otherwise, 5 s to add.
+    # One layer per quantity, the objects stacked on a leading axis (its
+    # slider picks one): 13 nuclei made 26 layers otherwise, 5 s to add. No
+    # axis labels: napari's are the viewer's, and the movie's time axis would
+    # be called "object".
     for quantity, colormap in (("normal_velocity", "bwr"), ("curvature", "PiYG")):
         maps = np.stack([result.membrane_map(k, quantity, n_arc=n_arc) for k in range(result.n_objects)])
         if not np.isfinite(maps).any():
             continue
         lim = float(np.nanpercentile(np.abs(maps), 98)) or 1.0
         layers.append((maps, dict(name=f"{name} {quantity.replace('_', ' ')} (object x frame x arc)",
-                                  colormap=colormap, contrast_limits=(-lim, lim), visible=False,
-                                  axis_labels=("object", "frame", "arc")), "image"))
+                                  colormap=colormap, contrast_limits=(-lim, lim), visible=False), "image"))
     return layers
 
 
