@@ -22,6 +22,7 @@ from napari.qt.threading import GeneratorWorker, thread_worker
 from napari.utils.notifications import show_error
 from threadpoolctl import threadpool_limits
 
+from ..core._drain import drain
 from ._layers import write_csv
 
 __all__ = ["WorkerWidget", "ask_save_path", "relay", "run_to_completion"]
@@ -370,12 +371,8 @@ def run_to_completion(generator, on_progress=None):
     """Drive a computation's generator (``segment_contours``, ``simulate_contours``) synchronously.
 
     For scripts and tests: ``on_progress`` (if given) receives each yielded
-    update; the generator's return value (its outcome) is returned.
+    update; the generator's return value (its outcome) is returned. The
+    core's own driver does it (the widgets' generators stop on their cancel
+    event, not on what is sent to them).
     """
-    while True:
-        try:
-            update = next(generator)
-        except StopIteration as stop:
-            return stop.value
-        if on_progress is not None:
-            on_progress(update)
+    return drain(generator, on_progress)

@@ -4,10 +4,11 @@ Choose an image with a time axis (its first axis; the last two are the
 frame's rows and columns) and a Shapes layer with contours drawn on any frame,
 stand on that frame and press Run. The core's generator
 :func:`~napari_physeg.core.iter_track` runs in napari's ``thread_worker``
-(no second thread, no queue); each object and frame it yields moves the
-progress bar and, at most every ``preview_interval`` seconds, the live
-preview. Cancel sends the generator a stop: what was tracked is kept and
-becomes layers like a finished run's.
+(no second thread, no queue, see :func:`~._worker.relay`); at most one
+object-frame every ``preview_interval`` seconds is passed on, to move the
+progress bar and the live preview when the GUI can afford it. Cancel sends
+the generator a stop: what was tracked is kept and becomes layers like a
+finished run's.
 
 The layers (:func:`tracking_layer_data`, no Qt) are what the ecosystem
 expects: one Shapes layer with a polygon per object and frame (the frame as
@@ -19,7 +20,6 @@ position), one slice per object along a leading "object" axis.
 
 from __future__ import annotations
 
-import time
 
 import napari
 import numpy as np
@@ -140,7 +140,6 @@ class TrackingWidget(WorkerWidget):
         self.last_result: TrackingResult | None = None
         self.output_layers: list = []
         self._preview = None
-        self._last_preview = 0.0
         self._run_info = None
         self._image = ComboBox(label="movie (image)", choices=self._image_choices, tooltip=_TIPS["image"])
         self._shapes = ComboBox(label="contours (shapes)", choices=self._shapes_choices, tooltip=_TIPS["shapes"])
@@ -206,7 +205,7 @@ class TrackingWidget(WorkerWidget):
         total = len(contours) * frames.shape[0]
         # Cancel stops after the current object and frame; what was tracked is kept.
         run = iter_track(frames, contours, start=start, max_steps=int(self._max_steps.value), segment_options=options)
-        return self._start(total, relay, run, self._cancel)
+        return self._start(total, relay, run, self._cancel, self.preview_interval)
 
     # ------------------------------------------------------------ worker signals (GUI thread)
     def _on_yielded(self, update: TrackingProgress):
@@ -216,9 +215,7 @@ class TrackingWidget(WorkerWidget):
         self.n_updates += 1
         self._advance(update.done)
         self._status.value = f"frame {update.frame}, object {update.object}: {update.status}"
-        now = time.perf_counter()
-        if update.contour is not None and now - self._last_preview >= self.preview_interval:
-            self._last_preview = now
+        if update.contour is not None:
             self._show_preview(update)
 
     def _show_preview(self, update: TrackingProgress):
