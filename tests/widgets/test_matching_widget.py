@@ -380,6 +380,9 @@ def test_pairs_saved_as_csv_match_the_layer(viewer_widget, wait_done, notes, tmp
     viewer, widget = viewer_widget
     viewer.open_sample("napari-physeg", "hand_poses")
     assert not widget._export_btn.enabled  # nothing to save before a run
+    with pytest.raises(ValueError, match="press Run first"):
+        widget.export_csv(tmp_path / "early.csv")
+    assert not (tmp_path / "early.csv").exists()
     widget.run()
     wait_done(widget)
     assert widget._export_btn.enabled

@@ -371,6 +371,8 @@ def test_frames_saved_as_csv(viewer_widgets, wait_done, notes, tmp_path):
 
     viewer, _, widget = viewer_widgets
     viewer.open_sample("napari-physeg", "hand_poses")
+    with pytest.raises(ValueError, match="press Run first"):
+        widget.export_csv(tmp_path / "early.csv")
     widget.run()
     wait_done(widget)
     res = widget.last_outcome.result
