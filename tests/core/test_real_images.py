@@ -40,9 +40,7 @@ CASES = [
     (32, 15, 1.46),  # cut by the lower side, bright neighbours around: polarity flipped
     (32, 16, 1.32),  # cut by the right side, the circle crosses a neighbour
     (32, 6, 0.5),  # drawn inside, touching a neighbour: leaked into it
-    pytest.param(38, 19, 0.5, marks=pytest.mark.xfail(
-        strict=True, reason="known limit: a neighbour cut by the same image side touches it without a neck "
-        "or a seam, and the contour takes it in (it used to raise DivergenceError)")),
+    (38, 19, 0.5),  # drawn inside; a neighbour cut by the same side touches it along the side: took it in
     (38, 10, 0.5),  # drawn inside, touching a neighbour
 ]
 

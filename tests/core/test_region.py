@@ -91,3 +91,32 @@ def test_lobes_and_thin_parts_drawn_around_are_kept():
     assert overlap(region, mask) > 0.95
     assert overlap(region, arm) > 0.85
     assert (region & ~mask).sum() < 0.05 * mask.sum()
+
+
+def test_neighbour_cut_by_the_same_image_side_is_split_off():
+    """Two nuclei cut by the image's right side, touching along it over a
+    contact wider than the smaller one's visible part: at half its inscribed
+    radius their cores merge along the side. Drawn inside or around the
+    smaller one, the region is that one only."""
+    shape = (130, 60)
+    small, large = disk(shape, (40, 66), 22), disk(shape, (80, 70), 30)
+    image = render(small | large)
+    for drawing in (circle((40, 52), 5), circle((40, 56), 26)):
+        _, region = region_for(image, drawing)
+        assert overlap(region, small & ~large) > 0.95
+        assert (region & large & ~small).sum() < 0.01 * (large & ~small).sum()
+
+
+@pytest.mark.parametrize("drawn", ["around", "inside"])
+def test_dark_spot_open_to_the_image_side_is_part_of_the_object(drawn):
+    """A nucleus cut by the image's top side with a dark nucleolus that the
+    side cuts too: the spot is a hole of the object, not its background."""
+    shape = (80, 100)
+    nucleus = disk(shape, (0, 50), 30)
+    spot = disk(shape, (2, 56), 7)
+    image = render(nucleus & ~spot)
+    drawing = circle((8, 50), 36) if drawn == "around" else circle((16, 40), 9)
+    _, region = region_for(image, drawing)
+    assert overlap(region, spot) > 0.95
+    assert overlap(region, nucleus) > 0.95
+    assert (region & ~nucleus).sum() < 0.05 * nucleus.sum()

@@ -158,7 +158,8 @@ def _disk(radius: int) -> np.ndarray:
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
 
 
-def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel) -> np.ndarray | None:
+def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
+                  image_sides=(True, True, True, True)) -> np.ndarray | None:
     """The object's own pixels: the object-like blob the drawing marks, split from its neighbours.
 
     Object-like pixels (``signed > 0``) are split into blobs at necks by a
@@ -177,6 +178,11 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel) -
     drawing : (N, 2) ndarray
         The drawn contour in the same frame.
     model : RegionModel
+    image_sides : 4 bools, optional
+        Which sides of ``signed`` (top, bottom, left, right) are the image's
+        own: a dark spot of the object open to the image's side is a hole of
+        the object there, not its background. All of them by default (``signed``
+        is the whole image).
 
     Returns
     -------
@@ -194,14 +200,18 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel) -
     region = np.zeros(signed.shape, bool)
     if np.any(hi <= lo):
         return None
-    local = _object_region_near(signed[box], drawing - lo, model)
+    # The crop's sides that are the image's: those where it meets an image side.
+    sides = (image_sides[0] and lo[0] == 0, image_sides[1] and hi[0] == signed.shape[0],
+             image_sides[2] and lo[1] == 0, image_sides[3] and hi[1] == signed.shape[1])
+    local = _object_region_near(signed[box], drawing - lo, model, sides)
     if local is None:
         return None
     region[box] = local
     return region
 
 
-def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionModel) -> np.ndarray | None:
+def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
+                        image_sides) -> np.ndarray | None:
     """:func:`object_region` on a crop around the drawing."""
     shape = signed.shape
     drawn = _fill(drawing, shape)
@@ -218,15 +228,14 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
         marked = drawn
     # Neighbours are split off whole (their cores lie beyond the drawing),
     # then the reach applies. Small holes (texture) would make false necks.
-    like = _without_small_holes(signed > 0, 0.25 * drawn.sum())
+    like = _without_small_holes(signed > 0, 0.25 * drawn.sum(), image_sides)
     seed = (marked if (marked & like).any() else drawn) & like
     if not seed.any():
         return None
     # Depth below the object's outline; beyond the image is not object, so
     # two objects cut by the image's side meet there at a neck too.
     depth = cv2.distanceTransform(np.pad(like, 1).view(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
-    inscribed = float(depth[seed].max())
-    cores, n = _label(depth > 0.5 * inscribed)
+    cores, n = _cores(depth, seed, reach)
     ours = np.unique(cores[seed])
     if model.drawn_around:
         # Lobes of the object lie inside the drawing; neighbours cross it.
@@ -236,23 +245,52 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     ours = ours[ours > 0]
     if ours.size == 0:  # the drawing marks only a thin part: its blob is the object
         blobs = _label(like)[0]
-        return _smoothed((blobs == blobs[seed][0]) & reach)
+        return _smoothed((blobs == blobs[seed][0]) & reach, image_sides)
     mine = np.isin(cores, ours)
     blobs, _ = _label(like)
     own_blobs = np.unique(blobs[mine])
     own = np.isin(blobs, own_blobs)
     if not (own & (cores > 0) & ~mine).any():
-        return _smoothed(own & reach)  # no neighbour touches it
+        return _smoothed(own & reach, image_sides)  # no neighbour touches it
     markers = np.where(cores > 0, 2, 0).astype(np.int32)
     markers[mine] = 1
     blobs = segmentation.watershed(-depth, markers, mask=like)
-    return _smoothed((blobs == 1) & reach)
+    return _smoothed((blobs == 1) & reach, image_sides)
 
 
-def _smoothed(region: np.ndarray) -> np.ndarray:
-    """``region`` without one-pixel spurs (noise at its rim), holes filled."""
+#: The cores of the blobs are the pixels deeper than these fractions of the
+#: object's inscribed radius, tried in turn (see _cores).
+CORE_DEPTHS = (0.5, 0.6, 0.7, 0.8)
+
+
+def _cores(depth: np.ndarray, seed: np.ndarray, reach: np.ndarray) -> tuple[np.ndarray, int]:
+    """Labelled cores of the object-like blobs: the pixels deeper than a
+    fraction of the object's inscribed radius (the largest depth under the
+    seed).
+
+    Half the radius splits touching neighbours at their neck. A core the
+    seed marks that reaches mostly beyond the object's reach is still a
+    merger (two nuclei cut by the image's side meet along it, where the neck
+    is as deep as the object is wide): the depth is raised until the marked
+    cores lie within the reach, or the last fraction is tried.
+    """
+    inscribed = float(depth[seed].max())
+    for fraction in CORE_DEPTHS:
+        cores, n = _label(depth > fraction * inscribed)
+        marked = np.isin(cores, np.unique(cores[seed & (cores > 0)]))
+        if (marked & reach).sum() >= 0.8 * marked.sum():
+            break
+    return cores, n
+
+
+def _smoothed(region: np.ndarray, image_sides) -> np.ndarray:
+    """``region`` without one-pixel spurs (noise at its rim), its holes filled
+    (those open to the image's side too, up to a quarter of its area)."""
     opened = cv2.morphologyEx(region.view(np.uint8), cv2.MORPH_OPEN, _disk(1)).view(bool)
-    return _fill_holes(opened if opened.any() else region)
+    region = opened if opened.any() else region
+    pieces, enclosed, open_to_image = _holes(region, image_sides)
+    small = np.bincount(pieces.ravel(), minlength=len(enclosed)) <= 0.25 * region.sum()
+    return region | (enclosed | (open_to_image & small))[pieces]
 
 
 def _label(mask: np.ndarray) -> tuple[np.ndarray, int]:
@@ -261,22 +299,23 @@ def _label(mask: np.ndarray) -> tuple[np.ndarray, int]:
     return labels, n - 1
 
 
-def _holes(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Labels of the pieces of ``~mask``, and which of them are holes (not open to the sides)."""
+def _holes(mask: np.ndarray, image_sides) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Labels of the pieces of ``~mask``; which are holes (on no side), and
+    which are open to the image's sides only (``image_sides``: top, bottom,
+    left, right)."""
     pieces, n = _label(~mask)
-    hole = np.ones(n + 1, bool)
-    hole[0] = False
-    hole[np.concatenate([pieces[0], pieces[-1], pieces[:, 0], pieces[:, -1]])] = False
-    return pieces, hole
+    sides = (pieces[0], pieces[-1], pieces[:, 0], pieces[:, -1])
+    on_image_side, on_other_side = np.zeros(n + 1, bool), np.zeros(n + 1, bool)
+    for side, is_image in zip(sides, image_sides):
+        (on_image_side if is_image else on_other_side)[side] = True
+    enclosed = ~(on_image_side | on_other_side)
+    open_to_image = on_image_side & ~on_other_side
+    enclosed[0] = open_to_image[0] = False
+    return pieces, enclosed, open_to_image
 
 
-def _fill_holes(mask: np.ndarray) -> np.ndarray:
-    pieces, hole = _holes(mask)
-    return mask | hole[pieces]
-
-
-def _without_small_holes(mask: np.ndarray, max_area: float) -> np.ndarray:
-    """``mask`` with its holes of at most ``max_area`` px filled."""
-    pieces, hole = _holes(mask)
-    hole &= np.bincount(pieces.ravel(), minlength=len(hole)) <= max_area
-    return mask | hole[pieces]
+def _without_small_holes(mask: np.ndarray, max_area: float, image_sides) -> np.ndarray:
+    """``mask`` with its holes of at most ``max_area`` px filled (those open to the image's side too)."""
+    pieces, enclosed, open_to_image = _holes(mask, image_sides)
+    small = np.bincount(pieces.ravel(), minlength=len(enclosed)) <= max_area
+    return mask | ((enclosed | open_to_image) & small)[pieces]

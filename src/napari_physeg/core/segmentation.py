@@ -160,7 +160,7 @@ def _near_window_border(nodes: np.ndarray, window, shape, guard: float) -> bool:
 EDGE_GATE = 3.0
 
 
-def region_features(intensity, edges, drawing, polarity=None, avoid=None):
+def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_sides=(True, True, True, True)):
     """Object-ness and edge images for the object the user drew.
 
     Parameters
@@ -176,6 +176,9 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None):
     avoid : (H, W) ndarray of bool, optional
         Pixels of other objects: background for this one, whatever they
         look like (objects tracked together repel each other).
+    image_sides : 4 bools, optional
+        Which sides of the window (top, bottom, left, right) are the image's
+        own; all by default (the window is the whole image).
 
     Returns
     -------
@@ -193,7 +196,7 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None):
     signed = objectness(intensity, model)
     if avoid is not None:
         signed[avoid] = -1.0
-    region = object_region(signed, drawing, model)
+    region = object_region(signed, drawing, model, image_sides)
     if region is None:
         return signed, edges, model.polarity
     signed = np.where(region, np.where(signed > 0, signed, 1.0), np.where(signed > 0, -1.0, signed))
@@ -416,8 +419,11 @@ class _FeatureWindow:
                 return self._compute(self._whole_image)
             raise ValueError("image is constant: there is no object border to segment")
         avoid = None if self.avoid is None else self.avoid[window]
+        rows, cols = window
+        image_sides = (rows.start == 0, rows.stop == self.image.shape[0], cols.start == 0,
+                       cols.stop == self.image.shape[1])
         signed, edges, self.polarity = region_features(intensity, edges, self.drawing - origin, self.polarity,
-                                                       avoid)
+                                                       avoid, image_sides)
         distance = _distance_with_image_border(edges, window, self.image.shape)
         field = ForceField.from_features(edges, distance, signed, self.weights, max_length=self.max_line_length)
         self.fields = [field]
