@@ -64,9 +64,9 @@ class SegmentationResult:
         object/background switch), ``"stalled"`` (at rest elsewhere: nothing
         in reach pulls it), ``"max_steps"`` (it kept moving: still travelling,
         or swinging about the border) or ``"cancelled"``. At rest means no node
-        moved more than ``tol`` for ``patience`` steps, or the area per length
-        and the centroid neither drifted nor strayed by more than half a pixel
-        over 15 steps.
+        strayed more than ``patience * tol`` px over the last ``patience``
+        steps, or the area per length and the centroid neither drifted nor
+        strayed by more than half a pixel over 15 steps.
     history : tuple of ndarray
         Sub-sampled evolution, first the resampled initial contour, last the
         final one.
@@ -459,6 +459,8 @@ class _ElasticBody:
         self.model_time = 0.0
         self.nodes = nodes
         self.rest = nodes.copy()
+        # Counts the times the nodes were replaced (remesh) or their frame shifted.
+        self.generation = 0
         self.remesh_watch = _RemeshWatch(spacing)
         self._build()
         self._reset_caps()
@@ -518,6 +520,15 @@ class _ElasticBody:
                 move = self._displacement(G @ self.sim.trial(G @ f)) + self.rest - self.nodes
         return self._displacement(G @ self.sim.step(G @ f)) + self.rest - self.nodes
 
+    def cap_by_reach(self, field: ForceField) -> None:
+        """Start every node's trust cap at its distance to the nearest edge
+        (and half a pixel): a node that starts on its border (a contour
+        carried over from the previous frame, or one entering refinement)
+        needs no 2-px jump to find it, and would overshoot and swing back."""
+        reach = field.sample(self.nodes)[:, 1] + 0.5
+        self.cap = np.clip(reach, 0.25 * self.tol, self.max_step_length)
+        self.last_sign = np.zeros(len(self.nodes))
+
     def _update_caps(self, move, normals) -> None:
         """Per-node trust region (as in Rprop): a node whose motion along its
         normal reverses (it stepped over its equilibrium) halves its cap, one
@@ -535,6 +546,7 @@ class _ElasticBody:
         nearest = cKDTree(old).query(nodes)[1]
         cap, last_sign = self.cap[nearest], self.last_sign[nearest]
         self.nodes = self.rest = nodes
+        self.generation += 1
         self.remesh_watch.forget()
         if not self.collapsed:
             self._build()
@@ -558,24 +570,41 @@ class _ElasticBody:
         return len(self.nodes) < 3 or abs(signed_area(self.nodes)) < 1.0
 
     def shift(self, offset: np.ndarray) -> None:
+        if not offset.any():
+            return
+        self.generation += 1
         self.nodes, self.rest = self.nodes + offset, self.rest + offset
         self.remesh_watch.shift(offset)
 
 
 class _RestDetector:
-    """At rest: no node moved more than ``tol`` for ``patience`` steps, or the
-    shape reached a plateau (see :class:`_Plateau`)."""
+    """At rest: over the last ``patience`` steps no node strayed more than
+    ``patience * tol`` px from where it was (it moved less than ``tol`` px per
+    step on average, and a node that trembles about its place does not count
+    as moving), or the shape reached a plateau (see :class:`_Plateau`).
+
+    The nodes' track restarts whenever they are replaced (a remesh) or the
+    frame they are measured in shifts.
+    """
 
     def __init__(self, tol, patience):
-        self.tol, self.patience = tol, patience
+        self.tol, self.patience = tol, int(patience)
         self.restart()
 
     def restart(self) -> None:
-        self.quiet, self.plateau = 0, _Plateau()
+        self.track, self.plateau = deque(maxlen=self.patience + 1), _Plateau()
+        self.generation = None
 
-    def at_rest(self, moved: float, nodes: np.ndarray) -> bool:
-        self.quiet = self.quiet + 1 if moved < self.tol else 0
-        return self.quiet >= self.patience or self.plateau.reached(nodes)
+    def at_rest(self, nodes: np.ndarray, generation: int) -> bool:
+        if generation != self.generation:
+            self.track.clear()
+            self.generation = generation
+        self.track.append(nodes.copy())
+        if len(self.track) > self.patience:
+            window = np.stack(self.track)
+            if np.ptp(window, axis=0).max() <= self.patience * self.tol:
+                return True
+        return self.plateau.reached(nodes)
 
 
 def _checked_options(material, forces, weights, stiffness, reference, integrator, polarity, max_step_length, tol,
@@ -716,6 +745,7 @@ def _evolve(
         rayleigh=rayleigh_coefficients(damping_ratio, *reference_frequency_range(spacing, sigma_used, material)),
         integrator=integrator, dt=dt, divergence_limit=10.0 * float(np.hypot(*image.shape)),
         reference=reference, max_step_length=max_step_length, tol=tol)
+    body.cap_by_reach(features.fields[0])
     history = [body.nodes + features.origin]
     rest = _RestDetector(tol, patience)
     stop_reason, steps = "max_steps", 0
@@ -729,7 +759,7 @@ def _evolve(
     phase = 0
     for steps in range(1, int(max_steps) + 1):
         body.shift(features.follow(body.nodes))
-        moved = _time_step(body, features.fields[phase], stiffness, features.bounds, steps)
+        _time_step(body, features.fields[phase], stiffness, features.bounds, steps)
         if body.collapsed:
             break
         if steps % max(int(history_every), 1) == 0:
@@ -739,13 +769,13 @@ def _evolve(
         if stop:
             stop_reason = "cancelled"
             break
-        if rest.at_rest(moved, body.nodes):
+        if rest.at_rest(body.nodes, body.generation):
             if phase == len(features.fields) - 1:
                 stop_reason = _rest_reason(features.fields[phase], body.nodes)
                 break
             phase += 1
             rest.restart()
-            body.cap = np.full(len(body.nodes), 0.5 * body.max_step_length)
+            body.cap_by_reach(features.fields[phase])
     if stop_reason != "cancelled" and body.collapsed:
         # Nothing held it: the region force shrinks a contour drawn on a
         # uniform background until it is a point. Say so rather than return it.
@@ -771,9 +801,8 @@ def _evolve(
     )
 
 
-def _time_step(body: _ElasticBody, field: ForceField, stiffness: float, bounds: np.ndarray, step: int) -> float:
-    """Image forces, one step of the dynamic equilibrium, and a remesh if due;
-    the largest node motion (px)."""
+def _time_step(body: _ElasticBody, field: ForceField, stiffness: float, bounds: np.ndarray, step: int) -> None:
+    """Image forces, one step of the dynamic equilibrium, and a remesh if due."""
     normals = outward_normals(body.nodes)
     forces = stiffness * field(body.nodes, normals)
     try:
@@ -786,7 +815,7 @@ def _time_step(body: _ElasticBody, field: ForceField, stiffness: float, bounds: 
             raise _divergence(step, stiffness, repaired=False) from None
         _remesh(body, body.nodes, bounds, step, stiffness)
         body._reset_caps()
-        return np.inf
+        return
     new_nodes = np.clip(body.nodes + move, -0.5, bounds)
     moved = float(np.abs(new_nodes - body.nodes).max())
     if not np.isfinite(moved) or moved > body.divergence_limit:
@@ -797,7 +826,6 @@ def _time_step(body: _ElasticBody, field: ForceField, stiffness: float, bounds: 
         body.nodes = new_nodes
         if body.reference == "incremental":
             body.rest = new_nodes
-    return moved
 
 
 def _remesh(body, nodes, bounds, step, stiffness) -> None:
@@ -894,8 +922,9 @@ def segment(
         No node moves more than this (px) in one step: forces on faster nodes
         are scaled down, so the contour cannot jump over a 1-px edge.
     tol, patience : float, int, optional
-        Converged when no node moves more than ``tol`` px per step for
-        ``patience`` consecutive steps.
+        At rest when no node strayed more than ``patience * tol`` px from
+        where it was over the last ``patience`` steps (less than ``tol`` px
+        per step on average; a node trembling in place does not count).
     max_line_length : float, optional
         Longest half-length of a normal line (px).
     isef_b : float, optional
