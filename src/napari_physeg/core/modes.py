@@ -41,6 +41,8 @@ Conventions (``docs/physics.md`` section 4):
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -324,12 +326,50 @@ def _modal_raw(nodes, *, n_compute: int = MAX_AUTO_MODES + 4, sigma: float | Non
     mat = get_material(material)
     centroid, axes, scale, anisotropy, skew = canonical_frame(nodes)
     canon = (nodes - centroid) @ axes.T / scale
+    if sigma is not None and not (np.isfinite(sigma) and sigma > 0):
+        raise ValueError(f"sigma must be a positive number, got {sigma!r}")
+    lam, modes, sigma = _canonical_modes(canon, n_compute, sigma, sigma_factor, mat, model_nodes)
+    return ModalBasis(
+        eigenvalues=lam,
+        shapes=modes,
+        nodes=canon,
+        centroid=centroid,
+        axes=axes,
+        scale=scale,
+        sigma=float(sigma),
+        anisotropy=anisotropy,
+        skewness=skew,
+        spectrum=lam,
+        material=mat.name,
+        model_nodes=None if model_nodes is None else int(model_nodes),
+    )
+
+
+#: The modes of the last few shapes (see _canonical_modes), most recent last.
+_MODES_CACHE: OrderedDict = OrderedDict()
+_MODES_CACHE_SIZE = 16
+_MODES_CACHE_LOCK = threading.Lock()
+
+
+def _canonical_modes(canon, n_compute, sigma, sigma_factor, mat, model_nodes):
+    """Eigenvalues, unit sign-fixed mode shapes at the nodes, and sigma, of
+    nodes in their canonical frame (read-only arrays).
+
+    The modes of a shape do not depend on where it lies or how it is turned,
+    and tracking matches every contour twice (with the frame before and the
+    frame after it), each time moved rigidly: the last few shapes' modes are
+    kept, keyed on their canonical nodes to nine decimals (the two copies
+    differ by rounding only).
+    """
+    key = (np.round(canon, 9).tobytes(), canon.shape, n_compute, sigma, sigma_factor, mat, model_nodes)
+    with _MODES_CACHE_LOCK:
+        if key in _MODES_CACHE:
+            _MODES_CACHE.move_to_end(key)
+            return _MODES_CACHE[key]
     model = canon if model_nodes is None else resample(canon, int(model_nodes))
     mm = len(model)
     if sigma is None:
         sigma = default_sigma(model, sigma_factor)
-    elif not (np.isfinite(sigma) and sigma > 0):
-        raise ValueError(f"sigma must be a positive number, got {sigma!r}")
     if mm > DENSE_LIMIT:
         lam, phi = _lowest_modes_sparse(model, sigma, mat, min(n_compute, 2 * mm - 1))
     else:
@@ -348,21 +388,14 @@ def _modal_raw(nodes, *, n_compute: int = MAX_AUTO_MODES + 4, sigma: float | Non
     modes = modes / np.maximum(norms, 1e-300)[None, :, None]
     w = _node_weights(canon)
     signs = np.array([_canonical_sign(modes[:, j], w) for j in range(n)])
-    modes = modes * signs[None, :, None]
-    return ModalBasis(
-        eigenvalues=np.ascontiguousarray(lam),
-        shapes=np.ascontiguousarray(modes),
-        nodes=canon,
-        centroid=centroid,
-        axes=axes,
-        scale=scale,
-        sigma=float(sigma),
-        anisotropy=anisotropy,
-        skewness=skew,
-        spectrum=np.ascontiguousarray(lam),
-        material=mat.name,
-        model_nodes=None if model_nodes is None else int(model_nodes),
-    )
+    lam, modes = np.ascontiguousarray(lam), np.ascontiguousarray(modes * signs[None, :, None])
+    lam.setflags(write=False)
+    modes.setflags(write=False)
+    with _MODES_CACHE_LOCK:
+        _MODES_CACHE[key] = lam, modes, sigma
+        while len(_MODES_CACHE) > _MODES_CACHE_SIZE:
+            _MODES_CACHE.popitem(last=False)
+    return lam, modes, sigma
 
 
 def truncate(basis: ModalBasis, n_modes: int) -> ModalBasis:

@@ -233,6 +233,10 @@ PLATEAU_MOTION = 0.1
 PLATEAU_JITTER = 0.5
 PLATEAU_STEPS = 15
 
+#: The evolution phase hands over to the refinement phase once at rest
+#: within this many times ``tol``.
+HANDOVER = 5.0
+
 #: At rest, the contour is on the object when at least this fraction of its
 #: nodes rest on a feature (an edge or an object/background switch).
 ON_BORDER_FRACTION = 0.7
@@ -747,7 +751,9 @@ def _evolve(
         reference=reference, max_step_length=max_step_length, tol=tol)
     body.cap_by_reach(features.fields[0])
     history = [body.nodes + features.origin]
-    rest = _RestDetector(tol, patience)
+    # The evolution need only bring the nodes within reach of the refinement
+    # (if any), which settles the last tenths of a pixel.
+    rest = _RestDetector(tol * (HANDOVER if len(features.fields) > 1 else 1.0), patience)
     stop_reason, steps = "max_steps", 0
     # The paper's loop: image forces along the normals, one step of the
     # dynamic equilibrium, remesh when the nodes crowd or thin out. Phase 0
@@ -774,7 +780,7 @@ def _evolve(
                 stop_reason = _rest_reason(features.fields[phase], body.nodes)
                 break
             phase += 1
-            rest.restart()
+            rest = _RestDetector(tol, patience)
             body.cap_by_reach(features.fields[phase])
     if stop_reason != "cancelled" and body.collapsed:
         # Nothing held it: the region force shrinks a contour drawn on a

