@@ -470,3 +470,27 @@ def test_iter_match_checks_its_options_at_the_call():
         iter_match(HAND, HAND, callback=print)
     with pytest.raises(TypeError, match="methd"):
         match(HAND, HAND, methd="order")
+
+
+def test_modes_of_a_moved_shape_are_remembered_and_right():
+    """Tracking matches each contour twice, rigidly moved: its modes are
+    computed once. The remembered modes are those a fresh computation gives,
+    read-only, and another shape gets its own."""
+    import napari_physeg.core.modes as modes_module
+
+    a, b, _ = data.hand_pair(67, 66)
+    angle = 0.7
+    turn = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    moved = a @ turn.T + [1e3, -250.0]
+    modes_module._MODES_CACHE.clear()
+    first = modal_basis(a, n_modes=8, model_nodes=32)
+    again = modal_basis(moved, n_modes=8, model_nodes=32)
+    assert again.shapes.base is first.shapes.base or np.shares_memory(again.shapes, first.shapes)
+    with pytest.raises(ValueError):
+        again.shapes[0, 0, 0] = 1.0  # shared: nobody may write into it
+    modes_module._MODES_CACHE.clear()
+    fresh = modal_basis(moved, n_modes=8, model_nodes=32)
+    assert np.allclose(fresh.shapes, again.shapes, atol=1e-7)
+    assert np.allclose(fresh.eigenvalues, again.eigenvalues, rtol=1e-9)
+    other = modal_basis(b, n_modes=8, model_nodes=32)
+    assert not np.shares_memory(other.shapes, first.shapes)
