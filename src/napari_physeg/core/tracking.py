@@ -425,26 +425,45 @@ def _closest_on_segments(points, a, b):
     return a + u[:, None] * d
 
 
-def _rigid_motion(source: np.ndarray, target: np.ndarray, iterations: int = 20):
+def _rigid_motion(source: np.ndarray, target: np.ndarray, iterations: int = 30):
     """Rotation ``R`` and shift ``T`` with ``source @ R.T + T`` closest to the
-    curve ``target`` (iterative closest points, Kabsch's rotation)."""
+    curve ``target``: iterative closest points, point to line.
+
+    Each node is drawn to the tangent line at its closest point of the target
+    (Chen & Medioni's point-to-plane ICP), not to that point: a node may slide
+    along the curve at no cost, so a turning outline's rotation is found in
+    full (point to point, the closest points of a sampled curve hold the nodes
+    back: it found 0.26 of the deforming cell's 0.40 degrees per frame).
+    """
     dense = resample(target, spacing=0.5)
+    tangent = np.roll(dense, -1, axis=0) - np.roll(dense, 1, axis=0)
+    normals = np.column_stack([tangent[:, 1], -tangent[:, 0]])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
     tree = cKDTree(dense)
-    rotation, shift = np.eye(2), dense.mean(0) - source.mean(0)
-    centred = source - source.mean(0)
-    extent = float(np.abs(centred).max())
+    centre = source.mean(0)
+    angle, shift = 0.0, dense.mean(0) - centre
+    extent = float(np.abs(source - centre).max())
     for _ in range(iterations):
-        matched = dense[tree.query(source @ rotation.T + shift)[1]]
-        u, _, vt = np.linalg.svd(centred.T @ (matched - matched.mean(0)))
-        flip = np.diag([1.0, np.sign(np.linalg.det(vt.T @ u.T))])
-        new_rotation = vt.T @ flip @ u.T
-        new_shift = matched.mean(0) - source.mean(0) @ new_rotation.T
+        rotation = _rotation(angle)
+        moved = (source - centre) @ rotation.T + centre + shift
+        nearest = tree.query(moved)[1]
+        n = normals[nearest]
+        arm = moved - centre - shift
+        # Linearised in the angle: a node moves by angle * (-arm_y, arm_x).
+        jacobian = np.column_stack([arm[:, 0] * n[:, 1] - arm[:, 1] * n[:, 0], n])
+        residual = ((dense[nearest] - moved) * n).sum(1)
+        update = np.linalg.lstsq(jacobian, residual, rcond=None)[0]
+        angle, shift = angle + update[0], shift + update[1:]
         # A thousandth of a pixel over the contour's extent: far below its node spacing.
-        done = np.abs(new_rotation - rotation).max() * extent < 1e-3 and np.abs(new_shift - shift).max() < 1e-3
-        rotation, shift = new_rotation, new_shift
-        if done:
+        if abs(update[0]) * extent < 1e-3 and np.abs(update[1:]).max() < 1e-3:
             break
-    return rotation, shift
+    rotation = _rotation(angle)
+    return rotation, centre + shift - centre @ rotation.T
+
+
+def _rotation(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s], [s, c]])
 
 
 def curvature(contour: np.ndarray) -> np.ndarray:
