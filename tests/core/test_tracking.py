@@ -222,3 +222,28 @@ def test_polarity_can_be_given_for_all_objects():
     frames = _disk_movie([[(48, 48)]] * 3)
     tr = track(frames, _circle((48, 48), 16), segment_options={"polarity": "bright"})
     assert tr.status[0] == [TRACKED] * 3
+
+
+@pytest.mark.parametrize("degrees", [0.4, -3.0, 10.0])
+def test_rigid_motion_between_frames_is_found_in_full(degrees):
+    """A bumpy elongated outline turned and shifted, its nodes placed anew
+    along it (as a new frame's segmentation places them): the rotation is
+    found to a hundredth of a degree. Closest points of the sampled curve
+    would hold the nodes back (a third of a small turn was lost)."""
+    from napari_physeg.core.contour import resample
+    from napari_physeg.core.tracking import _rigid_motion
+
+    t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+    radius = 30 + 4 * np.cos(3 * t) + 2 * np.sin(5 * t)
+    outline = np.column_stack([80 + 1.4 * radius * np.sin(t), 90 + radius * np.cos(t)])
+    angle = np.deg2rad(degrees)
+    turn = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    turned = (outline - outline.mean(0)) @ turn.T + outline.mean(0) + [1.5, -0.8]
+    source = resample(np.roll(turned, 7, axis=0), spacing=2.7)
+    target = resample(outline, spacing=2.7)
+    rotation, shift = _rigid_motion(source, target)
+    found = np.degrees(np.arctan2(rotation[1, 0], rotation[0, 0]))
+    assert found == pytest.approx(-degrees, abs=0.01)
+    back = source @ rotation.T + shift  # on the untouched outline again
+    dense = resample(outline, spacing=0.05)
+    assert np.sqrt(((back[:, None] - dense[None]) ** 2).sum(-1)).min(1).max() < 0.05
