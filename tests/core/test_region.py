@@ -120,3 +120,19 @@ def test_dark_spot_open_to_the_image_side_is_part_of_the_object(drawn):
     assert overlap(region, spot) > 0.95
     assert overlap(region, nucleus) > 0.95
     assert (region & ~nucleus).sum() < 0.05 * nucleus.sum()
+
+
+def test_drawn_inside_a_nucleus_with_a_dim_textured_centre():
+    """A bright nucleus whose middle is dimmer (nucleoplasm between bright
+    chromatin) on a dark background, drawn inside: the line, brighter than
+    the centre, lies on the object, not halfway to its dark outside. The
+    polarity stays bright and the region is the whole nucleus."""
+    shape = (120, 120)
+    nucleus = disk(shape, (60, 60), 30)
+    image = np.where(nucleus, 0.75, 0.08)
+    image[disk(shape, (60, 60), 10)] = 0.45
+    image += 0.02 * np.random.default_rng(1).standard_normal(shape)
+    model, region = region_for(image, circle((60, 60), 14))
+    assert model.polarity == 1 and not model.drawn_around
+    assert overlap(region, nucleus) > 0.95
+    assert (region & ~nucleus).sum() < 0.05 * nucleus.sum()

@@ -134,9 +134,11 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         if not np.isnan(level) and abs(level - centre) > best:
             outside, best = level, abs(level - centre)
     # Around the object, the line lies on the background: at least halfway
-    # from the centre's level to the outside's. (Comparing the line with the
-    # outside instead fails when the rings hold look-alike neighbours.)
-    around = np.isnan(outside) or abs(centre - on_line) >= 0.5 * abs(centre - outside)
+    # from the centre's level toward the outside's. (Comparing the line with
+    # the outside instead fails when the rings hold look-alike neighbours.)
+    # Signed: a line brighter than a dim, textured centre of a bright object
+    # lies on the object, not halfway to its dark outside.
+    around = np.isnan(outside) or (on_line - centre) * np.sign(outside - centre) >= 0.5 * abs(centre - outside)
     obj, background = (centre, on_line) if around else (on_line, outside)
     if polarity is None:
         polarity = 1 if obj >= background else -1
