@@ -61,6 +61,7 @@ OUT = ROOT / "benchmark_output"
 PAD = 16  # px around the init and the truth for the anchors' crop
 METHODS = ("ours", "snake", "MGAC", "MCV")
 LOW = 0.85  # the "fraction below" threshold of the tables
+NUCLEI_GROUPS = ("nuclei", "heldout")  # slices of the confocal stack
 
 
 def crop_box(obj, init):
@@ -216,7 +217,7 @@ def timelapse_ambiguity(rows, path):
 def nuclei_ambiguity(rows, path):
     """Lines and a figure: the nucleus truths listed in ``real_data.AMBIGUOUS_NUCLEI``, each with
     the mean intensity of what the label leaves in or out against the nucleus and its background."""
-    sel = [r for r in rows if r["group"] == "nuclei" and r["obj"].name in real_data.AMBIGUOUS_NUCLEI]
+    sel = [r for r in rows if r["group"] in NUCLEI_GROUPS and r["obj"].name in real_data.AMBIGUOUS_NUCLEI]
     if not sel:
         return []
     import matplotlib
@@ -228,8 +229,12 @@ def nuclei_ambiguity(rows, path):
     shown = list({r["obj"].name: r for r in sel}.values())
     lines = ["Nucleus truths that can be read two ways (the figure shows each with ours and MCV; intensities "
              "are medians of the normalised image):", ""]
-    fig, axes = plt.subplots(1, len(shown), figsize=(4 * len(shown), 4.6), squeeze=False)
-    for ax, r in zip(axes[0], shown):
+    cols = min(len(shown), 4)
+    rows_ = -(-len(shown) // cols)
+    fig, axes = plt.subplots(rows_, cols, figsize=(4 * cols, 4.6 * rows_), squeeze=False)
+    for ax in axes.flat:
+        ax.axis("off")
+    for ax, r in zip(axes.flat, shown):
         obj = r["obj"]
         # Two readings of a label: what it holds that looks like background (the gap between two
         # masses), and what a convex outline would add to it (a part of the nucleus left out).
@@ -273,7 +278,7 @@ def low_share(rows, timelapse_alt):
     """The share of ours' cases below ``LOW``: all of them, and with the ambiguous truths set apart
     (the nuclei of ``AMBIGUOUS_NUCLEI`` left out, the time-lapse scored against its mid-ramp truth)."""
     all_low = sum(r["ours"]["iou"] < LOW for r in rows)
-    kept = [r for r in rows if not (r["group"] == "nuclei" and r["obj"].name in real_data.AMBIGUOUS_NUCLEI)]
+    kept = [r for r in rows if not (r["group"] in NUCLEI_GROUPS and r["obj"].name in real_data.AMBIGUOUS_NUCLEI)]
     score = [timelapse_alt.get(r["case"], r["ours"]["iou"]) for r in kept]
     low = [r["case"] for r, s in zip(kept, score) if s < LOW]
     return [f"- ours below {LOW}: {all_low} of {len(rows)} cases ({all_low / max(len(rows), 1):.1%}); with the "

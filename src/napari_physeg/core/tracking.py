@@ -382,13 +382,14 @@ def node_origins(contour: np.ndarray, previous: np.ndarray, **match_options) -> 
     """Where each node of ``contour`` came from on ``previous``.
 
     The rigid part of the motion (rotation and translation, by iterative
-    closest points) is found first and undone; then the nodes are matched by
-    the order-preserving modal matching (every node of ``contour`` gets a
-    partner), with a cost on their remaining displacement, as the two
-    contours share a frame of reference. Each origin is the point of
-    ``previous``, next to the partner, closest to where the rigid motion puts
-    the node back: so a turning cell's nodes keep their place along its
-    membrane, and the normal displacement is not rounded to the node spacing.
+    closest points, point to line) is found first and undone; then the
+    nodes are matched by the order-preserving modal matching (every node of
+    ``contour`` gets a partner), with a cost on their remaining
+    displacement, as the two contours share a frame of reference. Each
+    origin is the point of ``previous``, next to the partner, closest to
+    where the rigid motion puts the node back: so a turning cell's nodes
+    keep their place along its membrane, and the normal displacement is not
+    rounded to the node spacing.
     """
     rotation, shift = _rigid_motion(contour, previous)
     back = contour @ rotation.T + shift
