@@ -28,6 +28,7 @@ import argparse
 import statistics
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 from skimage.draw import polygon2mask
@@ -110,6 +111,18 @@ def cases(quick: bool):
 
 
 
+def horse_case():
+    """The silhouette of ``skimage.data.horse()`` (legs, ears, tail) on a noisy background, and
+    its outline 4 px outside, every second vertex: issue 9's long contour (~650 nodes)."""
+    from scipy import ndimage as ndi
+    from skimage import data as skdata, measure
+
+    mask = ~skdata.horse()
+    image = np.where(mask, 0.8, 0.2) + 0.05 * np.random.default_rng(0).standard_normal(mask.shape)
+    outline = max(measure.find_contours(ndi.distance_transform_edt(~mask), 4.0), key=len)[:-1][::2]
+    return SimpleNamespace(image=image, mask=mask), outline
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="256x256 cases only")
@@ -123,7 +136,7 @@ def main(argv=None):
     # model: measured first, before the anchors have churned the process's memory.
     obj = data.ellipse((512, 512))
     run_physeg(obj, obj.init_near, 2, n_nodes=122)  # warm-up (imports, caches)
-    _, t122, res122 = run_physeg(obj, obj.init_near, max(args.repeat, 7), n_nodes=122)
+    _, t122, res122 = run_physeg(obj, obj.init_near, max(args.repeat, 15), n_nodes=122)
     big = data.blob((512, 512))
     i2k, t2k, res2k = run_physeg(big, big.init_near, 3, n_nodes=2000)
     # A small object in a large image: the features are computed on a window
@@ -142,6 +155,9 @@ def main(argv=None):
         seg_module.WINDOW_MAX_FRACTION = saved
     win_shift = float(np.abs(res_win.contour - res_full.contour).max()) if (
         len(res_win.contour) == len(res_full.contour)) else float("nan")
+    horse, horse_init = horse_case()
+    res_horse, t_horse = timed(lambda: segment(horse.image, horse_init), 3)
+    horse_iou = iou(polygon2mask(horse.image.shape, res_horse.contour), horse.mask)
 
     def out(s=""):
         print(s, flush=True)
@@ -182,12 +198,16 @@ def main(argv=None):
         f"max {max(copper_ratio):.2f}")
 
     out(f"- 122-node segmentation on 512x512 (ellipse, near init, features included, measured first in a "
-        f"fresh process): median {t122 * 1e3:.0f} ms ({res122.steps} steps)")
+        f"fresh process): median of 15 runs {t122 * 1e3:.0f} ms ({res122.steps} steps)")
     out(f"- 2000-node segmentation on 512x512 (blob, near init): median {t2k * 1e3:.0f} ms "
         f"({res2k.steps} steps, IoU {i2k:.3f})")
     out(f"- a 256x256 blob in a 2048x2048 image: median {t_win * 1e3:.0f} ms with the features on a window "
         f"around the contour, {t_full * 1e3:.0f} ms on the whole image ({t_full / t_win:.0f}x); "
         f"largest node difference {win_shift:.4f} px")
+    out(f"- issue 9's long contour, `skimage.data.horse()` (noise 0.05) from its outline 4 px outside "
+        f"({len(horse_init)} vertices): median {t_horse * 1e3:.0f} ms, {res_horse.n_nodes} nodes, "
+        f"{res_horse.steps} steps, of which {res_horse.timings['model'] * 1e3:.0f} ms building the element "
+        f"(at the start and at every remesh), IoU {horse_iou:.3f}")
 
     if args.write:
         doc = ROOT / "docs" / "benchmarks.md"
