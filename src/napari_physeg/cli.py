@@ -123,8 +123,8 @@ def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> 
                    + " (the default): edges (Shen-Castan edges pull nodes onto the border), intensity (region: "
                    "pushes nodes out of the object's intensity), distance (pulls toward the nearest edge from "
                    "afar); a force left out or weighted 0 is off")
-    g.add_argument("--polarity", help=f"the object is 'bright' or 'dark' on its background, or 'auto' (compares "
-                   f"the inside of the initial contour with a band around it); default {d['polarity']}")
+    g.add_argument("--polarity", help=f"the object is 'bright' or 'dark' on its background, or 'auto' (read from "
+                   f"the initial contour: its middle, its line and rings outside it); default {d['polarity']}")
     if max_steps:
         g.add_argument("--max-steps", type=_number(int, 1), metavar="N",
                        help=f"upper bound on time steps per contour; default {d['max_steps']}")

@@ -908,7 +908,8 @@ def segment(
         Weight of each force (defaults 0.4, 0.3, 0.3).
     polarity : {"auto", "bright", "dark"}, optional
         Whether the object is brighter or darker than its background; "auto"
-        compares the inside of ``init`` with a band around it.
+        reads it from ``init`` (its middle, its line and rings outside it),
+        drawn around or inside the object (see :mod:`.region`).
     damping_ratio : float, optional
         Rayleigh damping ratio at the lowest and highest natural frequencies.
     dt : float, optional
