@@ -678,7 +678,7 @@ def test_a_points_layer_with_too_few_points_says_so(viewer_widget, errors, hand)
 
 def test_a_long_run_keeps_the_gui_live_and_keeps_the_good_shapes(viewer_widget, wait_done, errors, caplog,
                                                                   monkeypatch):
-    """A multi-second segmentation (a ~600-node contour around the cameraman)
+    """A multi-second segmentation (a ~840-node contour around the cameraman)
     with napari's activity dock open: no RecursionError raised or logged, a
     10 ms GUI timer is never held up for more than 200 ms, and the good shape
     comes back although another shape of the layer fails."""
@@ -696,7 +696,7 @@ def test_a_long_run_keeps_the_gui_live_and_keeps_the_good_shapes(viewer_widget, 
     viewer.add_shapes([around_the_man, small], shape_type="polygon", name="drawn")
     widget.reset_choices()
     widget._image.value, widget._shapes.value = viewer.layers["camera"], viewer.layers["drawn"]
-    widget.physics._spacing.value = 1.75  # ~600 nodes
+    widget.physics._spacing.value = 1.25  # ~840 nodes
     fail_on_small_shapes(monkeypatch)
     gaps, last = [], [time.perf_counter()]
 
