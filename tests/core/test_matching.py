@@ -14,6 +14,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from napari_physeg import data
 from napari_physeg.core import Matching, match
+from napari_physeg.core._drain import drain
 from napari_physeg.core.contour import resample
 from napari_physeg.core.matching import curvature_signature, modal_affinity
 from napari_physeg.core.modes import modal_basis, select_modes
@@ -428,10 +429,7 @@ def test_iter_match_yields_progress_and_returns_what_match_returns():
     a, b, _ = data.hand_pair(120, 110, pose_a="open", pose_b="closed")
     run = iter_match(a, b, method="order", n_starts=3)
     states = []
-    with pytest.raises(StopIteration) as done:
-        while True:
-            states.append(next(run))
-    result = done.value.value
+    result = drain(run, states.append)
     assert all(isinstance(s, MatchingProgress) for s in states)
     phases = [s.phase for s in states]
     # features; the search around every start (one state per window of starts), then

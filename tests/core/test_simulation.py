@@ -7,6 +7,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from napari_physeg import data
+from napari_physeg.core._drain import drain
 from napari_physeg.core.contour import resample
 from napari_physeg.core.simulation import node_targets, simulate
 
@@ -163,10 +164,7 @@ def test_iter_simulate_yields_every_step_and_returns_the_result():
     m = _truth_matching(a, b, truth)
     run = iter_simulate(a, b, m, n_frames=4)
     states = []
-    with pytest.raises(StopIteration) as done:
-        while True:
-            states.append(next(run))
-    sim = done.value.value
+    sim = drain(run, states.append)
     assert all(isinstance(s, SimulationProgress) for s in states)
     assert [s.step for s in states] == list(range(1, sim.steps + 1))
     assert sim.stop_reason == "converged" and sim.converged
