@@ -593,9 +593,6 @@ class _RestDetector:
 
     def __init__(self, tol, patience):
         self.tol, self.patience = tol, int(patience)
-        self.restart()
-
-    def restart(self) -> None:
         self.track, self.plateau = deque(maxlen=self.patience + 1), _Plateau()
         self.generation = None
 
