@@ -360,6 +360,16 @@ def inside(poly: np.ndarray, mask: np.ndarray) -> bool:
     return bool(mask[polygon2mask(mask.shape, poly)].all())
 
 
+def traced_outline(obj: Obj, offset: float) -> np.ndarray | None:
+    """The truth's outline traced ``offset`` px outside it (as a label's outline or an earlier
+    result is), each node once; None when the outline touches itself (a node it passes twice,
+    which ``segment`` refuses)."""
+    from napari_physeg.core.contour import as_contour
+
+    nodes = as_contour(np.clip(boundary(obj.mask, offset), 0, np.array(obj.mask.shape) - 1))
+    return nodes if len(np.unique(nodes, axis=0)) == len(nodes) else None
+
+
 INITS = {"circle": init_circle, "freehand": init_freehand, "inside": init_inside}
 
 

@@ -8,6 +8,7 @@ neighbour, DivergenceError). The full set is ``benchmarks/real.py``.
 """
 
 import importlib.util
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -61,6 +62,32 @@ def test_nucleus(stack, z, label, factor):
     found = polygon2mask(truth.shape, res.contour)
     iou = (found & truth).sum() / (found | truth).sum()
     assert res.converged and res.polarity == 1
+    assert iou > 0.85, iou
+
+
+@pytest.mark.parametrize("z, label, offset", [(38, 19, 0.0), (38, 19, 1.0), (35, 19, 1.0)],
+                         ids=["z38-n19-on", "z38-n19-1px-out", "z35-n19-1px-out"])
+def test_outline_traced_on_the_label(stack, z, label, offset):
+    """A contour traced on the nucleus' border (its label's outline, or 1 px
+    beyond) lies on the edge's ramp, at neither the nucleus' level nor the
+    background's: it is read as drawn around the nucleus, with the background
+    beyond the line. Read as drawn inside it, z38/n19 took in the neighbour
+    cut by the same image side (IoU 0.31); read as around with the line's
+    level for the background, z38/n10 shrank to its bright core (0.49)."""
+    from skimage import measure
+
+    image, labels = stack[0][z], stack[1][z]
+    truth = ndi.binary_fill_holes(labels == label)
+    level = ndi.distance_transform_edt(~np.pad(truth, 3)) - ndi.distance_transform_edt(np.pad(truth, 3))
+    init = max(measure.find_contours(level, offset), key=len)[:-1] - 3
+    init = np.clip(init, 0, np.array(truth.shape) - 1)
+    init = init[np.any(np.diff(init, axis=0, append=init[:1]) != 0, axis=1)]  # a node once
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # nodes on the image's side
+        res = segment(image, init)
+    found = polygon2mask(truth.shape, res.contour)
+    iou = (found & truth).sum() / (found | truth).sum()
+    assert res.converged
     assert iou > 0.85, iou
 
 
