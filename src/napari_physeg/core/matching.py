@@ -481,25 +481,30 @@ def _order_dp(C: np.ndarray, nb: int, window: int, repeat: float, skip: float, g
     F = np.full(width, inf)
     F[: 2 * window + 1] = C[0, : 2 * window + 1]
     start = ks.copy()
-    adv = np.empty(width)
+    adv = np.full(width, inf)
+    adv_start = np.empty(width, dtype=start.dtype)
+    may_gap = np.isfinite(gap)  # the default never leaves a node unmatched: three operations fewer a row
     for i in range(1, na):
         vals = F - ramp
         pm = np.minimum.accumulate(vals)
         arg = np.maximum.accumulate(np.where(vals <= pm, ks, 0))
-        adv[0] = inf
-        adv[1:] = pm[:-1] + ramp[1:] - skip
+        np.add(pm[:-1], ramp[1:], out=adv[1:])
+        adv[1:] -= skip
         rep = F + repeat
         use_rep = rep < adv
-        D = np.where(use_rep, rep, adv) + C[i]
-        G = F + gap
-        use_gap = G < D
-        F = np.where(use_gap, G, D)
+        D = np.where(use_rep, rep, adv)
+        D += C[i]
         from_adv[i, 1:] = arg[:-1]
-        ch = np.where(use_gap, 2, np.where(use_rep, 1, 0)).astype(np.int8)
-        choice[i] = ch
-        adv_start = np.empty(width, dtype=start.dtype)
+        ch = choice[i]
+        ch[use_rep] = 1
+        if may_gap:
+            G = F + gap
+            use_gap = G < D
+            D[use_gap] = G[use_gap]
+            ch[use_gap] = 2
+        F = D
         adv_start[0] = start[0]
-        adv_start[1:] = start[arg[:-1]]
+        np.take(start, arg[:-1], out=adv_start[1:])
         start = np.where(ch == 0, adv_start, start)
     span = ks - start
     end = np.where(span <= nb - 1, F + skip * (nb - 1 - span), inf)
