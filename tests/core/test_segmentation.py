@@ -182,6 +182,40 @@ def test_contour_partly_outside_is_clipped_with_a_warning():
     assert iou(res.contour, obj.mask) >= 0.9
 
 
+@pytest.mark.parametrize("n_vertices, centre_row, radius", [(9, -30, 40), (13, -30, 60), (13, -20, 40)])
+def test_drawing_mostly_beyond_the_image_side_is_repaired(n_vertices, centre_row, radius):
+    """A coarse polygon mostly beyond the top side, clipped to the image, runs
+    out along the side and back over itself: its resampled nodes lie on top of
+    each other and the element was singular (scipy's LinAlgError escaped). It
+    is repaired as at a remesh: segmented, or refused for what it is (no
+    object within reach of the sliver left in the image)."""
+    obj = data.ellipse((128, 128))
+    t = np.linspace(0, 2 * np.pi, n_vertices, endpoint=False)
+    init = np.column_stack([centre_row + radius * np.sin(t), 64 + 0.8 * radius * np.cos(t)])
+    with pytest.warns(UserWarning, match="clipped"):
+        try:
+            res = segment(obj.image, init, max_steps=50)
+        except ValueError as err:
+            assert "collapsed to a point" in str(err)
+        else:
+            assert np.isfinite(res.contour).all() and res.contour.min() >= -0.5
+
+
+def test_rest_is_seen_across_remeshes():
+    """Across a remesh the nodes are new: the contours of the window are then
+    compared as curves. The same curve with its nodes redistributed is at
+    rest; one moved by more than the allowed stray is not."""
+    from napari_physeg.core.contour import resample
+    from napari_physeg.core.segmentation import _RestDetector
+
+    curve = resample(data.ellipse((128, 128)).init_far, spacing=0.1)
+    rest = _RestDetector(tol=0.02, patience=5)
+    states = [resample(curve, 300 + k) for k in range(6)]  # a remesh at every step
+    assert [rest.at_rest(nodes, 0, k) for k, nodes in enumerate(states)] == [False] * 5 + [True]
+    moving = _RestDetector(tol=0.02, patience=5)
+    assert not any(moving.at_rest(nodes + [0.03 * k, 0.0], 0, k) for k, nodes in enumerate(states))
+
+
 def test_absurd_stiffness_reports_divergence_instead_of_nan():
     obj = data.ellipse((64, 64))
     try:

@@ -8,6 +8,7 @@ first, which is not repeated.
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ._validation import node_array
 
@@ -20,6 +21,8 @@ __all__ = [
     "nodes_for_spacing",
     "crosses_itself",
     "area_centroid",
+    "closest_on_segments",
+    "contour_gap",
     "outward_normals",
     "mean_nearest_neighbour_distance",
     "polygon_mask",
@@ -260,6 +263,33 @@ def cut_pinches(contour: np.ndarray, gap: float, max_cuts: int = 100) -> np.ndar
 def crosses_itself(contour) -> bool:
     """Whether two non-adjacent edges of the closed ``contour`` cross (it is not a simple polygon)."""
     return len(_crossing_pairs(np.asarray(contour, dtype=np.float64))) > 0
+
+
+def closest_on_segments(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The point of each segment ``a[i] b[i]`` closest to ``points[i]``."""
+    d = b - a
+    u = np.clip(((points - a) * d).sum(1) / np.maximum((d * d).sum(1), 1e-12), 0.0, 1.0)
+    return a + u[:, None] * d
+
+
+def contour_gap(a: np.ndarray, b: np.ndarray) -> float:
+    """How far apart two closed contours are as curves, whatever their nodes:
+    the largest distance from a node of either to the other's polyline.
+
+    Each node is measured to the two segments about its nearest node of the
+    other contour: exact for contours that lie within about a node spacing of
+    each other (the use: a contour and itself a few steps later).
+    """
+    def one_way(points, curve):
+        nearest = cKDTree(curve).query(points)[1]
+        m = len(curve)
+        gap = np.full(len(points), np.inf)
+        for step in (-1, 0):
+            start, end = curve[(nearest + step) % m], curve[(nearest + step + 1) % m]
+            gap = np.minimum(gap, np.hypot(*(closest_on_segments(points, start, end) - points).T))
+        return float(gap.max())
+
+    return max(one_way(a, b), one_way(b, a))
 
 
 def area_centroid(contour) -> np.ndarray:

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .contour import (as_contour, cut_pinches, nodes_for_spacing, outward_normals, perimeter, remove_loops, resample,
+from .contour import (as_contour, contour_gap, cut_pinches, nodes_for_spacing, outward_normals, perimeter, remove_loops, resample,
                       segment_lengths, signed_area)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
@@ -463,8 +463,8 @@ class _ElasticBody:
         self.model_time = 0.0
         self.nodes = nodes
         self.rest = nodes.copy()
-        # Counts the times the nodes were replaced (remesh) or their frame shifted.
-        self.generation = 0
+        # Counts the times the nodes were replaced (a remesh) and their frame shifted.
+        self.remeshes, self.shifts = 0, 0
         self.remesh_watch = _RemeshWatch(spacing)
         self._build()
         self._reset_caps()
@@ -546,28 +546,15 @@ class _ElasticBody:
 
         Each new node inherits the trust cap of the old node nearest to it.
         """
-        old, nodes = nodes, self._repaired(nodes, bounds)
+        old, nodes = nodes, _repaired(nodes, bounds, self.spacing)
         nearest = cKDTree(old).query(nodes)[1]
         cap, last_sign = self.cap[nearest], self.last_sign[nearest]
         self.nodes = self.rest = nodes
-        self.generation += 1
+        self.remeshes += 1
         self.remesh_watch.forget()
         if not self.collapsed:
             self._build()
         self.cap, self.last_sign = cap, last_sign
-
-    def _repaired(self, nodes: np.ndarray, bounds: np.ndarray) -> np.ndarray:
-        # Clipped first: nodes pushed past a corner of the image meet there.
-        fixed = np.clip(nodes, -0.5, bounds)
-        gap = PINCH_GAP * self.spacing
-        # Resampling a contour that runs out along the image's side and back
-        # puts new nodes on top of each other: cut again until none pinch.
-        for _ in range(3):
-            fixed = resample(remove_loops(cut_pinches(fixed, gap)), spacing=self.spacing)
-            if len(fixed) < 4 or not cKDTree(fixed).query_pairs(gap):
-                break
-        keep = np.linalg.norm(fixed - np.roll(fixed, 1, axis=0), axis=1) > 1e-3 * self.spacing
-        return fixed[keep] if keep.sum() >= 3 else fixed
 
     @property
     def collapsed(self) -> bool:
@@ -576,9 +563,41 @@ class _ElasticBody:
     def shift(self, offset: np.ndarray) -> None:
         if not offset.any():
             return
-        self.generation += 1
+        self.shifts += 1
         self.nodes, self.rest = self.nodes + offset, self.rest + offset
         self.remesh_watch.shift(offset)
+
+
+def _repaired(nodes: np.ndarray, bounds: np.ndarray, spacing: float) -> np.ndarray:
+    """``nodes`` without pinches, loops or crowded nodes, evenly spaced ``spacing`` apart."""
+    # Clipped first: nodes pushed past a corner of the image meet there.
+    fixed = np.clip(nodes, -0.5, bounds)
+    gap = PINCH_GAP * spacing
+    # Resampling a contour that runs out along the image's side and back
+    # puts new nodes on top of each other: cut again until none pinch.
+    for _ in range(3):
+        fixed = resample(remove_loops(cut_pinches(fixed, gap)), spacing=spacing)
+        if len(fixed) < 4 or not cKDTree(fixed).query_pairs(gap):
+            break
+    keep = np.linalg.norm(fixed - np.roll(fixed, 1, axis=0), axis=1) > 1e-3 * spacing
+    return fixed[keep] if keep.sum() >= 3 else fixed
+
+
+def _new_body(nodes: np.ndarray, bounds: np.ndarray, **options) -> _ElasticBody:
+    """The elastic body on ``nodes``, repaired as at a remesh if they make its element singular.
+
+    A drawing partly beyond the image, clipped to it, can run out along the
+    image's side and back: nodes on top of each other.
+    """
+    try:
+        return _ElasticBody(nodes, **options)
+    except (np.linalg.LinAlgError, RuntimeError, ValueError):
+        repaired = _repaired(nodes, bounds, options["spacing"])
+    try:
+        return _ElasticBody(repaired, **options)
+    except (np.linalg.LinAlgError, RuntimeError, ValueError) as err:
+        raise ValueError("init gives a singular element even once its overlapping nodes are repaired; draw a "
+                         "simple contour that encloses an area of the image") from err
 
 
 class _RestDetector:
@@ -587,25 +606,34 @@ class _RestDetector:
     step on average, and a node that trembles about its place does not count
     as moving), or the shape reached a plateau (see :class:`_Plateau`).
 
-    The nodes' track restarts whenever they are replaced (a remesh) or the
-    frame they are measured in shifts.
+    Across a remesh, which puts new nodes on about the same curve, the nodes
+    cannot be followed one by one: the contours of the window are compared
+    as curves instead, each within half that distance of the newest (so
+    within it of each other). A contour whose nodes keep being remeshed
+    where it runs along the image's side thus still comes to rest. The track
+    restarts when the frame the nodes are measured in shifts.
     """
 
     def __init__(self, tol, patience):
         self.tol, self.patience = tol, int(patience)
         self.track, self.plateau = deque(maxlen=self.patience + 1), _Plateau()
-        self.generation = None
+        self.shifts = None
 
-    def at_rest(self, nodes: np.ndarray, generation: int) -> bool:
-        if generation != self.generation:
+    def at_rest(self, nodes: np.ndarray, shifts: int, remeshes: int) -> bool:
+        if shifts != self.shifts:
             self.track.clear()
-            self.generation = generation
-        self.track.append(nodes.copy())
-        if len(self.track) > self.patience:
-            window = np.stack(self.track)
-            if np.ptp(window, axis=0).max() <= self.patience * self.tol:
-                return True
+            self.shifts = shifts
+        self.track.append((remeshes, nodes.copy()))
+        if len(self.track) > self.patience and self._still():
+            return True
         return self.plateau.reached(nodes)
+
+    def _still(self) -> bool:
+        reach = self.patience * self.tol
+        if all(remeshes == self.track[0][0] for remeshes, _ in self.track):
+            return np.ptp(np.stack([nodes for _, nodes in self.track]), axis=0).max() <= reach
+        newest = self.track[-1][1]
+        return all(contour_gap(nodes, newest) <= 0.5 * reach for _, nodes in list(self.track)[:-1])
 
 
 def _checked_options(material, forces, weights, stiffness, reference, integrator, polarity, max_step_length, tol,
@@ -741,8 +769,8 @@ def _evolve(
                               avoid=None if avoid is None else np.asarray(avoid, dtype=bool))
     t_features = time.perf_counter()
 
-    body = _ElasticBody(
-        nodes - features.origin, spacing=spacing, sigma=sigma_used, material=material,
+    body = _new_body(
+        nodes - features.origin, features.bounds, spacing=spacing, sigma=sigma_used, material=material,
         rayleigh=rayleigh_coefficients(damping_ratio, *reference_frequency_range(spacing, sigma_used, material)),
         integrator=integrator, dt=dt, divergence_limit=10.0 * float(np.hypot(*image.shape)),
         reference=reference, max_step_length=max_step_length, tol=tol)
@@ -772,7 +800,7 @@ def _evolve(
         if stop:
             stop_reason = "cancelled"
             break
-        if rest.at_rest(body.nodes, body.generation):
+        if rest.at_rest(body.nodes, body.shifts, body.remeshes):
             if phase == len(features.fields) - 1:
                 stop_reason = _rest_reason(features.fields[phase], body.nodes)
                 break

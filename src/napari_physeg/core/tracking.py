@@ -27,7 +27,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._drain import drain
-from .contour import (area_centroid, as_contour, outward_normals, perimeter, polygon_mask, positively_oriented, remove_loops,
+from .contour import (area_centroid, as_contour, closest_on_segments, outward_normals, perimeter, polygon_mask, positively_oriented, remove_loops,
                       resample, signed_area)
 from .dynamics import DivergenceError
 from .matching import match
@@ -417,17 +417,11 @@ def node_origins(contour: np.ndarray, previous: np.ndarray, **match_options) -> 
     origin, best = previous[partner].copy(), np.full(len(contour), np.inf)
     for step in (-2, -1, 0, 1):
         a, b = previous[(partner + step) % m], previous[(partner + step + 1) % m]
-        point = _closest_on_segments(back, a, b)
+        point = closest_on_segments(back, a, b)
         dist = np.hypot(*(point - back).T)
         closer = dist < best
         origin[closer], best[closer] = point[closer], dist[closer]
     return origin
-
-
-def _closest_on_segments(points, a, b):
-    d = b - a
-    u = np.clip(((points - a) * d).sum(1) / np.maximum((d * d).sum(1), 1e-12), 0.0, 1.0)
-    return a + u[:, None] * d
 
 
 def _rigid_motion(source: np.ndarray, target: np.ndarray, iterations: int = 30):
