@@ -311,14 +311,16 @@ def traced_outlines(rows, groups):
             results.setdefault((obj.group, offset), []).append((ours["iou"], mcv))
     lines = [f"From the truth's own outline, traced on it and 1 px outside it ({skipped} outlines that touch "
              "themselves left out: `segment` refuses a repeated node):", "",
-             "| group | outline | n | ours mean IoU | ours < 0.85 | MCV mean IoU | MCV < 0.85 |", "|---|---|---|---|---|---|---|"]
+             "| group | outline | n | ours mean IoU | ours < 0.85 | MCV mean IoU | MCV < 0.85 |",
+             "|---|---|---|---|---|---|---|"]
     for g in groups:
         for offset in TRACED_OFFSETS:
             if (g, offset) not in results:
                 continue
             ours, mcv = np.array(results[(g, offset)]).T
-            lines.append(f"| {g} | {'on the truth' if offset == 0 else f'{offset:g} px out'} | {len(ours)} | "
-                         f"{ours.mean():.3f} | {(ours < LOW).mean():.0%} | {mcv.mean():.3f} | {(mcv < LOW).mean():.0%} |")
+            where = "on the truth" if offset == 0 else f"{offset:g} px out"
+            lines.append(f"| {g} | {where} | {len(ours)} | {ours.mean():.3f} | {(ours < LOW).mean():.0%} | "
+                         f"{mcv.mean():.3f} | {(mcv < LOW).mean():.0%} |")
     return lines
 
 

@@ -18,8 +18,8 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .contour import (as_contour, contour_gap, cut_pinches, nodes_for_spacing, outward_normals, perimeter, remove_loops, resample,
-                      segment_lengths, signed_area)
+from .contour import (as_contour, contour_gap, cut_pinches, nodes_for_spacing, outward_normals, perimeter,
+                      remove_loops, resample, segment_lengths, signed_area)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
@@ -609,9 +609,9 @@ class _RestDetector:
     Across a remesh, which puts new nodes on about the same curve, the nodes
     cannot be followed one by one: the contours of the window are compared
     as curves instead, each within half that distance of the newest (so
-    within it of each other). A contour whose nodes keep being remeshed
-    where it runs along the image's side thus still comes to rest. The track
-    restarts when the frame the nodes are measured in shifts.
+    within it of each other), so a contour remeshed every few steps can
+    still be seen at rest. The track restarts when the frame the nodes are
+    measured in shifts.
     """
 
     def __init__(self, tol, patience):
@@ -630,10 +630,14 @@ class _RestDetector:
 
     def _still(self) -> bool:
         reach = self.patience * self.tol
-        if all(remeshes == self.track[0][0] for remeshes, _ in self.track):
-            return np.ptp(np.stack([nodes for _, nodes in self.track]), axis=0).max() <= reach
-        newest = self.track[-1][1]
-        return all(contour_gap(nodes, newest) <= 0.5 * reach for _, nodes in list(self.track)[:-1])
+        last = self.track[-1][0]
+        same = [nodes for remeshes, nodes in self.track if remeshes == last]  # since the last remesh
+        if np.ptp(np.stack(same), axis=0).max() > reach:
+            return False
+        if len(same) == len(self.track):
+            return True
+        newest = same[-1]
+        return all(contour_gap(nodes, newest) <= 0.5 * reach for remeshes, nodes in self.track if remeshes != last)
 
 
 def _checked_options(material, forces, weights, stiffness, reference, integrator, polarity, max_step_length, tol,

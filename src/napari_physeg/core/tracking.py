@@ -27,8 +27,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._drain import drain
-from .contour import (area_centroid, as_contour, closest_on_segments, outward_normals, perimeter, polygon_mask, positively_oriented, remove_loops,
-                      resample, signed_area)
+from .contour import (area_centroid, as_contour, closest_on_segments, outward_normals, perimeter, polygon_mask,
+                      positively_oriented, remove_loops, resample, signed_area)
 from .dynamics import DivergenceError
 from .matching import match
 from .segmentation import FrameFeatures, check_segment_options, segment
