@@ -287,6 +287,24 @@ def low_share(rows, timelapse_alt):
             + (": " + ", ".join(low) if low else "")]
 
 
+def border_offsets(rows, groups):
+    """Lines: where ours' outline lies against the truth's, per group: the median over the
+    cases of the median signed distance of its nodes to the truth's outline (px, > 0 outside)."""
+    from scipy import ndimage as ndi
+
+    per_group = {}
+    for r in rows:
+        if r["contour"] is None:
+            continue
+        mask = r["obj"].mask
+        signed = ndi.distance_transform_edt(~mask) - ndi.distance_transform_edt(mask)
+        # The outline lies between the last pixel in (-1) and the first out (+1).
+        offset = np.median(ndi.map_coordinates(signed, r["contour"].T, order=1))
+        per_group.setdefault(r["group"], []).append(offset)
+    return ["- where ours' outline lies against the truth's (median signed distance, px; > 0 outside): "
+            + ", ".join(f"{g} {np.median(per_group[g]):+.1f}" for g in groups if g in per_group)]
+
+
 #: Outlines traced on the truth (0) and 1 px outside it: see traced_outlines().
 TRACED_OFFSETS = (0.0, 1.0)
 
@@ -518,6 +536,8 @@ def main(argv=None):
         out(s)
     out()
     for s in low_share(rows, timelapse_alt):
+        out(s)
+    for s in border_offsets(rows, args.groups):
         out(s)
     out()
     for s in traced_outlines(rows, args.groups):
