@@ -492,3 +492,53 @@ def test_modes_of_a_moved_shape_are_remembered_and_right():
     assert np.allclose(fresh.eigenvalues, again.eigenvalues, rtol=1e-9)
     other = modal_basis(b, n_modes=8, model_nodes=32)
     assert not np.shares_memory(other.shapes, first.shapes)
+
+
+def _order_dp_by_enumeration(C, nb, window, repeat, skip, gap):
+    """The least total of _order_dp's problem, state by state (row, column, start column):
+    node 0 starts in one of the first 2 window + 1 columns; each later node repeats the
+    previous column (``repeat``), advances past k columns (``skip`` each) or is left out
+    (``gap``, the column kept); the last column lies less than nb after the start, and the
+    columns left over count as skipped."""
+    na, width = C.shape
+    best = {(j, j): C[0, j] for j in range(2 * window + 1)}
+    for i in range(1, na):
+        nxt = {}
+        for (j, s), cost in best.items():
+            moves = [(j, cost + repeat + C[i, j]), (j, cost + gap)]
+            moves += [(k, cost + skip * (k - j - 1) + C[i, k]) for k in range(j + 1, width)]
+            for k, c in moves:
+                if c < nxt.get((k, s), np.inf):
+                    nxt[(k, s)] = c
+        best = nxt
+    return min(c + skip * (nb - 1 - (j - s)) for (j, s), c in best.items() if j - s <= nb - 1)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(2, 7), st.integers(3, 8), st.integers(1, 3), st.sampled_from([np.inf, 0.3, 2.0]),
+       st.integers(0, 2**31 - 1))
+def test_order_dp_finds_the_least_total(na, nb, window, gap, seed):
+    """From one start node, the vectorised order-preserving DP reaches the optimum of its problem,
+    found by enumeration, and the path it returns costs that total. (From several starts it keeps
+    one per cell, by design: see _order_search.)"""
+    from napari_physeg.core.matching import _order_dp
+
+    rng = np.random.default_rng(seed)
+    window = min(window, (nb - 1) // 2 or 1)
+    C = np.round(rng.random((na, nb + 2 * window)), 2)  # rounded: ties happen
+    start = int(rng.integers(0, 2 * window + 1))
+    C[0, : 2 * window + 1] = 1e6
+    C[0, start] = rng.random()
+    repeat, skip = rng.uniform(0.0, 1.0, 2)
+    part, total = _order_dp(C, nb, window, repeat, skip, gap)
+    assert total == pytest.approx(_order_dp_by_enumeration(C, nb, window, repeat, skip, gap), abs=1e-9)
+    assert part[0] == start
+    matched = np.flatnonzero(part >= 0)
+    cols = part[matched]
+    assert np.all(np.diff(cols) >= 0) and cols[-1] - cols[0] <= nb - 1
+    # The path's own cost: its costs, a repeat or the nodes of b passed over between matched
+    # nodes, a gap per node left out, and the nodes of b left over at the end.
+    steps = np.diff(cols)
+    cost = (C[matched, cols].sum() + repeat * np.sum(steps == 0) + skip * np.sum(np.maximum(steps - 1, 0))
+            + (gap * (na - len(matched)) if len(matched) < na else 0.0) + skip * (nb - 1 - (cols[-1] - cols[0])))
+    assert cost == pytest.approx(total, abs=1e-9)
