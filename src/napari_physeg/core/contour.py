@@ -21,7 +21,7 @@ __all__ = [
     "nodes_for_spacing",
     "crosses_itself",
     "area_centroid",
-    "closest_on_segments",
+    "closest_on_polyline",
     "contour_gap",
     "outward_normals",
     "mean_nearest_neighbour_distance",
@@ -265,11 +265,25 @@ def crosses_itself(contour) -> bool:
     return len(_crossing_pairs(np.asarray(contour, dtype=np.float64))) > 0
 
 
-def closest_on_segments(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _closest_on_segments(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The point of each segment ``a[i] b[i]`` closest to ``points[i]``."""
     d = b - a
     u = np.clip(((points - a) * d).sum(1) / np.maximum((d * d).sum(1), 1e-12), 0.0, 1.0)
     return a + u[:, None] * d
+
+
+def closest_on_polyline(points: np.ndarray, curve: np.ndarray, near: np.ndarray, steps=(-1, 0)):
+    """The point of the closed polyline ``curve`` closest to each of ``points``,
+    and its distance, among the segments that start ``steps`` nodes from the
+    node ``near[i]`` of ``curve`` (the first of equally close ones)."""
+    m = len(curve)
+    closest, distance = np.empty_like(points), np.full(len(points), np.inf)
+    for step in steps:
+        point = _closest_on_segments(points, curve[(near + step) % m], curve[(near + step + 1) % m])
+        dist = np.hypot(*(point - points).T)
+        closer = dist < distance
+        closest[closer], distance[closer] = point[closer], dist[closer]
+    return closest, distance
 
 
 def contour_gap(a: np.ndarray, b: np.ndarray) -> float:
@@ -281,13 +295,7 @@ def contour_gap(a: np.ndarray, b: np.ndarray) -> float:
     each other (the use: a contour and itself a few steps later).
     """
     def one_way(points, curve):
-        nearest = cKDTree(curve).query(points)[1]
-        m = len(curve)
-        gap = np.full(len(points), np.inf)
-        for step in (-1, 0):
-            start, end = curve[(nearest + step) % m], curve[(nearest + step + 1) % m]
-            gap = np.minimum(gap, np.hypot(*(closest_on_segments(points, start, end) - points).T))
-        return float(gap.max())
+        return float(closest_on_polyline(points, curve, cKDTree(curve).query(points)[1])[1].max())
 
     return max(one_way(a, b), one_way(b, a))
 

@@ -133,7 +133,8 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     shape = intensity.shape
     size = float(np.sqrt(max(abs(np.ptp(drawing[:, 0]) * np.ptp(drawing[:, 1])), 1.0)))
     half_width = int(np.clip(round(0.05 * size), 1, 3))
-    on_line = _median(intensity[_line_band(drawing, shape, half_width)])
+    line = _line_band(drawing, shape, half_width)
+    on_line = _median(intensity[line])
     centre = _median(intensity[_fill(_scaled(drawing, 0.5), shape)])
     if np.isnan(centre):  # a drawing too thin to have a centre
         centre = on_line
@@ -153,7 +154,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     around = np.isnan(outside) or (on_line - centre) * np.sign(outside - centre) >= 0.5 * abs(centre - outside)
     if around:
         obj, background = centre, on_line
-    elif (beyond := _beyond_the_border(intensity, drawing, half_width, centre, outside)) is not None:
+    elif (beyond := _beyond_the_border(intensity, drawing, line, centre, outside)) is not None:
         # Traced on the object's edge (a label's outline, an earlier result):
         # the line lies on the edge's ramp, at neither level. The object is
         # within the drawing, as for a drawing around it; its background is
@@ -170,9 +171,9 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     return RegionModel(int(polarity), float(obj), float(background), bool(around))
 
 
-def _beyond_the_border(intensity, drawing, half_width, centre, outside) -> float | None:
-    """The background's level if the drawn line separates the object from its
-    background, else None.
+def _beyond_the_border(intensity, drawing, line, centre, outside) -> float | None:
+    """The background's level if the drawn line (``line``, its band of pixels)
+    separates the object from its background, else None.
 
     It does when, from just outside the line to just inside it, the intensity
     climbs at least :data:`_BORDER_STEP` of the way from the background's
@@ -183,10 +184,8 @@ def _beyond_the_border(intensity, drawing, half_width, centre, outside) -> float
     from the centre's (a neighbour in the rings further out, or the ramp of
     a blurred edge just outside, brings either nearer).
     """
-    shape = intensity.shape
-    line = _line_band(drawing, shape, half_width)
     near = cv2.dilate(line.view(np.uint8), _disk(_SIDE_WIDTH)).view(bool) & ~line
-    drawn = _fill(drawing, shape)
+    drawn = _fill(drawing, intensity.shape)
     inner, outer = _median(intensity[near & drawn]), _median(intensity[near & ~drawn])
     if not (outer - inner) * np.sign(outside - centre) >= _BORDER_STEP * abs(centre - outside):
         return None

@@ -27,7 +27,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._drain import drain
-from .contour import (area_centroid, as_contour, closest_on_segments, outward_normals, perimeter, polygon_mask,
+from .contour import (area_centroid, as_contour, closest_on_polyline, outward_normals, perimeter, polygon_mask,
                       positively_oriented, remove_loops, resample, signed_area)
 from .dynamics import DivergenceError
 from .matching import match
@@ -413,15 +413,7 @@ def node_origins(contour: np.ndarray, previous: np.ndarray, **match_options) -> 
     missing = partner < 0
     if missing.any():  # not expected with method="order": nearest node instead
         partner[missing] = np.argmin(((back[missing, None] - previous[None]) ** 2).sum(-1), axis=1)
-    m = len(previous)
-    origin, best = previous[partner].copy(), np.full(len(contour), np.inf)
-    for step in (-2, -1, 0, 1):
-        a, b = previous[(partner + step) % m], previous[(partner + step + 1) % m]
-        point = closest_on_segments(back, a, b)
-        dist = np.hypot(*(point - back).T)
-        closer = dist < best
-        origin[closer], best[closer] = point[closer], dist[closer]
-    return origin
+    return closest_on_polyline(back, previous, partner, steps=(-2, -1, 0, 1))[0]
 
 
 def _rigid_motion(source: np.ndarray, target: np.ndarray, iterations: int = 30):
@@ -435,9 +427,7 @@ def _rigid_motion(source: np.ndarray, target: np.ndarray, iterations: int = 30):
     back: it found 0.26 of the deforming cell's 0.40 degrees per frame).
     """
     dense = resample(target, spacing=0.5)
-    tangent = np.roll(dense, -1, axis=0) - np.roll(dense, 1, axis=0)
-    normals = np.column_stack([tangent[:, 1], -tangent[:, 0]])
-    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    normals = outward_normals(dense)  # their sign does not matter: it cancels in each row of the fit
     tree = cKDTree(dense)
     centre = source.mean(0)
     angle, shift = 0.0, dense.mean(0) - centre
