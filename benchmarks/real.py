@@ -75,6 +75,14 @@ def crop_box(obj, init):
     return max(r0, 0), min(r1, h), max(c0, 0), min(c1, w)
 
 
+def on_crop(obj, init):
+    """The anchors' crop box, the object on it and the init in its frame. The crop holds the
+    whole truth, so IoU on the crop is IoU on the image."""
+    r0, r1, c0, c1 = box = crop_box(obj, init)
+    sub = SimpleNamespace(image=obj.image[r0:r1, c0:c1], mask=obj.mask[r0:r1, c0:c1])
+    return box, sub, init - np.array([r0, c0], float)
+
+
 def run_ours(obj, init):
     """Our defaults on the whole image; any exception is a recorded failure."""
     # Warnings (e.g. init nodes outside the image) go to the CSV, not the terminal.
@@ -98,10 +106,7 @@ def run_ours(obj, init):
 
 def run_anchors(obj, init, kind):
     """IoU and time of snake, MGAC and MCV on the crop; the MCV region (crop coordinates)."""
-    r0, r1, c0, c1 = box = crop_box(obj, init)
-    # The crop holds the whole truth, so IoU on the crop is IoU on the image.
-    sub = SimpleNamespace(image=obj.image[r0:r1, c0:c1], mask=obj.mask[r0:r1, c0:c1])
-    local = init - np.array([r0, c0], float)
+    box, sub, local = on_crop(obj, init)
     out = {}
     for name, fn in (("snake", lambda: run_snake(sub, local)),
                      ("MGAC", lambda: run_mgac(sub, local, balloon=1 if kind == "inside" else -1))):
@@ -322,9 +327,7 @@ def traced_outlines(rows, groups):
                 skipped += 1
                 continue
             ours, _ = run_ours(obj, init)
-            r0, r1, c0, c1 = crop_box(obj, init)
-            sub = SimpleNamespace(image=obj.image[r0:r1, c0:c1], mask=obj.mask[r0:r1, c0:c1])
-            local = init - np.array([r0, c0], float)
+            _, sub, local = on_crop(obj, init)
             mcv, _ = run_mcv(sub, local, point=local.mean(axis=0))
             results.setdefault((obj.group, offset), []).append((ours["iou"], mcv))
     lines = [f"From the truth's own outline, traced on it and 1 px outside it ({skipped} outlines that touch "
