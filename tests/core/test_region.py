@@ -67,6 +67,34 @@ def test_touching_neighbour_is_split_at_the_neck():
     assert (region & b & ~a).sum() < 0.05 * (b & ~a).sum()
 
 
+@pytest.mark.parametrize("radius", [7, 14])
+def test_neighbour_touching_at_a_neck_narrow_for_its_size_is_split_off(radius):
+    """Two equal small disks (crowded nuclei) whose contact is 0.64 times as
+    wide as either: wider than half the object's depth, so their cores merge,
+    but far narrower than either is deep. Drawn inside one, the region is that
+    one only; the same at twice the size."""
+    half_neck = 0.64 * radius
+    gap = 2 * np.sqrt(radius**2 - half_neck**2)  # between the centres
+    shape = (6 * radius, 8 * radius)
+    a = disk(shape, (3 * radius, 3 * radius), radius)
+    b = disk(shape, (3 * radius, 3 * radius + gap), radius)
+    _, region = region_for(render(a | b), circle((3 * radius, 3 * radius), radius / 2))
+    assert overlap(region, a) > 0.9
+    assert (region & b & ~a).sum() < 0.1 * (b & ~a).sum()
+
+
+def test_lobe_as_deep_as_its_neck_is_kept():
+    """A disk with a lobe half its size joined along a contact as wide as the
+    lobe is deep: drawn inside the disk, the lobe is the object's."""
+    shape = (80, 110)
+    body, lobe = disk(shape, (40, 40), 16), disk(shape, (40, 62), 9)
+    neck = np.zeros(shape, bool)
+    neck[32:49, 40:62] = True
+    mask = body | lobe | neck
+    _, region = region_for(render(mask), circle((40, 40), 7))
+    assert overlap(region, mask) > 0.95
+
+
 def test_neighbour_crossed_by_the_drawing_is_left_out():
     shape = (100, 100)
     obj, other = disk(shape, (50, 45), 18), disk(shape, (50, 80), 14)
