@@ -61,7 +61,7 @@ OUT = ROOT / "benchmark_output"
 PAD = 16  # px around the init and the truth for the anchors' crop
 METHODS = ("ours", "snake", "MGAC", "MCV")
 LOW = 0.85  # the "fraction below" threshold of the tables
-NUCLEI_GROUPS = ("nuclei", "heldout")  # slices of the confocal stack
+NUCLEI_GROUPS = ("nuclei", "heldout", "small")  # slices of the confocal stack
 
 
 def crop_box(obj, init):
@@ -286,9 +286,12 @@ def low_share(rows, timelapse_alt):
     kept = [r for r in rows if not (r["group"] in NUCLEI_GROUPS and r["obj"].name in real_data.AMBIGUOUS_NUCLEI)]
     score = [timelapse_alt.get(r["case"], r["ours"]["iou"]) for r in kept]
     low = [r["case"] for r, s in zip(kept, score) if s < LOW]
+    groups = list(dict.fromkeys(r["group"] for r in kept))
+    per_group = ", ".join(f"{g} {sum(c.startswith(g + '/') for c in low)} of {sum(r['group'] == g for r in kept)}"
+                          for g in groups)
     return [f"- ours below {LOW}: {all_low} of {len(rows)} cases ({all_low / max(len(rows), 1):.1%}); with the "
             f"ambiguous truths set apart (the nuclei above left out, the time-lapse scored against the ramp's "
-            f"middle): {len(low)} of {len(kept)} ({len(low) / max(len(kept), 1):.1%})"
+            f"middle): {len(low)} of {len(kept)} ({len(low) / max(len(kept), 1):.1%}; {per_group})"
             + (": " + ", ".join(low) if low else "")]
 
 
