@@ -58,8 +58,13 @@ _SIDE_FRACTION = 0.1
 _SIDE_WIDTH = 3
 _BORDER_STEP = 0.6
 
-#: A drawing inside the object bounds it to this many times its size.
+#: A drawing inside the object expects it within this many times its size:
+#: the object's cores reaching further are split deeper (see _cores). The
+#: object itself may reach further (a hand drawn inside its palm), up to
+#: _INSIDE_LIMIT times, a last guard against a leak into a look-alike
+#: background.
 _INSIDE_REACH = 4.0
+_INSIDE_LIMIT = 10.0
 
 #: Levels closer than this many noise standard deviations, or than this
 #: fraction of the normalised intensity range, are not a contrast.
@@ -243,7 +248,7 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
     """
     # Everything happens near the drawing: within its reach (below) and one
     # drawing size beyond, where neighbours that could take the object lie.
-    extent = _scaled(drawing, 1.0 if model.drawn_around else _INSIDE_REACH)
+    extent = _scaled(drawing, 1.0 if model.drawn_around else _INSIDE_LIMIT)
     size = float(np.sqrt(max(np.ptp(drawing[:, 0]) * np.ptp(drawing[:, 1]), 1.0)))
     lo = np.maximum(np.floor(extent.min(0) - size - 10), 0).astype(int)
     hi = np.minimum(np.ceil(extent.max(0) + size + 10) + 1, signed.shape).astype(int)
@@ -268,17 +273,19 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     drawn = _fill(drawing, shape)
     drawn_size = np.sqrt(max(drawn.sum(), 1) / np.pi)
     # The object is about where the user drew it: nothing beyond the drawing
-    # (and a margin for a hasty hand) when drawn around it, nothing beyond a
-    # few times the drawing when drawn inside it. Growth past that is a leak.
+    # (and a margin for a hasty hand) when drawn around it, within a few
+    # times the drawing when drawn inside it (its reach). Growth past that
+    # is a leak.
     if model.drawn_around:
         margin = int(np.clip(round(0.15 * drawn_size), 2, 8))
-        reach = cv2.dilate(drawn.view(np.uint8), _disk(margin)).view(bool)
+        reach = limit = cv2.dilate(drawn.view(np.uint8), _disk(margin)).view(bool)
         marked = _fill(_scaled(drawing, 0.5), shape)
     else:
         reach = _fill(_scaled(drawing, _INSIDE_REACH), shape)
+        limit = _fill(_scaled(drawing, _INSIDE_LIMIT), shape)
         marked = drawn
     # Neighbours are split off whole (their cores lie beyond the drawing),
-    # then the reach applies. Small holes (texture) would make false necks.
+    # then the limit applies. Small holes (texture) would make false necks.
     like = _without_small_holes(signed > 0, 0.25 * drawn.sum(), image_sides)
     seed = (marked if (marked & like).any() else drawn) & like
     if not seed.any():
@@ -291,7 +298,7 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
         # No drawing line bounds it: neighbours touching at a neck narrow
         # for their own size are parted too (small crowded nuclei).
         region &= _marked_basins(depth, like, seed)
-    return _smoothed(region & reach, image_sides)
+    return _smoothed(region & limit, image_sides)
 
 
 def _split_at_cores(depth, like, seed, drawn, reach) -> np.ndarray:
