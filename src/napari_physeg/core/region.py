@@ -42,8 +42,11 @@ from .features import _noise_sigma
 __all__ = ["RegionModel", "drawing_levels", "object_region", "objectness"]
 
 #: Rings outside the drawing (in multiples of its size about its centroid)
-#: tried in turn for the background of a drawing made inside the object.
+#: tried in turn for the background of a drawing made inside the object;
+#: those further out only while no ring differs visibly from the drawing's
+#: centre (a small drawing deep inside a large object).
 _OUTER_RINGS = ((1.15, 1.5), (1.5, 2.2), (2.2, 3.2))
+_FAR_RINGS = ((3.2, 5.0), (5.0, 8.0), (8.0, 13.0), (13.0, 21.0))
 
 #: Width of the bands either side of the drawn line that tell a line traced
 #: on the object's border (a fraction of the drawing's size, at most
@@ -64,7 +67,7 @@ _BORDER_STEP = 0.6
 #: _INSIDE_LIMIT times, a last guard against a leak into a look-alike
 #: background.
 _INSIDE_REACH = 4.0
-_INSIDE_LIMIT = 10.0
+_INSIDE_LIMIT = 25.0
 
 #: Levels closer than this many noise standard deviations, or than this
 #: fraction of the normalised intensity range, are not a contrast.
@@ -97,7 +100,7 @@ class RegionModel:
 
     def is_visible(self, intensity: np.ndarray) -> bool:
         """Whether the object stands out of its background's noise in ``intensity`` (in [0, 1])."""
-        return self.contrast > max(MIN_CONTRAST_SIGMAS * _noise_sigma(intensity), MIN_CONTRAST)
+        return self.contrast > _least_contrast(intensity)
 
 
 def _fill(contour: np.ndarray, shape) -> np.ndarray:
@@ -148,10 +151,13 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     centre = _median(intensity[_fill(_scaled(drawing, 0.5), shape)])
     if np.isnan(centre):  # a drawing too thin to have a centre
         centre = on_line
+    floor = _least_contrast(intensity)
     # The background of a drawing made inside the object: the ring outside
     # it that differs most from the drawing's centre.
     outside, best = np.nan, -1.0
-    for lo, hi in _OUTER_RINGS:
+    for k, (lo, hi) in enumerate(_OUTER_RINGS + _FAR_RINGS):
+        if k >= len(_OUTER_RINGS) and best > floor:
+            break
         ring = _fill(_scaled(drawing, hi), shape) & ~_fill(_scaled(drawing, lo), shape)
         level = _median(intensity[ring])
         if not np.isnan(level) and abs(level - centre) > best:
@@ -164,6 +170,10 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     around = np.isnan(outside) or (on_line - centre) * np.sign(outside - centre) >= 0.5 * abs(centre - outside)
     if around:
         obj, background = centre, on_line
+        if abs(obj - background) <= floor:
+            # A drawing far larger than the object: its centre is background
+            # too. The object is what differs from the line within the drawing.
+            obj = _other_level(intensity[_fill(drawing, shape)], on_line, floor)
     elif (beyond := _beyond_the_border(intensity, drawing, line, centre, outside, size)) is not None:
         # Traced on the object's edge (a label's outline, an earlier result):
         # the line lies on the edge's ramp, at neither level. The object is
@@ -179,6 +189,25 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         obj, background = (max(obj, background), min(obj, background)) if polarity > 0 else \
             (min(obj, background), max(obj, background))
     return RegionModel(int(polarity), float(obj), float(background), bool(around))
+
+
+def _least_contrast(intensity: np.ndarray) -> float:
+    """The least difference of levels that is a contrast in ``intensity``."""
+    return max(MIN_CONTRAST_SIGMAS * _noise_sigma(intensity), MIN_CONTRAST)
+
+
+def _other_level(values: np.ndarray, level: float, floor: float) -> float:
+    """The median of the class of ``values`` (split in two by Otsu's
+    threshold) that lies further from ``level``; ``level`` if they do not
+    differ by more than ``floor``."""
+    from skimage.filters import threshold_otsu
+
+    if values.size < 2 or np.ptp(values) <= floor:
+        return level
+    split = threshold_otsu(values)
+    low, high = _median(values[values <= split]), _median(values[values > split])
+    other = low if abs(low - level) > abs(high - level) else high
+    return other if abs(other - level) > floor else level
 
 
 def _beyond_the_border(intensity, drawing, line, centre, outside, size) -> float | None:
@@ -293,7 +322,10 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     # Depth below the object's outline; beyond the image is not object, so
     # two objects cut by the image's side meet there at a neck too.
     depth = cv2.distanceTransform(np.pad(like, 1).view(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
-    region = _split_at_cores(depth, like, seed, drawn if model.drawn_around else None, reach)
+    if model.drawn_around:
+        region = _split_at_cores(depth, like, seed, drawn, reach)
+    else:
+        region = _split_at_cores(depth, like, seed, None, reach, _side_distance(shape, image_sides))
     if not model.drawn_around:
         # No drawing line bounds it: neighbours touching at a neck narrow
         # for their own size are parted too (small crowded nuclei).
@@ -301,12 +333,23 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     return _smoothed(region & limit, image_sides)
 
 
-def _split_at_cores(depth, like, seed, drawn, reach) -> np.ndarray:
+def _side_distance(shape, image_sides) -> np.ndarray:
+    """Each pixel's distance (px) to the nearest of the sides (top, bottom,
+    left, right) that are the image's own; inf without any."""
+    rows, cols = np.arange(shape[0])[:, None], np.arange(shape[1])[None, :]
+    distance = np.full(shape, np.inf)
+    for is_image, d in zip(image_sides, (rows, shape[0] - 1 - rows, cols, shape[1] - 1 - cols)):
+        if is_image:
+            distance = np.minimum(distance, d)
+    return distance
+
+
+def _split_at_cores(depth, like, seed, drawn, reach, side_distance=None) -> np.ndarray:
     """The blob of ``like`` the seed marks, split from neighbours at their
     necks by a watershed of the depth from the blobs' cores (see _cores). The
     cores lying mostly inside ``drawn`` (the drawing around the object, or
     None) are the object's lobes."""
-    cores, n = _cores(depth, seed, reach)
+    cores, n = _cores(depth, seed, reach, side_distance)
     ours = np.unique(cores[seed])
     if drawn is not None:
         # Lobes of the object lie inside the drawing; neighbours cross it.
@@ -396,7 +439,7 @@ def _necks(basins: np.ndarray, depth: np.ndarray):
 CORE_DEPTHS = (0.5, 0.6, 0.7, 0.8)
 
 
-def _cores(depth: np.ndarray, seed: np.ndarray, reach: np.ndarray) -> tuple[np.ndarray, int]:
+def _cores(depth: np.ndarray, seed: np.ndarray, reach: np.ndarray, side_distance=None) -> tuple[np.ndarray, int]:
     """Labelled cores of the object-like blobs: the pixels deeper than a
     fraction of the object's inscribed radius (the largest depth under the
     seed).
@@ -405,13 +448,19 @@ def _cores(depth: np.ndarray, seed: np.ndarray, reach: np.ndarray) -> tuple[np.n
     seed marks that reaches mostly beyond the object's reach is still a
     merger (two nuclei cut by the image's side meet along it, where the neck
     is as deep as the object is wide): the depth is raised until the marked
-    cores lie within the reach, or the last fraction is tried.
+    cores lie within the reach, or the last fraction is tried. Given
+    ``side_distance`` (to the image's sides), only a marked core that runs
+    along a side (within its depth) is split so: the reach of a drawing made
+    inside the object is a guess of its size, and a large object (a horse
+    drawn inside its chest) would be split at its waist.
     """
     inscribed = float(depth[seed].max())
     for fraction in CORE_DEPTHS:
         cores, n = _label(depth > fraction * inscribed)
         marked = np.isin(cores, np.unique(cores[seed & (cores > 0)]))
         if (marked & reach).sum() >= 0.8 * marked.sum():
+            break
+        if side_distance is not None and not (side_distance[marked] <= fraction * inscribed + 1.5).any():
             break
     return cores, n
 
