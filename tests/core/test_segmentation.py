@@ -304,6 +304,98 @@ def test_hand_drawn_inside_its_palm_keeps_its_fingers(noise):
     assert res.converged
     assert (found & obj.mask).sum() / (found | obj.mask).sum() > 0.99
 
+
+def _circle(centre, radius, n=64):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.asarray(centre, float) + radius * np.column_stack([np.sin(t), np.cos(t)])
+
+
+def _iou(contour, mask):
+    found = polygon2mask(mask.shape, contour)
+    return (found & mask).sum() / (found | mask).sum()
+
+
+@pytest.mark.parametrize("make", [data.ellipse, data.hand, data.blob])
+def test_small_circle_deep_inside_a_large_object(make):
+    """A circle of a fifth of the inscribed radius at the deepest point: the
+    rings around it that should show the background (up to 3.2x its size) all
+    lie on the object. The background is looked for further out; it stalled
+    where it was drawn (IoU 0.001-0.76)."""
+    from scipy import ndimage as ndi
+
+    obj = make()
+    depth = ndi.distance_transform_edt(obj.mask)
+    centre = np.unravel_index(depth.argmax(), depth.shape)
+    res = segment(obj.image, _circle(centre, 0.2 * depth.max()))
+    assert res.converged
+    assert _iou(res.contour, obj.mask) > 0.98
+
+
+def test_circle_far_larger_than_the_object():
+    """A circle of twice the hand's extent (much of it beyond the image): its
+    centre is background too, so the object's level is read as the other
+    class of the pixels inside it (IoU 0.16)."""
+    obj = data.hand()
+    rows, cols = np.nonzero(obj.mask)
+    centre = np.array([rows.mean(), cols.mean()])
+    extent = np.hypot(rows - centre[0], cols - centre[1]).max()
+    with pytest.warns(UserWarning, match="outside the image"):
+        res = segment(obj.image, _circle(centre, 2 * extent, 96))
+    assert res.converged
+    assert _iou(res.contour, obj.mask) > 0.98
+
+
+def test_drawing_around_the_whole_image():
+    """The horse of skimage.data fills most of its image; a circle 2x its
+    extent lies wholly beyond the image, so the line says nothing: its clipped
+    copy, the image's sides, stands in (it stalled on them, IoU 0.34)."""
+    from skimage import data as skdata
+
+    mask = ~skdata.horse()
+    image = np.where(mask, 0.8, 0.2) + 0.05 * np.random.default_rng(1).standard_normal(mask.shape)
+    rows, cols = np.nonzero(mask)
+    centre = np.array([rows.mean(), cols.mean()])
+    extent = np.hypot(rows - centre[0], cols - centre[1]).max()
+    with pytest.warns(UserWarning, match="outside the image"):
+        res = segment(image, _circle(centre, 2 * extent, 96))
+    assert res.converged
+    assert _iou(res.contour, mask) > 0.97
+
+
+def test_horse_drawn_inside_its_chest_keeps_its_hindquarters():
+    """A circle of half the inscribed radius in the chest of skimage.data's
+    horse: the body reaches ~4.5x as far. Its cores were split deeper beyond
+    that reach, at its waist, and the hindquarters lost; only cores running
+    along the image's side are (two nuclei cut by it). A head on a neck
+    narrower than 0.8 of its depth is still parted, as a neighbour would be."""
+    from scipy import ndimage as ndi
+    from skimage import data as skdata
+
+    mask = ~skdata.horse()
+    image = np.where(mask, 0.8, 0.2) + 0.05 * np.random.default_rng(1).standard_normal(mask.shape)
+    depth = ndi.distance_transform_edt(mask)
+    centre = np.unravel_index(depth.argmax(), depth.shape)
+    res = segment(image, _circle(centre, 0.5 * depth.max()))
+    found = polygon2mask(mask.shape, res.contour)
+    hindquarters = np.zeros_like(mask)
+    hindquarters[100:180, 70:150] = True  # the rump, tail and legs aside
+    hindquarters &= mask
+    assert (found & hindquarters).sum() > 0.95 * hindquarters.sum()
+
+@pytest.mark.parametrize("make", [data.ellipse, data.hand])
+def test_drawing_along_the_image_sides_in_noise(make):
+    """A contour drawn along the image's four sides of a noisy 512 x 512
+    image: beside the background the image's side is no edge, and beyond it
+    the distance to an edge is not known (it held the contour there: IoU
+    0.16-0.19 at max_steps)."""
+    obj = make((512, 512), noise=0.1)
+    up, down = np.linspace(0, 511, 32, endpoint=False), np.linspace(511, 0, 32, endpoint=False)
+    low, high = np.zeros(32), np.full(32, 511.0)
+    frame = np.concatenate([np.column_stack(pair) for pair in ((low, up), (up, high), (high, down), (down, low))])
+    res = segment(obj.image, frame)
+    assert res.converged
+    assert _iou(res.contour, obj.mask) > 0.99
+
 # --------------------------------------------------------------------------
 # Feature window on large images
 # --------------------------------------------------------------------------

@@ -132,8 +132,19 @@ class ForceField:
         # a contour around an object cut by the border rests on the border.
         out = cv2.remap(self._stack, np.ascontiguousarray(grid[..., 1]), np.ascontiguousarray(grid[..., 0]),
                         interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                        borderValue=(1.0, 0.0, -1.0, 0.0))
-        return out.reshape(-1, 3)[:n].reshape(pts.shape[:-1] + (3,))
+                        borderValue=(1.0, 0.0, -1.0, 0.0)).reshape(-1, 3)[:n]
+        # Beyond the border the distance to the nearest edge is unknown: it is
+        # read as its mirror image inside, so the border neither pulls nor
+        # pushes a node by the distance force (the edge and region forces say
+        # whether the object ends there).
+        size = np.array(self._stack.shape[:2], dtype=np.float32) - 1
+        beyond = np.any((flat < 0) | (flat > size), axis=1)
+        if beyond.any():
+            mirrored = np.clip(size - np.abs(size - np.abs(flat[beyond])), 0, size)
+            out[beyond, 1] = cv2.remap(self.distance, np.ascontiguousarray(mirrored[None, :, 1]),
+                                       np.ascontiguousarray(mirrored[None, :, 0]),
+                                       interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[0]
+        return out.reshape(pts.shape[:-1] + (3,))
 
     @cached_property
     def _region_offsets(self) -> np.ndarray:

@@ -147,6 +147,8 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     size = float(np.sqrt(max(abs(np.ptp(drawing[:, 0]) * np.ptp(drawing[:, 1])), 1.0)))
     half_width = int(np.clip(round(0.05 * size), 1, 3))
     line = _line_band(drawing, shape, half_width)
+    if not line.any():  # drawn around the whole image: its sides are the line
+        line = _line_band(np.clip(drawing, 0, np.array(shape) - 1), shape, half_width)
     on_line = _median(intensity[line])
     centre = _median(intensity[_fill(_scaled(drawing, 0.5), shape)])
     if np.isnan(centre):  # a drawing too thin to have a centre

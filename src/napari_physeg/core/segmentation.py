@@ -242,13 +242,20 @@ HANDOVER = 5.0
 ON_BORDER_FRACTION = 0.7
 
 
-def _distance_with_image_border(edges: np.ndarray, window, shape) -> np.ndarray:
+def _distance_with_image_border(edges: np.ndarray, signed: np.ndarray, window, shape) -> np.ndarray:
     """Chamfer distance to the nearest edge, the image's own border counting
-    as an edge: an object cut by the border ends there, and a node on the
-    border does not reach across the object for the far side's edge."""
+    as an edge where the object meets it (``signed > 0`` beside it): an
+    object cut by the border ends there, and a node on the border does not
+    reach across the object for the far side's edge. Beside the background
+    the border is no edge: a contour drawn beyond the image, clipped onto
+    its border, is not held there."""
     rows, cols = window
     pad = ((int(rows.start == 0), int(rows.stop == shape[0])), (int(cols.start == 0), int(cols.stop == shape[1])))
-    framed = np.pad(np.asarray(edges) > 0, pad, constant_values=True)
+    framed = np.pad(np.asarray(edges) > 0, pad, constant_values=False)
+    inner = np.pad(np.asarray(signed) > 0, pad, mode="edge")
+    frame = np.ones(framed.shape, bool)
+    frame[pad[0][0]: framed.shape[0] - pad[0][1], pad[1][0]: framed.shape[1] - pad[1][1]] = False
+    framed |= frame & inner
     distance = chamfer_distance(framed)
     return distance[pad[0][0]: distance.shape[0] - pad[0][1], pad[1][0]: distance.shape[1] - pad[1][1]]
 
@@ -428,7 +435,7 @@ class _FeatureWindow:
                        cols.stop == self.image.shape[1])
         signed, edges, self.polarity = region_features(intensity, edges, self.drawing - origin, self.polarity,
                                                        avoid, image_sides)
-        distance = _distance_with_image_border(edges, window, self.image.shape)
+        distance = _distance_with_image_border(edges, signed, window, self.image.shape)
         field = ForceField.from_features(edges, distance, signed, self.weights, max_length=self.max_line_length)
         self.fields = [field]
         if self.with_refinement:
