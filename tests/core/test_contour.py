@@ -131,3 +131,18 @@ def test_nodes_for_spacing_is_the_perimeter_over_the_spacing():
     assert nodes_for_spacing(square, 1000.0) == 3  # a closed contour needs 3
     with pytest.raises(ValueError, match="spacing"):
         nodes_for_spacing(square, 0.0)
+
+
+def test_cut_pinches_keeps_the_piece_that_holds_the_given_points():
+    """Two squares joined by a pinch (their corners 0.1 px apart): the larger
+    piece is kept, unless points say where the object is."""
+    from napari_physeg.core.contour import cut_pinches
+
+    big = [(0, 0), (0, 20), (20, 20)]
+    small = [(20.1, 20.1), (30, 20.1), (30, 30), (20.1, 30)]
+    contour = resample(np.array(big + small + [(20, 0)], float), spacing=1.0)
+    kept = cut_pinches(contour, gap=0.5)
+    assert abs(signed_area(kept)) > 300
+    kept = cut_pinches(contour, gap=0.5, keep=np.array([[25.0, 25.0], [26.0, 24.0]]))
+    assert 50 < abs(signed_area(kept)) < 100
+

@@ -115,6 +115,24 @@ def test_small_crowded_nucleus_drawn_inside(stack, z, label):
     assert res.converged
     assert iou > 0.9, iou
 
+
+def test_box_around_a_nucleus_that_encloses_a_neighbour(stack):
+    """A box twice the size of z26/n9's (a nucleus cut by the lower side) that
+    encloses a brighter neighbour whole: the contour wraps both, pinches
+    between them, and the piece under the box's middle is kept, not the
+    larger one (it ended on the neighbour: IoU 0)."""
+    image, labels = stack[0][26], stack[1][26]
+    truth = ndi.binary_fill_holes(labels == 9)
+    rows, cols = np.nonzero(truth)
+    half = np.array([np.ptp(rows), np.ptp(cols)]) + 1.0
+    lo, hi = np.array([rows.min(), cols.min()]) - half / 2, np.array([rows.max(), cols.max()]) + half / 2
+    box = np.array([[lo[0], lo[1]], [lo[0], hi[1]], [hi[0], hi[1]], [hi[0], lo[1]]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the box leaves the image
+        res = segment(image, box)
+    found = polygon2mask(truth.shape, res.contour)
+    assert (found & truth).sum() / (found | truth).sum() > 0.9
+
 class _no_warning:
     def __enter__(self):
         return self

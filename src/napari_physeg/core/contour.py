@@ -228,15 +228,17 @@ def remove_loops(contour: np.ndarray, max_loops: int = 100) -> np.ndarray:
     return contour
 
 
-def cut_pinches(contour: np.ndarray, gap: float, max_cuts: int = 100) -> np.ndarray:
+def cut_pinches(contour: np.ndarray, gap: float, max_cuts: int = 100, keep=None) -> np.ndarray:
     """Split a closed contour where two non-neighbouring parts come closer than ``gap``.
 
     A contour squeezed through a narrow neck (between two touching objects,
     or against the image border) brings nodes of its two sides within a
     fraction of a pixel of each other without crossing: the pieces on either
-    side of such a pinch are separate regions. The piece enclosing the larger
-    area is kept; so is the body of a contour folded back on itself (a spike of
-    zero width, as clipping to the image's corner makes).
+    side of such a pinch are separate regions. The piece enclosing more of
+    the points ``keep`` (if given: where the object is known to be) is kept,
+    else the one enclosing the larger area; so is the body of a contour
+    folded back on itself (a spike of zero width, as clipping to the image's
+    corner makes).
     """
     from scipy.spatial import cKDTree
 
@@ -256,8 +258,20 @@ def cut_pinches(contour: np.ndarray, gap: float, max_cuts: int = 100) -> np.ndar
         k = np.flatnonzero(far)[np.argmax(apart[far])]
         i, j = int(i[k]), int(j[k])
         inner, outer = contour[i: j + 1], np.vstack([contour[j:], contour[: i + 1]])
-        contour = inner if abs(signed_area(inner)) >= abs(signed_area(outer)) else outer
+        contour = inner if _holds_more(inner, outer, keep) else outer
     return contour
+
+
+def _holds_more(a: np.ndarray, b: np.ndarray, points) -> bool:
+    """Whether closed contour ``a`` encloses more of ``points`` than ``b``
+    (the larger area when they hold as many, or no points are given)."""
+    if points is not None and len(points):
+        from skimage.measure import points_in_poly
+
+        in_a, in_b = points_in_poly(points, a).sum(), points_in_poly(points, b).sum()
+        if in_a != in_b:
+            return bool(in_a > in_b)
+    return abs(signed_area(a)) >= abs(signed_area(b))
 
 
 def crosses_itself(contour) -> bool:

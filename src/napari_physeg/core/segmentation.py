@@ -26,7 +26,7 @@ from .element import coefficient_system, rayleigh_coefficients, reference_freque
 from .features import chamfer_distance, compute_features, normalized_intensity
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .materials import Material, get_material
-from .region import _disk, drawing_levels, object_region, objectness
+from .region import _disk, _fill, _scaled, drawing_levels, object_region, objectness
 from .subpixel import polish
 
 __all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "FrameFeatures", "region_features"]
@@ -242,6 +242,24 @@ HANDOVER = 5.0
 ON_BORDER_FRACTION = 0.7
 
 
+#: At most this many points of the object mark it when a pinch parts the contour.
+ANCHOR_POINTS = 256
+
+
+def _anchor(signed: np.ndarray, drawing: np.ndarray) -> np.ndarray:
+    """Points (row, col) of the object's own region under the middle of the
+    drawing (its half-size copy about its centroid, else the drawing): where
+    the user said the object is. Where a pinch parts the contour, the piece
+    that holds them is the object, not the larger one (a neighbour that a
+    generous drawing took in whole)."""
+    own = signed > 0
+    for factor in (0.5, 1.0):
+        points = np.argwhere(_fill(_scaled(drawing, factor), signed.shape) & own)
+        if len(points):
+            return points[:: -(-len(points) // ANCHOR_POINTS)].astype(np.float64)
+    return np.zeros((0, 2))
+
+
 def _distance_with_image_border(edges: np.ndarray, signed: np.ndarray, window, shape) -> np.ndarray:
     """Chamfer distance to the nearest edge, the image's own border counting
     as an edge where the object meets it (``signed > 0`` beside it): an
@@ -436,6 +454,7 @@ class _FeatureWindow:
         signed, edges, self.polarity = region_features(intensity, edges, self.drawing - origin, self.polarity,
                                                        avoid, image_sides)
         distance = _distance_with_image_border(edges, signed, window, self.image.shape)
+        self.anchor = _anchor(signed, self.drawing - origin)
         field = ForceField.from_features(edges, distance, signed, self.weights, max_length=self.max_line_length)
         self.fields = [field]
         if self.with_refinement:
@@ -548,12 +567,14 @@ class _ElasticBody:
         cap = np.where(sign * self.last_sign < 0, 0.5 * self.cap, np.minimum(1.25 * self.cap, self.max_step_length))
         self.cap, self.last_sign = np.maximum(cap, 0.25 * self.tol), sign
 
-    def remesh(self, nodes: np.ndarray, bounds: np.ndarray) -> None:
+    def remesh(self, nodes: np.ndarray, bounds: np.ndarray, keep=None) -> None:
         """New nodes without pinches, loops or crowded nodes, evenly spaced; a new element.
 
-        Each new node inherits the trust cap of the old node nearest to it.
+        Of the pieces a pinch parts, the one holding more of the points
+        ``keep`` is kept. Each new node inherits the trust cap of the old node
+        nearest to it.
         """
-        old, nodes = nodes, _repaired(nodes, bounds, self.spacing)
+        old, nodes = nodes, _repaired(nodes, bounds, self.spacing, keep)
         nearest = cKDTree(old).query(nodes)[1]
         cap, last_sign = self.cap[nearest], self.last_sign[nearest]
         self.nodes = self.rest = nodes
@@ -575,15 +596,16 @@ class _ElasticBody:
         self.remesh_watch.shift(offset)
 
 
-def _repaired(nodes: np.ndarray, bounds: np.ndarray, spacing: float) -> np.ndarray:
-    """``nodes`` without pinches, loops or crowded nodes, evenly spaced ``spacing`` apart."""
+def _repaired(nodes: np.ndarray, bounds: np.ndarray, spacing: float, keep=None) -> np.ndarray:
+    """``nodes`` without pinches, loops or crowded nodes, evenly spaced ``spacing`` apart;
+    of the pieces a pinch parts, the one holding more of the points ``keep``."""
     # Clipped first: nodes pushed past a corner of the image meet there.
     fixed = np.clip(nodes, -0.5, bounds)
     gap = PINCH_GAP * spacing
     # Resampling a contour that runs out along the image's side and back
     # puts new nodes on top of each other: cut again until none pinch.
     for _ in range(3):
-        fixed = resample(remove_loops(cut_pinches(fixed, gap)), spacing=spacing)
+        fixed = resample(remove_loops(cut_pinches(fixed, gap, keep=keep)), spacing=spacing)
         if len(fixed) < 4 or not cKDTree(fixed).query_pairs(gap):
             break
     keep = np.linalg.norm(fixed - np.roll(fixed, 1, axis=0), axis=1) > 1e-3 * spacing
@@ -801,7 +823,7 @@ def _evolve(
     phase = 0
     for steps in range(1, int(max_steps) + 1):
         body.shift(features.follow(body.nodes))
-        _time_step(body, features.fields[phase], stiffness, features.bounds, steps)
+        _time_step(body, features.fields[phase], stiffness, features.bounds, steps, features.anchor)
         if body.collapsed:
             break
         if steps % max(int(history_every), 1) == 0:
@@ -843,8 +865,10 @@ def _evolve(
     )
 
 
-def _time_step(body: _ElasticBody, field: ForceField, stiffness: float, bounds: np.ndarray, step: int) -> None:
-    """Image forces, one step of the dynamic equilibrium, and a remesh if due."""
+def _time_step(body: _ElasticBody, field: ForceField, stiffness: float, bounds: np.ndarray, step: int,
+               keep=None) -> None:
+    """Image forces, one step of the dynamic equilibrium, and a remesh if due
+    (keeping, where a pinch parts the contour, the piece that holds ``keep``)."""
     normals = outward_normals(body.nodes)
     forces = stiffness * field(body.nodes, normals)
     try:
@@ -855,7 +879,7 @@ def _time_step(body: _ElasticBody, field: ForceField, stiffness: float, bounds: 
         # the contour nearly touching). Repair it and go on.
         if body.reference != "incremental":
             raise _divergence(step, stiffness, repaired=False) from None
-        _remesh(body, body.nodes, bounds, step, stiffness)
+        _remesh(body, body.nodes, bounds, step, stiffness, keep)
         body._reset_caps()
         return
     new_nodes = np.clip(body.nodes + move, -0.5, bounds)
@@ -863,16 +887,16 @@ def _time_step(body: _ElasticBody, field: ForceField, stiffness: float, bounds: 
     if not np.isfinite(moved) or moved > body.divergence_limit:
         raise _divergence(step, stiffness, repaired=False)
     if body.reference == "incremental" and body.remesh_watch.due(new_nodes):
-        _remesh(body, new_nodes, bounds, step, stiffness)
+        _remesh(body, new_nodes, bounds, step, stiffness, keep)
     else:
         body.nodes = new_nodes
         if body.reference == "incremental":
             body.rest = new_nodes
 
 
-def _remesh(body, nodes, bounds, step, stiffness) -> None:
+def _remesh(body, nodes, bounds, step, stiffness, keep=None) -> None:
     try:
-        body.remesh(nodes, bounds)
+        body.remesh(nodes, bounds, keep)
     except (np.linalg.LinAlgError, RuntimeError, ValueError) as err:
         raise _divergence(step, stiffness) from err
 
