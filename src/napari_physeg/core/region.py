@@ -87,20 +87,25 @@ class RegionModel:
         Median intensities of the object and of its background.
     drawn_around : bool
         Whether the drawing surrounds the object (else it lies inside it).
+    least_contrast : float
+        The least difference of levels that stands out of the noise of the
+        intensity the levels were read on.
     """
 
     polarity: int
     object_level: float
     background_level: float
     drawn_around: bool
+    least_contrast: float = MIN_CONTRAST
 
     @property
     def contrast(self) -> float:
         return abs(self.object_level - self.background_level)
 
-    def is_visible(self, intensity: np.ndarray) -> bool:
-        """Whether the object stands out of its background's noise in ``intensity`` (in [0, 1])."""
-        return self.contrast > _least_contrast(intensity)
+    @property
+    def is_visible(self) -> bool:
+        """Whether the object stands out of its background's noise."""
+        return self.contrast > self.least_contrast
 
 
 def _fill(contour: np.ndarray, shape) -> np.ndarray:
@@ -190,7 +195,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         # The user knows better: take the levels in the order they say.
         obj, background = (max(obj, background), min(obj, background)) if polarity > 0 else \
             (min(obj, background), max(obj, background))
-    return RegionModel(int(polarity), float(obj), float(background), bool(around))
+    return RegionModel(int(polarity), float(obj), float(background), bool(around), floor)
 
 
 def _least_contrast(intensity: np.ndarray) -> float:

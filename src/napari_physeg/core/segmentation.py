@@ -189,7 +189,7 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
     polarity : int
     """
     model = drawing_levels(intensity, drawing, polarity)
-    if not model.is_visible(intensity):
+    if not model.is_visible:
         # No object here that the eye could tell from its background: no
         # region force (edges may still guide the contour).
         return np.zeros(intensity.shape, np.float32), edges, model.polarity
