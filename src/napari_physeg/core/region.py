@@ -163,10 +163,13 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     # it that differs most from the drawing's centre.
     outside, best = np.nan, -1.0
     for k, (lo, hi) in enumerate(_OUTER_RINGS + _FAR_RINGS):
-        if k >= len(_OUTER_RINGS) and best > floor:
+        far = k >= len(_OUTER_RINGS)
+        if far and best > floor:
             break
         ring = _fill(_scaled(drawing, hi), shape) & ~_fill(_scaled(drawing, lo), shape)
-        level = _median(intensity[ring])
+        # Far out the background may be a small part of a ring that still
+        # lies mostly on the object: the ring's class furthest from the centre.
+        level = _other_level(intensity[ring], centre, floor) if far else _median(intensity[ring])
         if not np.isnan(level) and abs(level - centre) > best:
             outside, best = level, abs(level - centre)
     # Around the object, the line lies on the background: at least halfway
@@ -177,10 +180,12 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     around = np.isnan(outside) or (on_line - centre) * np.sign(outside - centre) >= 0.5 * abs(centre - outside)
     if around:
         obj, background = centre, on_line
-        if abs(obj - background) <= floor:
-            # A drawing far larger than the object: its centre is background
-            # too. The object is what differs from the line within the drawing.
-            obj = _other_level(intensity[_fill(drawing, shape)], on_line, floor)
+        # A drawing far larger than the object: its centre is mostly
+        # background too. The object is then what differs from the line
+        # within the drawing (the centre within a fifth of the way to it).
+        other = _other_level(intensity[_fill(drawing, shape)], on_line, floor)
+        if abs(centre - on_line) < 0.2 * abs(other - on_line):
+            obj = other
     elif (beyond := _beyond_the_border(intensity, drawing, line, centre, outside, size)) is not None:
         # Traced on the object's edge (a label's outline, an earlier result):
         # the line lies on the edge's ramp, at neither level. The object is
