@@ -61,6 +61,11 @@ _SIDE_FRACTION = 0.1
 _SIDE_WIDTH = 3
 _BORDER_STEP = 0.6
 
+#: A drawing whose line and centre share a level is around an object off
+#: its centre when at least this share of it differs from the line more
+#: than anything outside does (see drawing_levels).
+_OFF_CENTRE_SHARE = 0.15
+
 #: A drawing inside the object expects it within this many times its size:
 #: the object's cores reaching further are split deeper (see _cores). The
 #: object itself may reach further (a hand drawn inside its palm), up to
@@ -178,14 +183,21 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     # Signed: a line brighter than a dim, textured centre of a bright object
     # lies on the object, not halfway to its dark outside.
     around = np.isnan(outside) or (on_line - centre) * np.sign(outside - centre) >= 0.5 * abs(centre - outside)
+    # What differs from the line within the drawing: the object, if the
+    # drawing is around it; texture, if inside it.
+    other, share = _other_class(intensity[_fill(drawing, shape)], on_line, floor)
     if around:
         obj, background = centre, on_line
         # A drawing far larger than the object: its centre is mostly
-        # background too. The object is then what differs from the line
-        # within the drawing (the centre within a fifth of the way to it).
-        other = _other_level(intensity[_fill(drawing, shape)], on_line, floor)
+        # background too (within a fifth of the way to the other class).
         if abs(centre - on_line) < 0.2 * abs(other - on_line):
             obj = other
+    elif share >= _OFF_CENTRE_SHARE and abs(other - on_line) > max(abs(outside - on_line), floor):
+        # Line and centre alike on the background, the object off the
+        # drawing's centre: a part of the drawing differs from the line more
+        # than anything outside it does. Inside an object, texture differs
+        # less than the background does.
+        around, obj, background = True, other, on_line
     elif (beyond := _beyond_the_border(intensity, drawing, line, centre, outside, size)) is not None:
         # Traced on the object's edge (a label's outline, an earlier result):
         # the line lies on the edge's ramp, at neither level. The object is
@@ -212,14 +224,23 @@ def _other_level(values: np.ndarray, level: float, floor: float) -> float:
     """The median of the class of ``values`` (split in two by Otsu's
     threshold) that lies further from ``level``; ``level`` if they do not
     differ by more than ``floor``."""
+    return _other_class(values, level, floor)[0]
+
+
+def _other_class(values: np.ndarray, level: float, floor: float) -> tuple[float, float]:
+    """:func:`_other_level`, and the share of ``values`` in that class (0 when none)."""
     from skimage.filters import threshold_otsu
 
     if values.size < 2 or np.ptp(values) <= floor:
-        return level
+        return level, 0.0
     split = threshold_otsu(values)
-    low, high = _median(values[values <= split]), _median(values[values > split])
-    other = low if abs(low - level) > abs(high - level) else high
-    return other if abs(other - level) > floor else level
+    below = values <= split
+    low, high = _median(values[below]), _median(values[~below])
+    if abs(low - level) > abs(high - level):
+        other, share = low, below.mean()
+    else:
+        other, share = high, 1.0 - below.mean()
+    return (other, float(share)) if abs(other - level) > floor else (level, 0.0)
 
 
 def _beyond_the_border(intensity, drawing, line, centre, outside, size) -> float | None:
