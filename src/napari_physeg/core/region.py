@@ -63,7 +63,7 @@ _BORDER_STEP = 0.6
 
 #: A drawing whose line and centre share a level is around an object off
 #: its centre when at least this share of it differs from the line more
-#: than anything outside does (see drawing_levels).
+#: than twice what anything outside does (see drawing_levels).
 _OFF_CENTRE_SHARE = 0.15
 
 #: A drawing inside the object expects it within this many times its size:
@@ -192,11 +192,12 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         # background too (within a fifth of the way to the other class).
         if abs(centre - on_line) < 0.2 * abs(other - on_line):
             obj = other
-    elif share >= _OFF_CENTRE_SHARE and abs(other - on_line) > max(abs(outside - on_line), floor):
+    elif share >= _OFF_CENTRE_SHARE and abs(other - on_line) > 2 * max(abs(outside - on_line), floor):
         # Line and centre alike on the background, the object off the
-        # drawing's centre: a part of the drawing differs from the line more
-        # than anything outside it does. Inside an object, texture differs
-        # less than the background does.
+        # drawing's centre: a part of the drawing differs from the line twice
+        # as much as anything outside it does. Inside an object, texture
+        # differs less than the background does; a line over bright
+        # neighbours and background alike has a ring outside as different.
         around, obj, background = True, other, on_line
     elif (beyond := _beyond_the_border(intensity, drawing, line, centre, outside, size)) is not None:
         # Traced on the object's edge (a label's outline, an earlier result):
