@@ -359,11 +359,10 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     if model.drawn_around:
         region = _split_at_cores(depth, like, seed, drawn, reach)
     else:
-        region = _split_at_cores(depth, like, seed, None, reach, _side_distance(shape, image_sides))
-    if not model.drawn_around:
         # No drawing line bounds it: neighbours touching at a neck narrow
         # for their own size are parted too (small crowded nuclei).
-        region &= _marked_basins(depth, like, seed)
+        region = (_split_at_cores(depth, like, seed, None, reach, _side_distance(shape, image_sides))
+                  & _marked_basins(depth, like, seed))
     return _smoothed(region & limit, image_sides)
 
 
