@@ -66,6 +66,9 @@ _BORDER_STEP = 0.6
 #: than twice what anything outside does (see drawing_levels).
 _OFF_CENTRE_SHARE = 0.15
 
+#: At most about this many of the drawing's pixels are split in two classes.
+_MAX_SAMPLES = 20000
+
 #: A drawing inside the object expects it within this many times its size:
 #: the object's cores reaching further are split deeper (see _cores). The
 #: object itself may reach further (a hand drawn inside its palm), up to
@@ -185,7 +188,12 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     around = np.isnan(outside) or (on_line - centre) * np.sign(outside - centre) >= 0.5 * abs(centre - outside)
     # What differs from the line within the drawing: the object, if the
     # drawing is around it; texture, if inside it.
-    other, share = _other_class(intensity[_fill(drawing, shape)], on_line, floor)
+    within = intensity[_fill(drawing, shape)]
+    within = within[:: max(1, within.size // _MAX_SAMPLES)]
+    span = max(abs(float(within.max()) - on_line), abs(float(within.min()) - on_line)) if within.size else 0.0
+    other, share = on_line, 0.0
+    if (around and abs(centre - on_line) < 0.2 * span) or (not around and span > 2 * max(abs(outside - on_line), floor)):
+        other, share = _other_class(within, on_line, floor)
     if around:
         obj, background = centre, on_line
         # A drawing far larger than the object: its centre is mostly
