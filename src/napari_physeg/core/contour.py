@@ -149,8 +149,6 @@ def outward_normals(contour: np.ndarray) -> np.ndarray:
 
 def mean_nearest_neighbour_distance(nodes: np.ndarray) -> float:
     """Mean distance from each node to its nearest other node."""
-    from scipy.spatial import cKDTree
-
     dist, _ = cKDTree(nodes).query(nodes, k=2)
     return float(dist[:, 1].mean())
 
@@ -181,8 +179,6 @@ def polygon_mask(contour: np.ndarray, shape) -> np.ndarray:
 
 def _crossing_pairs(contour: np.ndarray) -> np.ndarray:
     """Pairs ``(i, j)``, ``i < j``, of non-adjacent edges that cross."""
-    from scipy.spatial import cKDTree
-
     n = len(contour)
     p, q = contour, np.roll(contour, -1, axis=0)
     seg = np.linalg.norm(q - p, axis=1)
@@ -240,8 +236,6 @@ def cut_pinches(contour: np.ndarray, gap: float, max_cuts: int = 100, keep=None)
     folded back on itself (a spike of zero width, as clipping to the image's
     corner makes).
     """
-    from scipy.spatial import cKDTree
-
     contour = np.asarray(contour, dtype=np.float64)
     for _ in range(max_cuts):
         n = len(contour)

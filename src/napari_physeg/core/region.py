@@ -187,27 +187,23 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     # lies on the object, not halfway to its dark outside.
     around = np.isnan(outside) or (on_line - centre) * np.sign(outside - centre) >= 0.5 * abs(centre - outside)
     # What differs from the line within the drawing: the object, if the
-    # drawing is around it; texture, if inside it.
-    within = intensity[_fill(drawing, shape)]
+    # drawing is around it; texture, if inside it. (A classes' split is only
+    # made when the pixels' spread leaves room for a rule below to use it.)
+    drawn = _fill(drawing, shape)
+    within = intensity[drawn]
     within = within[:: max(1, within.size // _MAX_SAMPLES)]
     span = max(abs(float(within.max()) - on_line), abs(float(within.min()) - on_line)) if within.size else 0.0
-    other, share = on_line, 0.0
-    if (around and abs(centre - on_line) < 0.2 * span) or (not around and span > 2 * max(abs(outside - on_line), floor)):
-        other, share = _other_class(within, on_line, floor)
     if around:
         obj, background = centre, on_line
         # A drawing far larger than the object: its centre is mostly
         # background too (within a fifth of the way to the other class).
-        if abs(centre - on_line) < 0.2 * abs(other - on_line):
-            obj = other
-    elif share >= _OFF_CENTRE_SHARE and abs(other - on_line) > 2 * max(abs(outside - on_line), floor):
-        # Line and centre alike on the background, the object off the
-        # drawing's centre: a part of the drawing differs from the line twice
-        # as much as anything outside it does. Inside an object, texture
-        # differs less than the background does; a line over bright
-        # neighbours and background alike has a ring outside as different.
-        around, obj, background = True, other, on_line
-    elif (beyond := _beyond_the_border(intensity, drawing, line, centre, outside, size)) is not None:
+        if abs(centre - on_line) < 0.2 * span:
+            other = _other_level(within, on_line, floor)
+            if abs(centre - on_line) < 0.2 * abs(other - on_line):
+                obj = other
+    elif (off_centre := _off_centre_level(within, span, on_line, outside, floor)) is not None:
+        around, obj, background = True, off_centre, on_line
+    elif (beyond := _beyond_the_border(intensity, drawn, line, centre, outside, size)) is not None:
         # Traced on the object's edge (a label's outline, an earlier result):
         # the line lies on the edge's ramp, at neither level. The object is
         # within the drawing, as for a drawing around it; its background is
@@ -252,9 +248,27 @@ def _other_class(values: np.ndarray, level: float, floor: float) -> tuple[float,
     return (other, float(share)) if abs(other - level) > floor else (level, 0.0)
 
 
-def _beyond_the_border(intensity, drawing, line, centre, outside, size) -> float | None:
-    """The background's level if the drawn line (``line``, its band of pixels)
-    separates the object from its background, else None.
+def _off_centre_level(within: np.ndarray, span: float, on_line: float, outside: float, floor: float) -> float | None:
+    """The level of an object off the drawing's centre, for a drawing whose
+    line and centre share a level; None if there is none.
+
+    There is one when at least :data:`_OFF_CENTRE_SHARE` of the drawing's
+    pixels (``within``, spread ``span`` about the line's level) differs from
+    the line twice as much as anything outside does. Inside an object,
+    texture differs less than the background does; a line over bright
+    neighbours and background alike has a ring outside as different.
+    """
+    least = 2 * max(abs(outside - on_line), floor)
+    if span <= least:
+        return None
+    other, share = _other_class(within, on_line, floor)
+    return other if share >= _OFF_CENTRE_SHARE and abs(other - on_line) > least else None
+
+
+def _beyond_the_border(intensity, drawn, line, centre, outside, size) -> float | None:
+    """The background's level if the drawn line (``line``, its band of pixels;
+    ``drawn``, the pixels it encloses) separates the object from its
+    background, else None.
 
     It does when, from just outside the line to just inside it, the intensity
     climbs at least :data:`_BORDER_STEP` of the way from the background's
@@ -267,7 +281,6 @@ def _beyond_the_border(intensity, drawing, line, centre, outside, size) -> float
     """
     side = int(np.clip(round(_SIDE_FRACTION * size), 1, _SIDE_WIDTH))
     near = cv2.dilate(line.view(np.uint8), _disk(side)).view(bool) & ~line
-    drawn = _fill(drawing, intensity.shape)
     inner, outer = _median(intensity[near & drawn]), _median(intensity[near & ~drawn])
     if not (outer - inner) * np.sign(outside - centre) >= _BORDER_STEP * abs(centre - outside):
         return None

@@ -608,8 +608,8 @@ def _repaired(nodes: np.ndarray, bounds: np.ndarray, spacing: float, keep=None) 
         fixed = resample(remove_loops(cut_pinches(fixed, gap, keep=keep)), spacing=spacing)
         if len(fixed) < 4 or not cKDTree(fixed).query_pairs(gap):
             break
-    keep = np.linalg.norm(fixed - np.roll(fixed, 1, axis=0), axis=1) > 1e-3 * spacing
-    return fixed[keep] if keep.sum() >= 3 else fixed
+    distinct = np.linalg.norm(fixed - np.roll(fixed, 1, axis=0), axis=1) > 1e-3 * spacing
+    return fixed[distinct] if distinct.sum() >= 3 else fixed
 
 
 def _new_body(nodes: np.ndarray, bounds: np.ndarray, **options) -> _ElasticBody:
