@@ -133,6 +133,35 @@ def test_box_around_a_nucleus_that_encloses_a_neighbour(stack):
     found = polygon2mask(truth.shape, res.contour)
     assert (found & truth).sum() / (found | truth).sum() > 0.9
 
+@pytest.mark.parametrize("z, label, margin", [(32, 15, 0.4), (32, 9, 0.4), (32, 5, 1.0), (32, 8, 1.0)],
+                         ids=["z32-n15-dim-among-bright", "z32-n9-line-on-neighbours", "z32-n5-whole-neighbours",
+                              "z32-n8-whole-neighbours"])
+def test_box_in_a_crowded_field(stack, z, label, margin):
+    """Boxes as napari's rectangle tool draws them, ``margin`` times the
+    nucleus' bounding box wider, in a crowded field.
+
+    * z32/n15, dim among brighter neighbours: every ring outside the box is
+      brighter than its centre, the line darker; it was read as drawn inside a
+      dark object (IoU 0.0005).
+    * z32/n9: half the box's line lies on neighbours, its median nearer the
+      nucleus' level than the background's; read as drawn inside (0.40).
+    * z32/n5, z32/n8: the box holds whole neighbours apart from the nucleus,
+      which were taken as its lobes (0.46, 0.51)."""
+    image, labels = stack[0][z], stack[1][z]
+    truth = ndi.binary_fill_holes(labels == label)
+    rows, cols = np.nonzero(truth)
+    half = margin * np.array([np.ptp(rows), np.ptp(cols)]) / 2 + 1.0
+    lo, hi = np.array([rows.min(), cols.min()]) - half, np.array([rows.max(), cols.max()]) + half
+    box = np.array([[lo[0], lo[1]], [lo[0], hi[1]], [hi[0], hi[1]], [hi[0], lo[1]]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the box may leave the image
+        res = segment(image, box)
+    found = polygon2mask(truth.shape, res.contour)
+    iou = (found & truth).sum() / (found | truth).sum()
+    assert res.converged and res.polarity == 1
+    assert iou > 0.85, iou
+
+
 class _no_warning:
     def __enter__(self):
         return self
