@@ -4,7 +4,7 @@ Objects and truths (``benchmarks/real_data.py`` says how each truth was made): n
 confocal stack with its shipped labels, nuclei of a fluorescence time-lapse, the 24 coins of
 ``skimage.data.coins()`` and the cell of ``skimage.data.cell()``. Each object is segmented
 from the initial contours people draw: a rough circle around it, a jittery freehand lasso,
-a small circle inside it (``real_data.INIT_KINDS`` lists which for which group). Run::
+a small circle inside it, a box as napari's rectangle tool draws it (``real_data.INIT_KINDS`` lists which for which group). Run::
 
     make bench        # or: .venv/bin/python benchmarks/real.py [--quick] [--groups nuclei coins] [--write]
 
@@ -19,7 +19,7 @@ Methods, all from the same init in the same run:
 * ours - ``segment(image, init)`` with its defaults, on the whole image (it takes the window
   it needs itself). An exception is a failure: IoU 0, its class and message recorded.
 * scikit-image anchors, run by ``benchmarks/segmentation.py``'s functions with its settings:
-  ``active_contour`` (snake), MGAC (balloon -1 from a circle or freehand init, which lie
+  ``active_contour`` (snake), MGAC (balloon -1 from a circle, freehand or box init, which lie
   around the object, +1 from an inside init) and morphological Chan-Vese (MCV). They run on
   a crop: the bounding box of the init and the truth, padded by ``PAD`` px and clipped to
   the image (the crop only helps them: fewer pixels, fewer neighbours, and its extent uses
@@ -587,7 +587,7 @@ made: nuclei of a confocal stack with their shipped labels (`napari-bio-sample-d
 a fluorescence time-lapse, the 24 coins of `skimage.data.coins()` and `skimage.data.cell()`
 (truths of the last three from classical pipelines, described in `benchmarks/real_data.py`),
 each from the contours people draw: a rough circle around the object, a jittery freehand lasso,
-a small circle inside it. The anchors run on a crop around the init and the truth; ours on the
+a small circle inside it, a box 1.1-1.5x the object's bounding box (napari's rectangle tool). The anchors run on a crop around the init and the truth; ours on the
 whole image. Per-case results: `benchmark_output/real_cases.csv` after a run."""
 
 

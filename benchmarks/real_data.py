@@ -292,12 +292,12 @@ AMBIGUOUS_NUCLEI = {
 
 GROUPS = {"nuclei": nuclei, "heldout": heldout, "small": small, "timelapse": timelapse, "coins": coins, "cell": cell}
 INIT_KINDS = {
-    "nuclei": ("circle", "freehand", "inside"),
-    "heldout": ("circle", "freehand", "inside"),
-    "small": ("circle", "freehand", "inside"),
-    "timelapse": ("circle", "freehand"),
-    "coins": ("circle", "inside"),
-    "cell": ("circle", "freehand", "inside"),
+    "nuclei": ("circle", "freehand", "inside", "box"),
+    "heldout": ("circle", "freehand", "inside", "box"),
+    "small": ("circle", "freehand", "inside", "box"),
+    "timelapse": ("circle", "freehand", "box"),
+    "coins": ("circle", "inside", "box"),
+    "cell": ("circle", "freehand", "inside", "box"),
 }
 
 
@@ -320,6 +320,18 @@ def init_circle(obj: Obj, rng) -> tuple[np.ndarray, str]:
     angle, off = rng.uniform(0, 2 * np.pi), rng.uniform(0, 0.1 * r)
     c = obj.centroid + off * np.array([np.sin(angle), np.cos(angle)])
     return circle(c, r), f"circle{factor:.2f}"
+
+
+def init_box(obj: Obj, rng) -> tuple[np.ndarray, str]:
+    """A rectangle as napari's rectangle tool draws it: the object's bounding
+    box 1.1-1.5 times as wide and as tall, shifted by up to a tenth of its size."""
+    rows, cols = np.nonzero(obj.mask)
+    lo, hi = np.array([rows.min(), cols.min()], float), np.array([rows.max(), cols.max()], float)
+    factor = rng.uniform(1.1, 1.5)
+    half = factor * (hi - lo + 1) / 2
+    centre = (lo + hi) / 2 + rng.uniform(-0.1, 0.1, 2) * (hi - lo + 1)
+    a, b = centre - half, centre + half
+    return np.array([[a[0], a[1]], [a[0], b[1]], [b[0], b[1]], [b[0], a[1]]]), f"box{factor:.2f}"
 
 
 def boundary(mask: np.ndarray, dilate: float) -> np.ndarray:
@@ -402,7 +414,7 @@ def traced_outline(obj: Obj, offset: float) -> np.ndarray | None:
     return nodes if len(np.unique(nodes, axis=0)) == len(nodes) else None
 
 
-INITS = {"circle": init_circle, "freehand": init_freehand, "inside": init_inside}
+INITS = {"circle": init_circle, "freehand": init_freehand, "inside": init_inside, "box": init_box}
 
 
 def cases(groups, quick: bool = False):

@@ -68,7 +68,7 @@ _OFF_CENTRE_SHARE = 0.15
 
 #: A drawn line that crosses neighbours is around the object when its
 #: quarter nearest the background's level lies at least this share of the way
-#: from the centre's level to it (see _around). On the real-image benchmark,
+#: from the centre's level to it (see _line_among_neighbours). On the real-image benchmark,
 #: for drawings made inside the nuclei but those in division, that quarter
 #: lay at most 0.57 of the way; for boxes twice a nucleus' size in a crowded
 #: field, at least 0.97.
@@ -189,9 +189,17 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         level = _other_level(intensity[ring], centre, floor) if far else _median(intensity[ring])
         if not np.isnan(level) and abs(level - centre) > best:
             outside, best = level, abs(level - centre)
-    around, crossed = _around(along, on_line, centre, outside)
-    if crossed is not None:  # the line crosses neighbours: its background is its quarter nearest the outside's
-        on_line = crossed
+    # Around the object, the line lies on the background: at least halfway
+    # from the centre's level toward the outside's. (Comparing the line with
+    # the outside instead fails when the rings hold look-alike neighbours.)
+    # Signed: a line brighter than a dim, textured centre of a bright object
+    # lies on the object, not halfway to its dark outside.
+    # Nor can a line that differs from the centre more than anything outside
+    # does, the other way, lie on the object: the centre's texture would
+    # differ from the object more than its background does (the rings hold
+    # neighbours unlike the object: a dim nucleus among bright ones).
+    around = (np.isnan(outside) or (on_line - centre) * np.sign(outside - centre) >= 0.5 * abs(centre - outside)
+              or abs(on_line - centre) > abs(centre - outside))
     # What differs from the line within the drawing: the object, if the
     # drawing is around it; texture, if inside it. (A classes' split is only
     # made when the pixels' spread leaves room for a rule below to use it.)
@@ -207,14 +215,16 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
             other = _other_level(within, on_line, floor)
             if abs(centre - on_line) < 0.2 * abs(other - on_line):
                 obj = other
-    elif (off_centre := _off_centre_level(within, span, on_line, outside, floor)) is not None:
-        around, obj, background = True, off_centre, on_line
     elif (beyond := _beyond_the_border(intensity, drawn, line, centre, outside, size)) is not None:
         # Traced on the object's edge (a label's outline, an earlier result):
         # the line lies on the edge's ramp, at neither level. The object is
         # within the drawing, as for a drawing around it; its background is
         # beyond the line.
         around, obj, background = True, centre, beyond
+    elif (crossed := _line_among_neighbours(along, centre, outside)) is not None:
+        around, obj, background = True, centre, crossed
+    elif (off_centre := _off_centre_level(within, span, on_line, outside, floor)) is not None:
+        around, obj, background = True, off_centre, on_line
     else:
         obj, background = on_line, outside
     if polarity is None:
@@ -226,39 +236,22 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     return RegionModel(int(polarity), float(obj), float(background), bool(around), floor)
 
 
-def _around(along: np.ndarray, on_line: float, centre: float, outside: float) -> tuple[bool, float | None]:
-    """Whether the drawn line lies on the background around the object, and
-    the background's level on a line that crosses neighbours (else None).
+def _line_among_neighbours(along: np.ndarray, centre: float, outside: float) -> float | None:
+    """The background's level on a line drawn around the object that crosses
+    neighbours for up to half its length (a box twice a nucleus' size in a
+    crowded field), whose median lies nearer the object's level than the
+    background's; None if the line does not lie around the object so.
 
     ``along`` are the intensities on the line (median ``on_line``),
     ``centre`` the level at the drawing's centre, ``outside`` the level of the
-    ring outside the drawing that differs most from the centre. Around the
-    object, the line lies on the background:
-
-    * its median is at least halfway from the centre's level toward the
-      outside's (signed: a line brighter than a dim, textured centre of a
-      bright object lies on the object, not halfway to its dark outside);
-    * or, drawn in a crowded field (a box twice the object's size), the line
-      crosses neighbours for up to half its length, and its quarter nearest
-      the outside's level lies at least :data:`_CROSSED_SHARE` of the way
-      there (inside an object, that quarter of the line is texture);
-    * or the line differs from the centre more than anything outside does,
-      the other way (the rings hold neighbours unlike the object: a dim
-      nucleus among bright ones). Inside an object, the centre's texture
-      cannot differ from the object more than its background does.
+    ring outside the drawing that differs most from the centre. The line's
+    quarter nearest the outside's level is the background when it lies at
+    least :data:`_CROSSED_SHARE` of the way there (inside an object, that
+    quarter of the line is texture).
     """
-    if np.isnan(outside):
-        return True, None
-    gap = abs(centre - outside)
     toward = np.sign(outside - centre)
-    if (on_line - centre) * toward >= 0.5 * gap:
-        return True, None
-    if abs(on_line - centre) > gap:
-        return True, None
     quarter = float(np.percentile(along, 25 if toward < 0 else 75))
-    if (quarter - centre) * toward >= _CROSSED_SHARE * gap:
-        return True, quarter
-    return False, None
+    return quarter if (quarter - centre) * toward >= _CROSSED_SHARE * abs(centre - outside) else None
 
 
 def _least_contrast(intensity: np.ndarray) -> float:
