@@ -172,6 +172,11 @@ class ForceField:
         """
         if normals is None:
             normals = outward_normals(nodes)
+        w = self.weights
+        if w.get("edges", 0) <= 0 and w.get("distance", 0) <= 0:
+            # The region force alone (the refinement phase): its short lines only.
+            region = self.sample(nodes[:, None, :] + self._region_offsets[None, :, None] * normals[:, None, :])
+            return (w.get("intensity", 0) * region[..., 2].mean(1)).astype(np.float64)[:, None] * normals
         lengths = self.line_lengths(nodes).astype(np.float64)
         S = self.n_samples
         offsets = np.concatenate([lengths[:, None] * self._line_fractions[None, :],  # (N, 2S+1) search line
@@ -181,7 +186,6 @@ class ForceField:
         samples = self.sample(nodes[:, None, :] + offsets[..., None] * normals[:, None, :])
         values = samples[:, :2 * S + 1].astype(np.float64)  # (N, 2S+1, 3)
         total = np.zeros(len(nodes))
-        w = self.weights
         if w.get("edges", 0) > 0:
             # An edge counts only where the object-ness falls outward across
             # it (object inside, background outside): the far side of the
