@@ -162,6 +162,45 @@ def test_box_in_a_crowded_field(stack, z, label, margin):
     assert iou > 0.85, iou
 
 
+@pytest.mark.parametrize("z, label, centre, radius", [(26, 3, (194, 51), 2.8), (32, 9, (235, 132), 5.3)],
+                         ids=["z26-n3", "z32-n9"])
+def test_small_circle_inside_a_textured_nucleus(stack, z, label, centre, radius):
+    """A click-sized circle (3-5 px) inside a nucleus, off its centre: every
+    ring read around it (to 3.2x) lies on the nucleus' texture, whose spots
+    differ from the circle's centre by more than the noise. They were taken
+    for the background, the circle for one drawn around a spot, and the
+    contour stayed on it (IoU 0.02); rings further out are now read until one
+    stands out of the texture twice as much."""
+    image, labels = stack[0][z], stack[1][z]
+    truth = ndi.binary_fill_holes(labels == label)
+    init = circle(np.array(centre, float), radius)
+    assert truth[polygon2mask(truth.shape, init)].all()
+    res = segment(image, init)
+    found = polygon2mask(truth.shape, res.contour)
+    iou = (found & truth).sum() / (found | truth).sum()
+    assert res.converged and res.polarity == 1
+    assert iou > 0.85, iou
+
+
+@pytest.mark.parametrize("centre, radius", [((40, 215), 3.3), ((56, 160), 4.9)], ids=["c03", "c02"])
+def test_small_circle_inside_an_engraved_coin(centre, radius):
+    """The same on coins of skimage.data.coins(), whose relief is texture (IoU 0.02-0.05 before)."""
+    from skimage import data, filters, measure, segmentation
+
+    image = data.coins()
+    markers = np.zeros_like(image)
+    markers[image < 30] = 1
+    markers[image > 150] = 2
+    labels = measure.label(ndi.binary_fill_holes(segmentation.watershed(filters.sobel(image), markers) == 2))
+    truth = labels == labels[centre]
+    init = circle(np.array(centre, float), radius)
+    res = segment(image, init)
+    found = polygon2mask(truth.shape, res.contour)
+    iou = (found & truth).sum() / (found | truth).sum()
+    assert res.converged and res.polarity == 1
+    assert iou > 0.9, iou
+
+
 class _no_warning:
     def __enter__(self):
         return self

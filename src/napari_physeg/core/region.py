@@ -74,6 +74,11 @@ _OFF_CENTRE_SHARE = 0.15
 #: field, at least 0.97.
 _CROSSED_SHARE = 0.8
 
+#: A drawn line (a ring outside the drawing) lies within the texture of the
+#: drawing's centre when their levels differ by at most this many robust
+#: standard deviations of the line's (the ring's) pixels (see drawing_levels).
+_TEXTURE_SPREADS = 2.0
+
 #: At most about this many of the drawing's pixels are split in two classes.
 _MAX_SAMPLES = 20000
 
@@ -177,18 +182,34 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         centre = on_line
     floor = _least_contrast(intensity)
     # The background of a drawing made inside the object: the ring outside
-    # it that differs most from the drawing's centre.
-    outside, best = np.nan, -1.0
+    # it that differs most from the drawing's centre. Rings further out are
+    # read while no near ring differs visibly from the centre. So they are
+    # when the near ring that differs most does not stand out of the scatter
+    # of its own pixels or of the drawing's, around a line that does not
+    # either and differs from the centre less (a small drawing inside a
+    # textured object): then until one differs from the centre twice as
+    # much, for the near rings held the object's texture, not its background.
+    textured = abs(on_line - centre) <= max(floor, _TEXTURE_SPREADS * _scatter(along))
+    drawn = _fill(drawing, shape)
+    within = intensity[drawn]
+    within = within[:: max(1, within.size // _MAX_SAMPLES)]
+    outside, best, scatter, through = np.nan, -1.0, 0.0, False
     for k, (lo, hi) in enumerate(_OUTER_RINGS + _FAR_RINGS):
         far = k >= len(_OUTER_RINGS)
-        if far and best > floor:
+        if k == len(_OUTER_RINGS):
+            near_best = best
+            texture = max(scatter, _scatter(within))
+            through = (textured and floor < near_best <= _TEXTURE_SPREADS * texture
+                       and abs(on_line - centre) <= near_best)
+        if far and best > (near_best if through else floor):
             break
-        ring = _fill(_scaled(drawing, hi), shape) & ~_fill(_scaled(drawing, lo), shape)
+        ring = intensity[_fill(_scaled(drawing, hi), shape) & ~_fill(_scaled(drawing, lo), shape)]
         # Far out the background may be a small part of a ring that still
         # lies mostly on the object: the ring's class furthest from the centre.
-        level = _other_level(intensity[ring], centre, floor) if far else _median(intensity[ring])
-        if not np.isnan(level) and abs(level - centre) > best:
+        level = _other_level(ring, centre, floor) if far else _median(ring)
+        if not np.isnan(level) and abs(level - centre) > (2 * near_best if through else best):
             outside, best = level, abs(level - centre)
+            scatter = 0.0 if far else _scatter(ring)
     # Around the object, the line lies on the background: at least halfway
     # from the centre's level toward the outside's. (Comparing the line with
     # the outside instead fails when the rings hold look-alike neighbours.)
@@ -203,9 +224,6 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     # What differs from the line within the drawing: the object, if the
     # drawing is around it; texture, if inside it. (A classes' split is only
     # made when the pixels' spread leaves room for a rule below to use it.)
-    drawn = _fill(drawing, shape)
-    within = intensity[drawn]
-    within = within[:: max(1, within.size // _MAX_SAMPLES)]
     span = max(abs(float(within.max()) - on_line), abs(float(within.min()) - on_line)) if within.size else 0.0
     if around:
         obj, background = centre, on_line
@@ -252,6 +270,15 @@ def _line_among_neighbours(along: np.ndarray, centre: float, outside: float) -> 
     toward = np.sign(outside - centre)
     quarter = float(np.percentile(along, 25 if toward < 0 else 75))
     return quarter if (quarter - centre) * toward >= _CROSSED_SHARE * abs(centre - outside) else None
+
+
+def _scatter(values: np.ndarray) -> float:
+    """Robust standard deviation of ``values`` (1.4826 times their median
+    absolute deviation; 0 for none): a ring that straddles an edge is two
+    levels, not texture."""
+    if values.size == 0:
+        return 0.0
+    return 1.4826 * float(np.median(np.abs(values - np.median(values))))
 
 
 def _least_contrast(intensity: np.ndarray) -> float:
