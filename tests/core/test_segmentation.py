@@ -424,17 +424,17 @@ def test_drawing_along_the_image_sides_in_noise(make):
 
 
 def _feature_shapes(monkeypatch):
-    """Shapes of the images compute_features is called on from now on."""
+    """Shapes of the images the feature images are computed on from now on."""
     import napari_physeg.core.segmentation as seg
 
     shapes = []
-    real = seg.compute_features
+    real = seg._edges_and_intensity
 
-    def recording(image, **kwargs):
+    def recording(image, isef_b):
         shapes.append(np.shape(image))
-        return real(image, **kwargs)
+        return real(image, isef_b)
 
-    monkeypatch.setattr(seg, "compute_features", recording)
+    monkeypatch.setattr(seg, "_edges_and_intensity", recording)
     return shapes
 
 

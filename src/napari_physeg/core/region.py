@@ -193,14 +193,13 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     drawn = _fill(drawing, shape)
     within = intensity[drawn]
     within = within[:: max(1, within.size // _MAX_SAMPLES)]
-    outside, best, scatter, through = np.nan, -1.0, 0.0, False
+    outside, best, best_ring, through = np.nan, -1.0, None, False
     for k, (lo, hi) in enumerate(_OUTER_RINGS + _FAR_RINGS):
         far = k >= len(_OUTER_RINGS)
         if k == len(_OUTER_RINGS):
             near_best = best
-            texture = max(scatter, _scatter(within))
-            through = (textured and floor < near_best <= _TEXTURE_SPREADS * texture
-                       and abs(on_line - centre) <= near_best)
+            through = (textured and floor < near_best and abs(on_line - centre) <= near_best
+                       and near_best <= _TEXTURE_SPREADS * max(_scatter(best_ring), _scatter(within)))
         if far and best > (near_best if through else floor):
             break
         ring = intensity[_fill(_scaled(drawing, hi), shape) & ~_fill(_scaled(drawing, lo), shape)]
@@ -208,8 +207,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         # lies mostly on the object: the ring's class furthest from the centre.
         level = _other_level(ring, centre, floor) if far else _median(ring)
         if not np.isnan(level) and abs(level - centre) > (2 * near_best if through else best):
-            outside, best = level, abs(level - centre)
-            scatter = 0.0 if far else _scatter(ring)
+            outside, best, best_ring = level, abs(level - centre), ring
     # Around the object, the line lies on the background: at least halfway
     # from the centre's level toward the outside's. (Comparing the line with
     # the outside instead fails when the rings hold look-alike neighbours.)
@@ -276,7 +274,7 @@ def _scatter(values: np.ndarray) -> float:
     """Robust standard deviation of ``values`` (1.4826 times their median
     absolute deviation; 0 for none): a ring that straddles an edge is two
     levels, not texture."""
-    if values.size == 0:
+    if values is None or values.size == 0:
         return 0.0
     return 1.4826 * float(np.median(np.abs(values - np.median(values))))
 

@@ -23,7 +23,7 @@ from .contour import (as_contour, contour_gap, cut_pinches, nodes_for_spacing, o
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
-from .features import chamfer_distance, compute_features, normalized_intensity
+from .features import chamfer_distance, normalized_intensity, shen_castan_edges
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .materials import Material, get_material
 from .region import _disk, _fill, _scaled, drawing_levels, object_region, objectness
@@ -400,13 +400,17 @@ class FrameFeatures:
     @classmethod
     def of(cls, image, isef_b: float = 0.7) -> FrameFeatures:
         image = _validate_image(image)
-        return cls(compute_features(image, b=isef_b).edges, _light_intensity(image))
+        return cls(*_edges_and_intensity(image, isef_b))
 
 
-def _light_intensity(image) -> np.ndarray:
-    """The region force needs the border where it is: a light denoising, not
-    the strong ISEF smoothing used for edge detection."""
-    return cv2.GaussianBlur(normalized_intensity(image), (0, 0), 1.0, borderType=cv2.BORDER_REFLECT)
+def _edges_and_intensity(image, isef_b: float) -> tuple[np.ndarray, np.ndarray]:
+    """The edge map (Shen-Castan on the normalised image, as
+    :func:`~.features.compute_features` finds it) and the lightly smoothed
+    normalised intensity: the region force needs the border where it is, a
+    light denoising, not the strong ISEF smoothing used for edge detection."""
+    normalised = normalized_intensity(image)
+    return (shen_castan_edges(normalised, b=isef_b),
+            cv2.GaussianBlur(normalised, (0, 0), 1.0, borderType=cv2.BORDER_REFLECT))
 
 
 class _FeatureWindow:
@@ -442,7 +446,7 @@ class _FeatureWindow:
         if self.shared is not None:
             edges, intensity = self.shared.edges[window], self.shared.intensity[window]
         else:
-            edges, intensity = compute_features(sub, b=self.isef_b).edges, _light_intensity(sub)
+            edges, intensity = _edges_and_intensity(sub, self.isef_b)
         if not edges.any() and np.ptp(intensity) <= 1e-12:
             if sub.shape != self.image.shape:  # nothing here: look at the whole image
                 return self._compute(self._whole_image)
