@@ -24,6 +24,7 @@ bench: setup
 	$(PY) benchmarks/segmentation.py
 	$(PY) benchmarks/matching.py
 	$(PY) benchmarks/real.py
+	$(PY) benchmarks/drawings.py
 	$(PY) benchmarks/tracking.py
 	$(PY) benchmarks/batch.py
 	if [ -n "$$DISPLAY" ]; then $(PY) benchmarks/gui.py; else xvfb-run -a $(PY) benchmarks/gui.py; fi

@@ -45,9 +45,8 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from _common import machine  # noqa: E402
+from _common import machine, write_section  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
 #: The issue's bound on the GUI's overhead, for runs of LONG_RUN seconds and more.
 LIMIT = 1.25
 LONG_RUN = 2.0
@@ -209,15 +208,7 @@ def main(argv=None) -> int:
     lines += ["", f"Worst ratio over the runs of {LONG_RUN:g} s and more headless: {worst:.2f} (target ≤ {LIMIT})."]
     print(lines[-1])
     if args.write:
-        doc = ROOT / "docs" / "benchmarks.md"
-        text = doc.read_text()
-        start, end = "<!-- gui:start -->", "<!-- gui:end -->"
-        block = start + "\n" + "\n".join(lines) + "\n" + end
-        if start in text:
-            text = text[: text.index(start)] + block + text[text.index(end) + len(end):]
-        else:
-            text = text.rstrip("\n") + "\n\n## The widgets against headless runs\n\n" + block + "\n"
-        doc.write_text(text)
+        write_section("gui", lines, "The widgets against headless runs")
     return 0 if worst <= LIMIT else 1
 
 

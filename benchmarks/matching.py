@@ -60,19 +60,16 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
-from _common import machine, timed  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
+from _common import machine, timed, write_section  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
 from matching_data import articulated_pairs, held_out_pairs  # noqa: E402
 from napari_physeg import data  # noqa: E402
 from napari_physeg.core import match  # noqa: E402
 from napari_physeg.core.contour import resample, signed_area  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
-START, END = "<!-- matching:start -->", "<!-- matching:end -->"
 
 
 # --------------------------------------------------------------------------
@@ -441,16 +438,7 @@ def main(argv=None):
         _ablation_table(out, cases, families)
 
     if args.write:
-        doc = ROOT / "docs" / "benchmarks.md"
-        text = doc.read_text() if doc.exists() else "# Benchmarks\n"
-        block = START + "\n" + "\n".join(lines) + "\n" + END
-        if START in text and END in text:
-            text = text[: text.index(START)] + block + text[text.index(END) + len(END):]
-        else:
-            text = text.rstrip() + "\n\n## Matching\n\n" + block + "\n"
-        doc.parent.mkdir(parents=True, exist_ok=True)
-        doc.write_text(text)
-        print(f"wrote {doc}", file=sys.stderr)
+        print(f"wrote {write_section('matching', lines, 'Matching')}", file=sys.stderr)
 
 
 if __name__ == "__main__":

@@ -52,7 +52,7 @@ import numpy as np  # noqa: E402
 from skimage.draw import polygon2mask  # noqa: E402
 
 import real_data  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
-from _common import machine  # noqa: E402
+from _common import machine, write_section  # noqa: E402
 from napari_physeg.core import segment  # noqa: E402
 from segmentation import iou, run_mcv, run_mgac, run_snake  # noqa: E402
 
@@ -563,21 +563,13 @@ def main(argv=None):
     print(f"run time {time.perf_counter() - t_start:.0f} s", file=sys.stderr)
 
     if args.write:
-        doc = ROOT / "docs" / "benchmarks.md"
-        text = doc.read_text() if doc.exists() else "# Benchmarks\n"
         figs = ["", "Worst cases of ours: ![worst cases](images/real_worst.png)", "",
                 "Time-lapse truths and their ambiguity: ![time-lapse ambiguity](images/real_timelapse_ambiguity.png)",
                 "",
                 "Ambiguous nucleus truths: ![nucleus ambiguity](images/real_nuclei_ambiguity.png)",
                 "",
                 "Truths: " + ", ".join(f"[{p.stem[len('real_truth_'):]}](images/{p.name})" for p in truth_paths)]
-        start, end = "<!-- real:start -->", "<!-- real:end -->"
-        block = start + "\n" + "\n".join(lines + figs) + "\n" + end
-        if start in text:
-            text = text[: text.index(start)] + block + text[text.index(end) + len(end):]
-        else:
-            text = text.rstrip() + "\n\n## Real images\n\n" + INTRO + "\n\n" + block + "\n"
-        doc.write_text(text)
+        doc = write_section("real", lines + figs, "Real images\n\n" + INTRO)
         print(f"wrote {doc}", file=sys.stderr)
 
 

@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import statistics
 import sys
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -40,12 +39,11 @@ from skimage.segmentation import (
     morphological_geodesic_active_contour,
 )
 
-from _common import machine, timed  # benchmarks/ is on sys.path when run as a script
+from _common import machine, timed, write_section  # benchmarks/ is on sys.path when run as a script
 from napari_physeg import data
 from napari_physeg.core import segment
 from napari_physeg.core.contour import resample
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def iou(a: np.ndarray, b: np.ndarray) -> float:
@@ -210,16 +208,7 @@ def main(argv=None):
         f"(at the start and at every remesh), IoU {horse_iou:.3f}")
 
     if args.write:
-        doc = ROOT / "docs" / "benchmarks.md"
-        text = doc.read_text() if doc.exists() else "# Benchmarks\n"
-        start, end = "<!-- segmentation:start -->", "<!-- segmentation:end -->"
-        block = start + "\n" + "\n".join(lines) + "\n" + end
-        if start in text:
-            text = text[: text.index(start)] + block + text[text.index(end) + len(end):]
-        else:
-            text = text.rstrip() + "\n\n## Segmentation\n\n" + block + "\n"
-        doc.write_text(text)
-        print(f"wrote {doc}", file=sys.stderr)
+        print(f"wrote {write_section('segmentation', lines, 'Segmentation')}", file=sys.stderr)
 
 
 if __name__ == "__main__":

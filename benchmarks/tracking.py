@@ -55,7 +55,7 @@ from scipy import ndimage as ndi  # noqa: E402
 from skimage import feature, filters, measure, segmentation  # noqa: E402
 
 import real_data  # noqa: E402
-from _common import machine  # noqa: E402
+from _common import machine, write_section  # noqa: E402
 from napari_physeg import data  # noqa: E402
 from napari_physeg.core import TRACKED, track  # noqa: E402
 from napari_physeg.core.contour import outward_normals, polygon_mask, remove_loops, resample  # noqa: E402
@@ -348,16 +348,9 @@ def main(argv=None):
     kymograph_figure(syn, kymo)
     print(f"wrote {kymo}; run time {time.perf_counter() - t_start:.0f} s", file=sys.stderr)
     if args.write:
-        doc = ROOT / "docs" / "benchmarks.md"
-        text = doc.read_text()
-        start, end = "<!-- tracking:start -->", "<!-- tracking:end -->"
-        block = start + "\n" + "\n".join(lines + ["", "![membrane maps](images/tracking_membrane_maps.png)"]) + "\n" + end
-        if start in text:
-            text = text[: text.index(start)] + block + text[text.index(end) + len(end):]
-        else:
-            text = text.rstrip() + "\n\n## Tracking\n\n" + __doc__.split("\n\n", 1)[1].split("Run::")[0].strip() \
-                + "\n\n" + block + "\n"
-        doc.write_text(text)
+        intro = __doc__.split("\n\n", 1)[1].split("Run::")[0].strip()
+        doc = write_section("tracking", lines + ["", "![membrane maps](images/tracking_membrane_maps.png)"],
+                            "Tracking\n\n" + intro)
         print(f"wrote {doc}", file=sys.stderr)
 
 

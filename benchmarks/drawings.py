@@ -1,0 +1,137 @@
+"""``segment()`` from drawings beyond those of ``benchmarks/real.py``, on the same real images.
+
+``benchmarks/real.py`` starts each object from four drawings (a rough circle, a freehand
+lasso, a circle half the object's size inside it, a box 1.1-1.5x its bounding box) and runs the
+scikit-image anchors beside ours. People draw in other ways too; this script tries ours alone
+(the anchors have no answer to most of these) on every object of the real groups from six more,
+each seeded by the case's name:
+
+* **polygon**: 5-8 clicks around the object at 1.2-1.6x its radius (+-15 %), their angles
+  evenly spread with jitter, so that some chords cut the object's corners;
+* **ellipse**: napari's ellipse tool over the bounding box, 1.15-1.4x it;
+* **off-centre**: a circle 1.6x the object's radius, its centre 0.35 radius off the object's,
+  crossing neighbours and the image's side;
+* **tight**: the object's outline 0.5-1.5 px outside it (a label's outline, an earlier result);
+* **click inside**: a circle of 0.3x the local depth (1.5-6 px) at a random point at least
+  0.3 of the object's depth inside it, as one click-drags inside a large object;
+* **box 2x**: a box twice the bounding box, holding whole neighbours in a crowded field.
+
+Run::
+
+    python benchmarks/drawings.py [--write]
+
+``--write`` puts the table into docs/benchmarks.md between ``<!-- drawings:start -->`` and
+``<!-- drawings:end -->``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import warnings
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import numpy as np  # noqa: E402
+from scipy import ndimage as ndi  # noqa: E402
+
+import real_data  # noqa: E402
+from _common import machine, write_section  # noqa: E402
+from real import run_ours  # noqa: E402
+
+GROUPS = ("nuclei", "heldout", "small", "timelapse", "coins")
+
+
+def polygon(obj, rng):
+    n = int(rng.integers(5, 9))
+    angles = rng.uniform(0, 2 * np.pi) + 2 * np.pi * (np.arange(n) + rng.uniform(-0.3, 0.3, n)) / n
+    radii = obj.radius * rng.uniform(1.2, 1.6) * rng.uniform(0.85, 1.15, n)
+    return obj.centroid + np.column_stack([radii * np.sin(angles), radii * np.cos(angles)])
+
+
+def _bounding_box(obj):
+    rows, cols = np.nonzero(obj.mask)
+    lo, hi = np.array([rows.min(), cols.min()], float), np.array([rows.max(), cols.max()], float)
+    return (lo + hi) / 2, (hi - lo + 1) / 2
+
+
+def ellipse(obj, rng):
+    centre, half = _bounding_box(obj)
+    half = rng.uniform(1.15, 1.4) * half
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    return centre + np.column_stack([half[0] * np.sin(t), half[1] * np.cos(t)])
+
+
+def off_centre(obj, rng):
+    angle = rng.uniform(0, 2 * np.pi)
+    return real_data.circle(obj.centroid + 0.35 * obj.radius * np.array([np.sin(angle), np.cos(angle)]),
+                            1.6 * obj.radius)
+
+
+def tight(obj, rng):
+    return real_data.boundary(obj.mask, rng.uniform(0.5, 1.5))
+
+
+def click_inside(obj, rng):
+    depth = ndi.distance_transform_edt(obj.mask)
+    candidates = np.argwhere(depth >= 0.3 * depth.max())
+    point = candidates[rng.integers(len(candidates))]
+    return real_data.circle(point.astype(float), max(1.5, 0.3 * depth[tuple(point)]))
+
+
+def box_2x(obj, rng):
+    centre, half = _bounding_box(obj)
+    lo, hi = centre - 2 * half, centre + 2 * half
+    return np.array([[lo[0], lo[1]], [lo[0], hi[1]], [hi[0], hi[1]], [hi[0], lo[1]]])
+
+
+DRAWINGS = {"polygon": polygon, "ellipse": ellipse, "off-centre": off_centre, "tight": tight,
+            "click inside": click_inside, "box 2x": box_2x}
+
+
+def run(groups=GROUPS):
+    """One row per object and drawing: group, object, drawing, IoU, stop reason."""
+    rows = []
+    for group in groups:
+        for obj in real_data.GROUPS[group]():
+            for kind, draw in DRAWINGS.items():
+                init = draw(obj, real_data.rng_for(f"drawings/{group}/{obj.name}/{kind}"))
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    result, _ = run_ours(obj, init)
+                rows.append((group, obj.name, kind, result["iou"], result["stop"]))
+    return rows
+
+
+def table(rows) -> list[str]:
+    lines = ["| group | " + " | ".join(DRAWINGS) + " |", "|---|" + "---|" * len(DRAWINGS)]
+    for group in dict.fromkeys(r[0] for r in rows):
+        cells = []
+        for kind in DRAWINGS:
+            iou = np.array([r[3] for r in rows if r[0] == group and r[2] == kind])
+            cells.append(f"{iou.mean():.3f} ({np.mean(iou < 0.85):.0%}, {iou.min():.2f})")
+        lines.append(f"| {group} | " + " | ".join(cells) + " |")
+    stops = {}
+    for r in rows:
+        stops[r[4]] = stops.get(r[4], 0) + 1
+    lines += ["", f"Mean IoU (share below 0.85, worst) over {len(rows)} runs; stop reasons: "
+              + ", ".join(f"{k} {v}" for k, v in sorted(stops.items())) + "."]
+    return lines
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--write", action="store_true", help="write the table into docs/benchmarks.md")
+    args = ap.parse_args(argv)
+    rows = run()
+    lines = [f"Machine: {machine()}", "Command: `python benchmarks/drawings.py`", "", *table(rows)]
+    print("\n".join(lines))
+    if args.write:
+        print(f"wrote {write_section('drawings', lines, 'Other drawings on the real images')}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
