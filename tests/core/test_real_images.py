@@ -235,3 +235,14 @@ def test_dim_coin_without_an_edge_pixel(factor):
     found = polygon2mask(truth.shape, res.contour)
     assert res.converged
     assert (found & truth).sum() / (found | truth).sum() > 0.95
+
+
+def test_a_click_that_collapses_is_told_to_draw_larger():
+    """A 3-px circle inside a small nucleus (the stack shrunk threefold) says
+    too little about the nucleus' level and collapses: the error says to draw
+    larger, not only "closer to its border", which it already is."""
+    from skimage.transform import resize
+
+    image = resize(tifffile.imread(SAMPLES / "nuclei.tif")[41].astype(float), (85, 85), anti_aliasing=True)
+    with pytest.raises(ValueError, match=r"larger than this 3-px click"):
+        segment(image, circle(np.array([52.0, 33.0]), 1.5))

@@ -358,6 +358,11 @@ def _rest_reason(field: ForceField, nodes: np.ndarray) -> str:
     return "stalled" if field.on_border(nodes).mean() < ON_BORDER_FRACTION else "converged"
 
 
+#: A drawing fewer pixels across than this is a click: if it collapses, the
+#: error says to draw larger.
+SMALL_DRAWING = 8.0
+
+
 def _divergence(steps: int, stiffness: float, repaired: bool = True) -> DivergenceError:
     what = "became numerically singular and could not be repaired" if repaired else "diverged"
     return DivergenceError(
@@ -847,9 +852,12 @@ def _evolve(
     if stop_reason != "cancelled" and body.collapsed:
         # Nothing held it: the region force shrinks a contour drawn on a
         # uniform background until it is a point. Say so rather than return it.
+        across = float(np.ptp(drawing, axis=0).max())
         raise ValueError(
             f"the contour collapsed to a point after {steps} steps: no object border was found within reach "
             f"({max_line_length:g} px) of the initial contour; draw it around the object, closer to its border"
+            + (f", or, inside it, larger than this {across:.0f}-px click (a few pixels say too little about "
+               "the object's level)" if across < SMALL_DRAWING else "")
         )
     nodes = body.nodes
     if stop_reason == "converged" and features.with_refinement:
