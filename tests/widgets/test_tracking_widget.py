@@ -158,3 +158,17 @@ def test_points_clicked_around_a_cell_are_a_contour(movie_in_viewer, wait_done):
     widget.run()
     wait_done(widget)
     assert widget.last_result.status == [["tracked"] * 8]
+
+
+def test_the_preview_does_not_take_the_users_selection(movie_in_viewer, qtbot, wait_done):
+    """The live preview layer goes in without changing which layer the user
+    has selected (napari selects every layer it adds: the layer controls
+    switched to the preview in the middle of the run)."""
+    viewer, widget = movie_in_viewer
+    drawn = widget._shapes.value
+    viewer.layers.selection.active = drawn
+    widget.run()
+    qtbot.waitUntil(lambda: widget._preview is not None, timeout=RUN_TIMEOUT_MS)
+    assert widget._preview in viewer.layers
+    assert viewer.layers.selection.active is drawn and set(viewer.layers.selection) == {drawn}
+    wait_done(widget)

@@ -643,12 +643,9 @@ class SegmentationWidget(WorkerWidget):
             "metadata": {PREVIEW_KEY: True},
             **job.transform,
         }
-        active = self.viewer.layers.selection.active
-        self.preview_layer = self.viewer.add_layer(
+        self.preview_layer = self._add_preview(
             Layer.create(contours_to_shapes_data(job.contours, job.leading, closed=True), preview_meta, "shapes")
         )
-        if active is not None:  # keep the user's selection (and layer controls) while previewing
-            self.viewer.layers.selection.active = active
         max_steps = kwargs_list[0]["max_steps"]
         total = len(job.contours) * max_steps
         return self._start(total, segment_contours, job.image, job.contours, kwargs_list, cancel=self._cancel,

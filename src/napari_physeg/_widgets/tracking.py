@@ -24,7 +24,7 @@ from __future__ import annotations
 import napari
 import numpy as np
 from magicgui.widgets import ComboBox, Label, PushButton, SpinBox
-from napari.layers import Points
+from napari.layers import Points, Shapes
 from napari.utils.notifications import show_info, show_warning
 
 from ..core import LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, segment, track
@@ -223,9 +223,9 @@ class TrackingWidget(WorkerWidget):
         if self._preview is None or self._preview not in self.viewer.layers:
             transform = self._run_info["transform"]
             common = {key: transform[key] for key in ("scale", "translate", "rotate", "shear", "affine")}
-            self._preview = self.viewer.add_shapes(data, shape_type="polygon", edge_color=PREVIEW_COLOR,
-                                                   face_color="transparent", name="tracking preview",
-                                                   metadata={PREVIEW_KEY: True}, **common)
+            self._preview = self._add_preview(Shapes(data, shape_type="polygon", edge_color=PREVIEW_COLOR,
+                                                     face_color="transparent", name="tracking preview",
+                                                     metadata={PREVIEW_KEY: True}, **common))
         else:
             self._preview.data = data
 
