@@ -181,33 +181,10 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     if np.isnan(centre):  # a drawing too thin to have a centre
         centre = on_line
     floor = _least_contrast(intensity)
-    # The background of a drawing made inside the object: the ring outside
-    # it that differs most from the drawing's centre. Rings further out are
-    # read while no near ring differs visibly from the centre. So they are
-    # when the near ring that differs most does not stand out of the scatter
-    # of its own pixels or of the drawing's, around a line that does not
-    # either and differs from the centre less (a small drawing inside a
-    # textured object): then until one differs from the centre twice as
-    # much, for the near rings held the object's texture, not its background.
-    textured = abs(on_line - centre) <= max(floor, _TEXTURE_SPREADS * _scatter(along))
     drawn = _fill(drawing, shape)
     within = intensity[drawn]
     within = within[:: max(1, within.size // _MAX_SAMPLES)]
-    outside, best, best_ring, through = np.nan, -1.0, None, False
-    for k, (lo, hi) in enumerate(_OUTER_RINGS + _FAR_RINGS):
-        far = k >= len(_OUTER_RINGS)
-        if k == len(_OUTER_RINGS):
-            near_best = best
-            through = (textured and floor < near_best and abs(on_line - centre) <= near_best
-                       and near_best <= _TEXTURE_SPREADS * max(_scatter(best_ring), _scatter(within)))
-        if far and best > (near_best if through else floor):
-            break
-        ring = intensity[_fill(_scaled(drawing, hi), shape) & ~_fill(_scaled(drawing, lo), shape)]
-        # Far out the background may be a small part of a ring that still
-        # lies mostly on the object: the ring's class furthest from the centre.
-        level = _other_level(ring, centre, floor) if far else _median(ring)
-        if not np.isnan(level) and abs(level - centre) > (2 * near_best if through else best):
-            outside, best, best_ring = level, abs(level - centre), ring
+    outside = _outside_level(intensity, drawing, centre, on_line, along, within, floor)
     # Around the object, the line lies on the background: at least halfway
     # from the centre's level toward the outside's. (Comparing the line with
     # the outside instead fails when the rings hold look-alike neighbours.)
@@ -250,6 +227,41 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         obj, background = (max(obj, background), min(obj, background)) if polarity > 0 else \
             (min(obj, background), max(obj, background))
     return RegionModel(int(polarity), float(obj), float(background), bool(around), floor)
+
+
+def _outside_level(intensity, drawing, centre, on_line, along, within, floor) -> float:
+    """The background's level for a drawing made inside the object: that of
+    the ring outside it that differs most from the drawing's centre (NaN if
+    no ring lies in the image).
+
+    ``centre`` and ``on_line`` are the levels at the drawing's centre and on
+    its line (``along``, the line's pixels; ``within``, the drawing's),
+    ``floor`` the least contrast. Rings further out are read while no near
+    ring differs visibly from the centre. So they are when the near ring that
+    differs most does not stand out of the scatter of its own pixels or of
+    the drawing's, around a line that does not either and differs from the
+    centre less (a small drawing inside a textured object): then until one
+    differs from the centre twice as much, for the near rings held the
+    object's texture, not its background.
+    """
+    shape = intensity.shape
+    textured = abs(on_line - centre) <= max(floor, _TEXTURE_SPREADS * _scatter(along))
+    outside, best, best_ring, through = np.nan, -1.0, None, False
+    for k, (lo, hi) in enumerate(_OUTER_RINGS + _FAR_RINGS):
+        far = k >= len(_OUTER_RINGS)
+        if k == len(_OUTER_RINGS):
+            near_best = best
+            through = (textured and floor < near_best and abs(on_line - centre) <= near_best
+                       and near_best <= _TEXTURE_SPREADS * max(_scatter(best_ring), _scatter(within)))
+        if far and best > (near_best if through else floor):
+            break
+        ring = intensity[_fill(_scaled(drawing, hi), shape) & ~_fill(_scaled(drawing, lo), shape)]
+        # Far out the background may be a small part of a ring that still
+        # lies mostly on the object: the ring's class furthest from the centre.
+        level = _other_level(ring, centre, floor) if far else _median(ring)
+        if not np.isnan(level) and abs(level - centre) > (2 * near_best if through else best):
+            outside, best, best_ring = level, abs(level - centre), ring
+    return outside
 
 
 def _line_among_neighbours(along: np.ndarray, centre: float, outside: float) -> float | None:
