@@ -35,11 +35,11 @@ def machine() -> str:
     return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}"
 
 
-def write_section(name: str, lines, heading: str) -> Path:
-    """Put ``lines`` into docs/benchmarks.md between ``<!-- name:start -->``
-    and ``<!-- name:end -->``, replacing what was there, or append them under
+def write_section(name: str, lines, heading: str, doc: str = "benchmarks.md") -> Path:
+    """Put ``lines`` into ``docs/<doc>`` between ``<!-- name:start -->`` and
+    ``<!-- name:end -->``, replacing what was there, or append them under
     ``## heading`` the first time; the file's path."""
-    doc = Path(__file__).resolve().parents[1] / "docs" / "benchmarks.md"
+    doc = Path(__file__).resolve().parents[1] / "docs" / doc
     text = doc.read_text() if doc.exists() else "# Benchmarks\n"
     start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
     block = start + "\n" + "\n".join(lines) + "\n" + end

@@ -42,12 +42,10 @@ import numpy as np  # noqa: E402
 import tifffile  # noqa: E402
 from distributed import Client, LocalCluster  # noqa: E402
 
-from _common import machine  # noqa: E402
+from _common import machine, write_section  # noqa: E402
 from napari_physeg import data  # noqa: E402
 from napari_physeg.batch import track_files  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
-DOC = ROOT / "docs" / "batch.md"
 
 
 def write_movies(folder: Path, n: int, n_frames: int, size: int):
@@ -194,14 +192,9 @@ def main(argv=None):
         seconds = 1000 * per_task / n
         idle = 1000 * (two["cpu_per_task"] + two["client_cpu_per_task"]) / n
         lines.append(f"| {n} | {_duration(seconds)} | {_duration(idle)} | {n * peak / 1024:.1f} GB |")
-    table = "\n".join(lines)
-    print(table)
+    print("\n".join(lines))
     if args.write:
-        text = DOC.read_text()
-        start, end = "<!-- batch:start -->", "<!-- batch:end -->"
-        i, j = text.index(start) + len(start), text.index(end)
-        DOC.write_text(text[:i] + "\n" + table + "\n" + text[j:])
-        print(f"wrote {DOC}")
+        print(f"wrote {write_section('batch', lines, 'Benchmark', doc='batch.md')}")
 
 
 if __name__ == "__main__":

@@ -51,14 +51,8 @@ def polygon(obj, rng):
     return obj.centroid + np.column_stack([radii * np.sin(angles), radii * np.cos(angles)])
 
 
-def _bounding_box(obj):
-    rows, cols = np.nonzero(obj.mask)
-    lo, hi = np.array([rows.min(), cols.min()], float), np.array([rows.max(), cols.max()], float)
-    return (lo + hi) / 2, (hi - lo + 1) / 2
-
-
 def ellipse(obj, rng):
-    centre, half = _bounding_box(obj)
+    centre, half = real_data.bounding_box(obj.mask)
     half = rng.uniform(1.15, 1.4) * half
     t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
     return centre + np.column_stack([half[0] * np.sin(t), half[1] * np.cos(t)])
@@ -82,9 +76,8 @@ def click_inside(obj, rng):
 
 
 def box_2x(obj, rng):
-    centre, half = _bounding_box(obj)
-    lo, hi = centre - 2 * half, centre + 2 * half
-    return np.array([[lo[0], lo[1]], [lo[0], hi[1]], [hi[0], hi[1]], [hi[0], lo[1]]])
+    centre, half = real_data.bounding_box(obj.mask)
+    return real_data.rectangle(centre, 2 * half)
 
 
 DRAWINGS = {"polygon": polygon, "ellipse": ellipse, "off-centre": off_centre, "tight": tight,
@@ -129,7 +122,8 @@ def main(argv=None) -> int:
     lines = [f"Machine: {machine()}", "Command: `python benchmarks/drawings.py`", "", *table(rows)]
     print("\n".join(lines))
     if args.write:
-        print(f"wrote {write_section('drawings', lines, 'Other drawings on the real images')}", file=sys.stderr)
+        doc = write_section("drawings", lines, "Other drawings on the real images")
+        print(f"wrote {doc}", file=sys.stderr)
     return 0
 
 

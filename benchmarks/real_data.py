@@ -322,16 +322,25 @@ def init_circle(obj: Obj, rng) -> tuple[np.ndarray, str]:
     return circle(c, r), f"circle{factor:.2f}"
 
 
+def bounding_box(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and half-size (row, col) of the pixels of ``mask``, as a box around their areas."""
+    rows, cols = np.nonzero(mask)
+    lo, hi = np.array([rows.min(), cols.min()], float), np.array([rows.max(), cols.max()], float)
+    return (lo + hi) / 2, (hi - lo + 1) / 2
+
+
+def rectangle(centre, half) -> np.ndarray:
+    """The 4 corners, as napari's rectangle tool draws them, of the box ``centre +- half``."""
+    (a0, a1), (b0, b1) = np.asarray(centre) - half, np.asarray(centre) + half
+    return np.array([[a0, a1], [a0, b1], [b0, b1], [b0, a1]])
+
+
 def init_box(obj: Obj, rng) -> tuple[np.ndarray, str]:
     """A rectangle as napari's rectangle tool draws it: the object's bounding
     box 1.1-1.5 times as wide and as tall, shifted by up to a tenth of its size."""
-    rows, cols = np.nonzero(obj.mask)
-    lo, hi = np.array([rows.min(), cols.min()], float), np.array([rows.max(), cols.max()], float)
+    centre, half = bounding_box(obj.mask)
     factor = rng.uniform(1.1, 1.5)
-    half = factor * (hi - lo + 1) / 2
-    centre = (lo + hi) / 2 + rng.uniform(-0.1, 0.1, 2) * (hi - lo + 1)
-    a, b = centre - half, centre + half
-    return np.array([[a[0], a[1]], [a[0], b[1]], [b[0], b[1]], [b[0], a[1]]]), f"box{factor:.2f}"
+    return rectangle(centre + rng.uniform(-0.1, 0.1, 2) * 2 * half, factor * half), f"box{factor:.2f}"
 
 
 def boundary(mask: np.ndarray, dilate: float) -> np.ndarray:

@@ -155,6 +155,10 @@ class ForceField:
     def _region_offsets(self) -> np.ndarray:
         return np.linspace(-self.min_length, self.min_length, 7)
 
+    def _sample_short_lines(self, nodes: np.ndarray, normals: np.ndarray) -> np.ndarray:
+        """Samples (N, 7, 3) along each node's shortest normal line (the region force's)."""
+        return self.sample(nodes[:, None, :] + self._region_offsets[None, :, None] * normals[:, None, :])
+
     def line_lengths(self, nodes: np.ndarray) -> np.ndarray:
         """Adaptive half-length of each node's normal line."""
         d = self.sample(nodes)[:, 1]
@@ -175,7 +179,7 @@ class ForceField:
         w = self.weights
         if w.get("edges", 0) <= 0 and w.get("distance", 0) <= 0:
             # The region force alone (the refinement phase): its short lines only.
-            region = self.sample(nodes[:, None, :] + self._region_offsets[None, :, None] * normals[:, None, :])
+            region = self._sample_short_lines(nodes, normals)
             return (w.get("intensity", 0) * region[..., 2].mean(1)).astype(np.float64)[:, None] * normals
         lengths = self.line_lengths(nodes).astype(np.float64)
         S = self.n_samples
@@ -211,11 +215,10 @@ class ForceField:
         the shortest normal line, or an edge lies within a pixel and a half."""
         if normals is None:
             normals = outward_normals(nodes)
-        offsets = self._region_offsets
-        values = self.sample(nodes[:, None, :] + offsets[None, :, None] * normals[:, None, :])
+        values = self._sample_short_lines(nodes, normals)
         region = values[..., 2]
         crossing = (region.min(1) < 0) & (region.max(1) > 0)
-        near = np.abs(offsets) <= 1.5
+        near = np.abs(self._region_offsets) <= 1.5
         return crossing | (values[:, near, 0].max(1) > 0.3)
 
 

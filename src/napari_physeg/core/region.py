@@ -67,11 +67,11 @@ _BORDER_STEP = 0.6
 _OFF_CENTRE_SHARE = 0.15
 
 #: A drawn line that crosses neighbours is around the object when its
-#: quarter nearest the background's level lies at least this share of the way
-#: from the centre's level to it (see _line_among_neighbours). On the real-image benchmark,
-#: for drawings made inside the nuclei but those in division, that quarter
-#: lay at most 0.57 of the way; for boxes twice a nucleus' size in a crowded
-#: field, at least 0.97.
+#: quarter nearest the background's level lies at least this share of the
+#: way from the centre's level to it (see _line_among_neighbours). On the
+#: real-image benchmark, for drawings made inside the nuclei but those in
+#: division, that quarter lay at most 0.57 of the way; for boxes twice a
+#: nucleus' size in a crowded field, at least 0.97.
 _CROSSED_SHARE = 0.8
 
 #: A drawn line (a ring outside the drawing) lies within the texture of the
