@@ -12,6 +12,7 @@ napari = pytest.importorskip("napari")
 from napari.layers import Shapes, Vectors  # noqa: E402
 
 from napari_physeg import data  # noqa: E402
+from napari_physeg._widgets import _worker  # noqa: E402
 from napari_physeg._widgets import matching as mat  # noqa: E402
 from napari_physeg._widgets.matching import (  # noqa: E402
     COST_COLORMAP,
@@ -54,9 +55,11 @@ def matching_layers(viewer):
 # --------------------------------------------------------------------------
 
 
-def test_hand_poses_lines_coloured_by_cost(viewer_widget, wait_done, notes, record_progress, poses):
+def test_hand_poses_lines_coloured_by_cost(viewer_widget, wait_done, notes, record_progress, poses, monkeypatch):
     viewer, widget = viewer_widget
     shown = record_progress(widget)
+    # Every update shown, however busy the GUI (the throttle has its own test).
+    monkeypatch.setattr(_worker, "PREVIEW_SHARE", float("inf"))
     viewer.open_sample("napari-physeg", "hand_poses")
     la, lb = viewer.layers["hand open outline"], viewer.layers["hand closed outline"]
     # defaults: two different contours

@@ -13,6 +13,7 @@ napari = pytest.importorskip("napari")
 from napari.layers import Labels, Shapes  # noqa: E402
 
 from napari_physeg import data  # noqa: E402
+from napari_physeg._widgets import _worker  # noqa: E402
 from napari_physeg._widgets import segmentation as seg  # noqa: E402
 from napari_physeg._widgets.segmentation import (  # noqa: E402
     PREVIEW_KEY,
@@ -104,6 +105,8 @@ def test_sample_hand_end_to_end(viewer_widget, wait_done, errors, monkeypatch, r
     assert widget._image.value is viewer.layers["hand"]
     assert widget._shapes.value is viewer.layers["initial contour"]
     seen = record_updates(widget, monkeypatch)
+    # Every update shown, however busy the GUI (the throttle has its own test).
+    monkeypatch.setattr(_worker, "PREVIEW_SHARE", float("inf"))
     n_before = len(viewer.layers)
 
     worker = widget.run()

@@ -28,10 +28,9 @@ from ._layers import write_csv
 __all__ = ["WorkerWidget", "ask_save_path", "relay", "run_to_completion"]
 
 
-#: At most this share of a run's time goes to showing its updates (previews, progress): the GUI
-#: thread's own time; software OpenGL paints in threads of its own on top (measured: 0.1 left
-#: a 2 s segmentation 1.3x slower than headless on 2 cores, 0.05 1.2x).
-PREVIEW_SHARE = 0.05
+#: At most this share of a run's time goes to showing its updates (previews, progress): the CPU
+#: time of every thread but the worker's, the GUI thread's and those software OpenGL paints in.
+PREVIEW_SHARE = 0.1
 #: GUI time (s) since the last update shown below which the next is always shown.
 CHEAP_DRAW = 0.01
 #: Least height of a widget's scroll area (px): a row or two of controls.
@@ -67,7 +66,8 @@ class WorkerWidget(Container):
         self.n_received = 0  # and received (some are not shown when the GUI is busy)
         self._running = False
         self._delivering = False
-        self._last_draw = None  # (wall, GUI thread CPU) seconds when an update was last shown
+        self._last_draw = None  # (wall, display CPU) seconds when an update was last shown
+        self._worker_clock = None  # the CPU-time clock of the worker's thread
         self._pending = deque()  # worker signals waiting for the one before to be handled
 
     def _lay_out(self, controls, advanced=(), buttons=()):
@@ -227,7 +227,8 @@ class WorkerWidget(Container):
         self.progress_bar.max = max(int(total), 1)
         self.progress_bar.value = 0
         self.progress_bar.visible = True
-        worker = thread_worker(_with_one_blas_thread(function), start_thread=False)(*args, **kwargs)
+        self._worker_clock = None
+        worker = thread_worker(_in_worker(function, self._note_worker_clock), start_thread=False)(*args, **kwargs)
         if isinstance(worker, GeneratorWorker):  # only generators report progress
             worker.yielded.connect(self._on_yielded_once)
         worker.returned.connect(self._on_returned_in_order)
@@ -270,6 +271,20 @@ class WorkerWidget(Container):
         finally:
             self._delivering = False
 
+    def _note_worker_clock(self, clock):
+        self._worker_clock = clock  # (an int: set from the worker thread at once)
+
+    def _display_cpu(self) -> float:
+        """CPU seconds used by this process apart from its worker: the GUI
+        thread's and those software OpenGL paints in (the GUI thread's alone
+        where the worker's cannot be read)."""
+        if self._worker_clock is not None:
+            try:
+                return time.process_time() - time.clock_gettime(self._worker_clock)
+            except OSError:
+                self._worker_clock = None
+        return time.thread_time()
+
     def _on_yielded_once(self, update):
         self._deliver(self._draw_if_due, update)
 
@@ -278,14 +293,15 @@ class WorkerWidget(Container):
 
         Drawing a preview and moving the progress bar repaint the window,
         which takes tens of milliseconds (more with software OpenGL), in the
-        GUI thread and holding the GIL the worker needs. An update is shown
-        only while the GUI thread has used at most PREVIEW_SHARE of the time
-        since the last one shown (its CPU time: the last drawing, its repaint,
-        everything); the others are dropped (each supersedes the last),
-        unless :meth:`_must_show` says otherwise.
+        GUI thread and holding the GIL the worker needs, and in software
+        OpenGL's own threads, which take the worker's CPU on a small machine.
+        An update is shown only while everything but the worker
+        (:meth:`_display_cpu`) has used at most PREVIEW_SHARE of the time
+        since the last one shown; the others are dropped (each supersedes the
+        last), unless :meth:`_must_show` says otherwise.
         """
         self.n_received += 1
-        now, cpu = time.perf_counter(), time.thread_time()
+        now, cpu = time.perf_counter(), self._display_cpu()
         if self._last_draw is not None and not self._must_show(update):
             wall, used = now - self._last_draw[0], cpu - self._last_draw[1]
             if used > max(PREVIEW_SHARE * wall, CHEAP_DRAW):
@@ -335,18 +351,25 @@ class WorkerWidget(Container):
             pass
 
 
-def _with_one_blas_thread(generator_function):
-    """``generator_function`` run with BLAS/LAPACK limited to one thread.
+def _in_worker(generator_function, note_clock):
+    """``generator_function`` as the worker runs it: with BLAS/LAPACK limited
+    to one thread, having first passed the worker thread's CPU-time clock
+    (or None where the platform has none) to ``note_clock``.
 
     The core's dense problems are small (at most a few hundred unknowns):
     OpenBLAS's threads only spin against the GUI thread and the worker, and
     a LAPACK call holds the GIL meanwhile. On a busy 2-core machine a
     128 x 128 eigenproblem took 0.5 s instead of 2 ms, and the GUI froze
-    that long.
+    that long. The worker's CPU time tells the GUI what the rest of the
+    process costs (see ``WorkerWidget._draw_if_due``).
     """
 
     @functools.wraps(generator_function)
     def run(*args, **kwargs):
+        try:
+            note_clock(time.pthread_getcpuclockid(threading.get_ident()))
+        except (AttributeError, OSError):  # not on every platform (macOS, Windows)
+            note_clock(None)
         with threadpool_limits(limits=1, user_api="blas"):
             return (yield from generator_function(*args, **kwargs))
 

@@ -382,6 +382,9 @@ class MatchingWidget(WorkerWidget):
         return self._start(total, match_contours, pair.a, pair.b, **self.parameters(), cancel=self._cancel)
 
     # ------------------------------------------------------------ worker signals (GUI thread)
+    def _must_show(self, state) -> bool:
+        return state.fraction >= 1.0  # the bar's end
+
     def _on_yielded(self, state):
         if not self._gui_alive():
             self._on_destroyed()

@@ -653,7 +653,8 @@ class SegmentationWidget(WorkerWidget):
 
     # ------------------------------------------------------------ worker signals (GUI thread)
     def _must_show(self, update: SegmentationProgress) -> bool:
-        return update.done  # a contour's final state
+        # A contour's final state, but the last's: the result layer shows it at once.
+        return update.done and update.index + 1 < update.total
 
     def _on_yielded(self, update: SegmentationProgress):
         if not self._gui_alive():
