@@ -78,10 +78,10 @@ _CROSSED_SHARE = 0.8
 #: line) is inside an object all the same when its line's level forms a
 #: region enclosed by a level at least this many times as different from it
 #: as the centre is (see _enclosing_background): the object's border is the
-#: stronger contrast, the spot its texture (a click on a nucleolus). The
-#: clicks of benchmarks/drawings.py so read inside nuclei and coins had
-#: ratios of 2.6-20; the three-level image of the tests (a dark disk in a
-#: grey region ringed by a bright one) has 1.
+#: stronger contrast, the spot its texture (a click on a nucleolus). The 20
+#: drawings of benchmarks/drawings.py so read (all clicks inside nuclei and
+#: coins) had ratios of 2.6-20; the three-level image of the tests (a dark
+#: disk in a grey region ringed by a bright one) has 1.
 _ENCLOSING_CONTRAST = 2.0
 
 #: A drawn line (a ring outside the drawing) lies within the texture of the
@@ -210,13 +210,8 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     # drawing is around it; texture, if inside it. (A classes' split is only
     # made when the pixels' spread leaves room for a rule below to use it.)
     span = max(abs(float(within.max()) - on_line), abs(float(within.min()) - on_line)) if within.size else 0.0
-    enclosing = _enclosing_background(intensity, drawing, line, centre, on_line, floor) if around else None
-    if enclosing is not None and polarity in (None, np.sign(on_line - enclosing)):
-        # A click on a spot of an object's texture (a nucleolus, a coin's
-        # relief): the object's border is the stronger contrast around it.
-        # (A polarity given the other way says the spot is the object.)
-        around, obj, background = False, on_line, enclosing
-    elif around:
+    beyond = None
+    if around:
         obj, background = centre, on_line
         # A drawing far larger than the object: its centre is mostly
         # background too (within a fifth of the way to the other class).
@@ -236,6 +231,13 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         around, obj, background = True, off_centre, on_line
     else:
         obj, background = on_line, outside
+    enclosing = _enclosing_background(intensity, drawing, line, centre, on_line, floor,
+                                      traced=beyond is not None) if around else None
+    if enclosing is not None and polarity in (None, np.sign(on_line - enclosing)):
+        # A click on a spot of an object's texture (a nucleolus, a coin's
+        # relief): the object's border is the stronger contrast around it.
+        # (A polarity given the other way says the spot is the object.)
+        around, obj, background = False, on_line, enclosing
     if polarity is None:
         polarity = 1 if obj >= background else -1
     elif np.sign(obj - background) not in (0, polarity):
@@ -280,20 +282,23 @@ def _outside_level(intensity, drawing, centre, on_line, along, within, floor) ->
     return outside
 
 
-def _enclosing_background(intensity, drawing, line, centre, on_line, floor) -> float | None:
-    """The background's level if a drawing that looks drawn around a spot
-    lies inside a larger object, the spot its texture; else None.
+def _enclosing_background(intensity, drawing, line, centre, on_line, floor, traced=False) -> float | None:
+    """The background's level if a drawing read as around a spot lies inside
+    a larger object, the spot its texture; else None.
 
-    ``line`` are the drawn line's pixels, at level ``on_line``; ``centre`` is
-    the level at the drawing's centre, ``floor`` the least contrast. Within
-    the far rings (out to 21 times the drawing), the class of pixels
-    furthest from the line's level must differ from it at least
+    ``line`` are the drawn line's pixels, ``centre`` and ``on_line`` the
+    levels at the drawing's centre and on its line, ``floor`` the least
+    contrast. Within the far rings (out to 21 times the drawing), the class
+    of pixels furthest from the line's level must differ from it at least
     :data:`_ENCLOSING_CONTRAST` times as much as the centre does, and the
     pixels on the line's side of the two levels' midpoint that the line lies
-    on must be enclosed by that class: reach neither the rings' outer edge
-    nor half their area. Around an object, the line lies on its background,
-    which stretches out to the rings' edge; where the rings cover the whole
-    image nothing is concluded.
+    on must form a body that class encloses: it reaches neither the rings'
+    outer edge nor half their area. Around an object, the line lies on its
+    background, which stretches out to the rings' edge; where the rings
+    cover the whole image nothing is concluded. A line read as ``traced`` on
+    an edge must lie on that body for at least 0.9 of its length: one traced
+    on an object's blurred edge lies partly on its ramp, below the midpoint;
+    one around a spot of texture, on the object.
     """
     shape = intensity.shape
     extent = _fill(_scaled(drawing, _FAR_RINGS[-1][1]), shape)
@@ -304,7 +309,7 @@ def _enclosing_background(intensity, drawing, line, centre, on_line, floor) -> f
     like_line = extent & ((intensity - 0.5 * (on_line + far)) * np.sign(on_line - far) > 0)
     pieces, _ = _label(like_line)
     held = pieces[line & like_line]
-    if held.size == 0:
+    if held.size == 0 or (traced and held.size < 0.9 * line.sum()):
         return None
     body = pieces == np.bincount(held).argmax()
     # The rings' outer edge within the image (cv2.erode keeps the image's sides).
