@@ -74,14 +74,14 @@ _OFF_CENTRE_SHARE = 0.15
 #: nucleus' size in a crowded field, at least 0.97.
 _CROSSED_SHARE = 0.8
 
-#: A drawing that looks drawn around a spot (its centre differs from its
-#: line) is inside an object all the same when its line's level forms a
-#: region enclosed by a level at least this many times as different from it
-#: as the centre is (see _enclosing_background): the object's border is the
-#: stronger contrast, the spot its texture (a click on a nucleolus). The 20
-#: drawings of benchmarks/drawings.py so read (all clicks inside nuclei and
-#: coins) had ratios of 2.6-20; the three-level image of the tests (a dark
-#: disk in a grey region ringed by a bright one) has 1.
+#: A drawing's reading took texture for a level of its own (its centre for
+#: the object's, around a spot; its near rings for the background's, inside
+#: the object) when the line's level forms a region enclosed by a level at
+#: least this many times as different from it (see _enclosing_background):
+#: the object's border is the stronger contrast (a click on a nucleolus). The
+#: 26 drawings of benchmarks/drawings.py so read again (all clicks inside
+#: nuclei and coins) had ratios of 2.1-20; the three-level image of the tests
+#: (a dark disk in a grey region ringed by a bright one) has 1.
 _ENCLOSING_CONTRAST = 2.0
 
 #: A drawn line (a ring outside the drawing) lies within the texture of the
@@ -231,12 +231,13 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         around, obj, background = True, off_centre, on_line
     else:
         obj, background = on_line, outside
-    enclosing = _enclosing_background(intensity, drawing, line, centre, on_line, floor,
-                                      traced=beyond is not None) if around else None
+    # A small drawing deep inside a textured object, its centre or the rings
+    # near it on the texture: the object's border is a stronger contrast
+    # further out (a click on a nucleolus, a coin's relief).
+    texture = centre if around else outside
+    enclosing = _enclosing_background(intensity, drawing, line, on_line, texture, floor, traced=beyond is not None)
+    # (Told the object's polarity the other way, the spot drawn around is the object.)
     if enclosing is not None and polarity in (None, np.sign(on_line - enclosing)):
-        # A click on a spot of an object's texture (a nucleolus, a coin's
-        # relief): the object's border is the stronger contrast around it.
-        # (A polarity given the other way says the spot is the object.)
         around, obj, background = False, on_line, enclosing
     if polarity is None:
         polarity = 1 if obj >= background else -1
@@ -282,15 +283,17 @@ def _outside_level(intensity, drawing, centre, on_line, along, within, floor) ->
     return outside
 
 
-def _enclosing_background(intensity, drawing, line, centre, on_line, floor, traced=False) -> float | None:
-    """The background's level if a drawing read as around a spot lies inside
-    a larger object, the spot its texture; else None.
+def _enclosing_background(intensity, drawing, line, on_line, texture, floor, traced=False) -> float | None:
+    """The background's level if a drawing lies inside an object at its
+    line's level whose texture the drawing's reading took for the other
+    level; else None.
 
-    ``line`` are the drawn line's pixels, ``centre`` and ``on_line`` the
-    levels at the drawing's centre and on its line, ``floor`` the least
-    contrast. Within the far rings (out to 21 times the drawing), the class
-    of pixels furthest from the line's level must differ from it at least
-    :data:`_ENCLOSING_CONTRAST` times as much as the centre does, and the
+    ``texture`` is that level: the centre's, for a drawing read as around a
+    spot; the near rings', for one read as inside. ``line`` are the drawn
+    line's pixels, at level ``on_line``; ``floor`` is the least contrast.
+    Within the far rings (out to 21 times the drawing), the class of pixels
+    furthest from the line's level must differ from it at least
+    :data:`_ENCLOSING_CONTRAST` times as much as ``texture`` does, and the
     pixels on the line's side of the two levels' midpoint that the line lies
     on must form a body that class encloses: it reaches neither the rings'
     outer edge nor half their area. Around an object, the line lies on its
@@ -300,11 +303,13 @@ def _enclosing_background(intensity, drawing, line, centre, on_line, floor, trac
     on an object's blurred edge lies partly on its ramp, below the midpoint;
     one around a spot of texture, on the object.
     """
+    if np.isnan(texture):
+        return None
     shape = intensity.shape
     extent = _fill(_scaled(drawing, _FAR_RINGS[-1][1]), shape)
     rings = intensity[extent & ~_fill(_scaled(drawing, _OUTER_RINGS[0][0]), shape)]
     far = _other_level(rings, on_line, floor)
-    if abs(far - on_line) < _ENCLOSING_CONTRAST * max(abs(centre - on_line), floor):
+    if abs(far - on_line) < _ENCLOSING_CONTRAST * max(abs(texture - on_line), floor):
         return None
     like_line = extent & ((intensity - 0.5 * (on_line + far)) * np.sign(on_line - far) > 0)
     pieces, _ = _label(like_line)
