@@ -303,13 +303,14 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, tra
     on an object's blurred edge lies partly on its ramp, below the midpoint;
     one around a spot of texture, on the object.
     """
-    if np.isnan(texture):
-        return None
     shape = intensity.shape
+    least = _ENCLOSING_CONTRAST * max(abs(texture - on_line), floor)
+    if np.isnan(texture) or max(intensity.max() - on_line, on_line - intensity.min()) < least:
+        return None  # no level differs enough (most drawings: cheaper than reading the rings)
     extent = _fill(_scaled(drawing, _FAR_RINGS[-1][1]), shape)
     rings = intensity[extent & ~_fill(_scaled(drawing, _OUTER_RINGS[0][0]), shape)]
     far = _other_level(rings, on_line, floor)
-    if abs(far - on_line) < _ENCLOSING_CONTRAST * max(abs(texture - on_line), floor):
+    if abs(far - on_line) < least:
         return None
     like_line = extent & ((intensity - 0.5 * (on_line + far)) * np.sign(on_line - far) > 0)
     pieces, _ = _label(like_line)
