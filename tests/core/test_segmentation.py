@@ -557,15 +557,19 @@ def test_remesh_of_a_contour_doubled_back_along_the_image_side():
     assert np.isfinite(body.sim.from_rest(np.ones(2 * len(body.nodes)))).all()
 
 
+@pytest.mark.parametrize("band", [0.9, 1.0])
 @pytest.mark.parametrize("radius", [36, 55])
-def test_dark_object_in_a_grey_region_inside_a_bright_ring(radius):
+def test_dark_object_in_a_grey_region_inside_a_bright_ring(radius, band):
     """Three intensity levels: a dark disk in a grey region ringed by a bright
     band. A two-class threshold would group the dark and grey pixels; the
     levels read from the drawing (dark centre, grey line) keep the contour
-    on the dark disk."""
+    on the dark disk. With the band at 1.0 the grey line is not halfway
+    from the centre's level to the band's: the disk, held within the
+    drawing, says it is drawn around (the contour ran out to the band, IoU
+    0.25)."""
     rr, cc = np.mgrid[:200, :200]
     d = np.hypot(rr - 100, cc - 100)
-    image = np.where(d < 30, 0.1, np.where(d < 60, 0.5, np.where(d < 75, 0.9, 0.5)))
+    image = np.where(d < 30, 0.1, np.where(d < 60, 0.5, np.where(d < 75, band, 0.5)))
     image = image + 0.03 * np.random.default_rng(0).standard_normal(image.shape)
     t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
     res = segment(image, np.column_stack([100 + radius * np.sin(t), 100 + radius * np.cos(t)]))

@@ -80,8 +80,9 @@ _CROSSED_SHARE = 0.8
 #: least this many times as different from it (see _enclosing_background):
 #: the object's border is the stronger contrast (a click on a nucleolus). The
 #: 26 drawings of benchmarks/drawings.py so read again (all clicks inside
-#: nuclei and coins) had ratios of 2.1-20; the three-level image of the tests
-#: (a dark disk in a grey region ringed by a bright one) has 1.
+#: nuclei and coins) had ratios of 2.1-20; the three-level images of the
+#: tests (a dark disk in a grey region ringed by a bright one) have 1-1.25.
+#: The same ratio tells a disk held within a drawing from texture (see _held_within).
 _ENCLOSING_CONTRAST = 2.0
 
 #: A drawn line (a ring outside the drawing) lies within the texture of the
@@ -229,6 +230,8 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         around, obj, background = True, centre, crossed
     elif (off_centre := _off_centre_level(within, span, on_line, outside, floor)) is not None:
         around, obj, background = True, off_centre, on_line
+    elif _held_within(intensity, drawing, drawn, line, centre, on_line, outside, floor):
+        around, obj, background = True, centre, on_line
     else:
         obj, background = on_line, outside
     # A small drawing deep inside a textured object, its centre or the rings
@@ -323,6 +326,31 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, tra
     if not edge.any() or (body & edge).any() or body.sum() > 0.5 * extent.sum():
         return None
     return far
+
+
+def _held_within(intensity, drawing, drawn, line, centre, on_line, outside, floor) -> bool:
+    """Whether the drawing is around an object at its centre's level that
+    lies wholly within it, though its line is not halfway to the outside's
+    level (a dark disk in a grey region ringed by a far brighter band: the
+    band is the ring farthest from the centre).
+
+    It is when the blob of pixels on the centre's side of the centre's and
+    the line's levels, under the middle of the drawing, stays off its line,
+    within it, and fills at least a quarter of it; and the centre's level is
+    no texture: the outside differs from the line less than
+    :data:`_ENCLOSING_CONTRAST` times as much as the centre does (a nucleus'
+    dim middle drawn inside it has a background further off than that).
+    ``drawn`` and ``line`` are the drawing's pixels and its line's.
+    """
+    if abs(centre - on_line) <= floor or abs(outside - on_line) >= _ENCLOSING_CONTRAST * abs(centre - on_line):
+        return False
+    like_centre = (intensity - 0.5 * (centre + on_line)) * np.sign(centre - on_line) > 0
+    pieces, _ = _label(like_centre)
+    middle = _fill(_scaled(drawing, 0.5), intensity.shape) & like_centre
+    if not middle.any():
+        return False
+    blob = pieces == np.bincount(pieces[middle]).argmax()
+    return not (blob & (line | ~drawn)).any() and blob.sum() >= 0.25 * drawn.sum()
 
 
 def _line_among_neighbours(along: np.ndarray, centre: float, outside: float) -> float | None:
