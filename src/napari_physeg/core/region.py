@@ -188,7 +188,8 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         line = _line_band(np.clip(drawing, 0, np.array(shape) - 1), shape, half_width)
     along = intensity[line]
     on_line = _median(along)
-    centre = _median(intensity[_fill(_scaled(drawing, 0.5), shape)])
+    middle = _fill(_scaled(drawing, 0.5), shape)
+    centre = _median(intensity[middle])
     if np.isnan(centre):  # a drawing too thin to have a centre
         centre = on_line
     floor = _least_contrast(intensity)
@@ -230,7 +231,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         around, obj, background = True, centre, crossed
     elif (off_centre := _off_centre_level(within, span, on_line, outside, floor)) is not None:
         around, obj, background = True, off_centre, on_line
-    elif _held_within(intensity, drawing, drawn, line, centre, on_line, outside, floor):
+    elif _held_within(intensity, middle, drawn, line, centre, on_line, outside, floor):
         around, obj, background = True, centre, on_line
     else:
         obj, background = on_line, outside
@@ -315,12 +316,9 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, tra
     far = _other_level(rings, on_line, floor)
     if abs(far - on_line) < least:
         return None
-    like_line = extent & ((intensity - 0.5 * (on_line + far)) * np.sign(on_line - far) > 0)
-    pieces, _ = _label(like_line)
-    held = pieces[line & like_line]
-    if held.size == 0 or (traced and held.size < 0.9 * line.sum()):
+    body, on_body = _marked_piece(intensity, on_line, far, line, extent)
+    if body is None or (traced and on_body < 0.9 * line.sum()):
         return None
-    body = pieces == np.bincount(held).argmax()
     # The rings' outer edge within the image (cv2.erode keeps the image's sides).
     edge = extent & ~cv2.erode(extent.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
     if not edge.any() or (body & edge).any() or body.sum() > 0.5 * extent.sum():
@@ -328,7 +326,7 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, tra
     return far
 
 
-def _held_within(intensity, drawing, drawn, line, centre, on_line, outside, floor) -> bool:
+def _held_within(intensity, middle, drawn, line, centre, on_line, outside, floor) -> bool:
     """Whether the drawing is around an object at its centre's level that
     lies wholly within it, though its line is not halfway to the outside's
     level (a dark disk in a grey region ringed by a far brighter band: the
@@ -340,17 +338,28 @@ def _held_within(intensity, drawing, drawn, line, centre, on_line, outside, floo
     no texture: the outside differs from the line less than
     :data:`_ENCLOSING_CONTRAST` times as much as the centre does (a nucleus'
     dim middle drawn inside it has a background further off than that).
-    ``drawn`` and ``line`` are the drawing's pixels and its line's.
+    ``middle``, ``drawn`` and ``line`` are the pixels of the drawing's
+    half-size copy, of the drawing and of its line.
     """
     if abs(centre - on_line) <= floor or abs(outside - on_line) >= _ENCLOSING_CONTRAST * abs(centre - on_line):
         return False
-    like_centre = (intensity - 0.5 * (centre + on_line)) * np.sign(centre - on_line) > 0
-    pieces, _ = _label(like_centre)
-    middle = _fill(_scaled(drawing, 0.5), intensity.shape) & like_centre
-    if not middle.any():
-        return False
-    blob = pieces == np.bincount(pieces[middle]).argmax()
-    return not (blob & (line | ~drawn)).any() and blob.sum() >= 0.25 * drawn.sum()
+    blob, _ = _marked_piece(intensity, centre, on_line, middle)
+    return blob is not None and not (blob & (line | ~drawn)).any() and blob.sum() >= 0.25 * drawn.sum()
+
+
+def _marked_piece(intensity, level, other, marks, within=None):
+    """The 4-connected piece of the pixels on ``level``'s side of the midpoint
+    between ``level`` and ``other`` (those ``within`` it, if given) that holds
+    most of the pixels ``marks``, and how many of ``marks`` lie on that side;
+    ``(None, 0)`` when none does."""
+    side = (intensity - 0.5 * (level + other)) * np.sign(level - other) > 0
+    if within is not None:
+        side &= within
+    pieces, _ = _label(side)
+    held = pieces[marks & side]
+    if held.size == 0:
+        return None, 0
+    return pieces == np.bincount(held).argmax(), held.size
 
 
 def _line_among_neighbours(along: np.ndarray, centre: float, outside: float) -> float | None:
