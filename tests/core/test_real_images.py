@@ -249,11 +249,13 @@ def test_dim_coin_without_an_edge_pixel(factor):
 
 
 def test_a_click_that_collapses_is_told_to_draw_larger(stack):
-    """A 3-px circle inside the nucleus in division (slice 35) says too little
-    about the nucleus' level and collapses: the error says to draw larger,
-    not only "closer to its border", which it already is."""
-    with pytest.raises(ValueError, match=r"larger than this 3-px click"):
-        segment(stack[0][35], circle(np.array([91.0, 56.0]), 1.5))
+    """A 3-px circle on the background between nuclei (slice 26) finds no
+    border within reach and collapses: the error says to draw around the
+    object or, inside it, larger than a click."""
+    centre = np.array([110.0, 205.0])
+    assert stack[1][26][110, 205] == 0
+    with pytest.raises(ValueError, match=r"draw it around the object.*larger than this 3-px click"):
+        segment(stack[0][26], circle(centre, 1.5))
 
 
 @pytest.mark.parametrize("z, label, centre, radius", [(26, 9, (235, 138), 3.4), (26, 14, (148, 191), 4.3),
@@ -282,6 +284,22 @@ def test_a_click_whose_near_rings_lie_on_texture_grows_to_the_nucleus(stack, z, 
     texture's darker level (in the rings near it) taken for the background:
     the contour grew over a part of the nucleus only (IoU 0.21-0.36). The
     background beyond, twice as different, encloses the nucleus."""
+    image, labels = stack[0][z], stack[1][z]
+    res, iou = segmented(image, ndi.binary_fill_holes(labels == label), circle(np.array(centre, float), radius))
+    assert res.converged and res.polarity == 1
+    assert iou > 0.9, iou
+
+
+@pytest.mark.parametrize("z, label, centre, radius", [(38, 14, (156, 190), 2.4), (35, 12, (207, 195), 2.3),
+                                                      (29, 17, (148, 230), 3.0)],
+                         ids=["z38-n14", "z35-n12", "z29-n17"])
+def test_a_click_among_dark_texture_grows_to_the_whole_nucleus(stack, z, label, centre, radius):
+    """A click with the right levels, inside a nucleus whose dark texture
+    falls below the midpoint: its holes in the object-like pixels were filled
+    only up to a quarter of the click's area, so they made necks, and the
+    object's region was the piece of the nucleus around the click (IoU
+    0.28-0.32). Holes are filled up to a quarter of the object's area, as
+    deep as the blob the click marks with its holes filled."""
     image, labels = stack[0][z], stack[1][z]
     res, iou = segmented(image, ndi.binary_fill_holes(labels == label), circle(np.array(centre, float), radius))
     assert res.converged and res.polarity == 1

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from scipy import ndimage as ndi
 from skimage import segmentation
 
 from .features import _noise_sigma
@@ -538,8 +539,11 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
         limit = _fill(_scaled(drawing, _INSIDE_LIMIT), shape)
         marked = drawn
     # Neighbours are split off whole (their cores lie beyond the drawing),
-    # then the limit applies. Small holes (texture) would make false necks.
-    like = _without_small_holes(signed > 0, 0.25 * drawn.sum(), image_sides)
+    # then the limit applies. Holes of dark texture would make false necks:
+    # those up to a quarter of the object's area are filled (a drawing
+    # around it is about its size; a click inside it is not).
+    hole_area = 0.25 * (drawn.sum() if model.drawn_around else _area_held(signed > 0, marked | drawn, reach))
+    like = _without_small_holes(signed > 0, hole_area, image_sides)
     seed = (marked if (marked & like).any() else drawn) & like
     if not seed.any():
         return None
@@ -554,6 +558,19 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
         region = (_split_at_cores(depth, like, seed, None, reach, _side_distance(shape, image_sides))
                   & _marked_basins(depth, like, seed))
     return _smoothed(region & limit, image_sides)
+
+
+def _area_held(like: np.ndarray, marks: np.ndarray, reach: np.ndarray) -> float:
+    """The area of the disk as deep as the blob of ``like`` that ``marks``
+    touch gets within ``reach``, its holes filled: the size of the object a
+    drawing inside it marks, which its dark texture (holes, necks between
+    them) hides."""
+    solid = ndi.binary_fill_holes(like)
+    depth = cv2.distanceTransform(np.pad(solid, 1).view(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
+    pieces, _ = _label(solid)
+    held = np.unique(pieces[marks & solid])
+    blob = np.isin(pieces, held[held > 0]) & reach
+    return float(np.pi * depth[blob].max() ** 2) if blob.any() else 0.0
 
 
 def _side_distance(shape, image_sides) -> np.ndarray:
