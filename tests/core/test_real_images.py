@@ -306,6 +306,25 @@ def test_a_click_among_dark_texture_grows_to_the_whole_nucleus(stack, z, label, 
     assert iou > 0.9, iou
 
 
+@pytest.mark.parametrize("z, label", [(38, 10), (32, 3), (35, 13)])
+def test_a_box_twice_the_nucleus_keeps_to_the_nucleus(stack, z, label):
+    """A box twice a nucleus' bounding box in a crowded field holds whole
+    neighbours that touch it. Their cores, wholly inside the box, were taken
+    for the nucleus' lobes, and the middle of the box, where the object is,
+    marked their corners: the contour took in a neighbour (IoU 0.44-0.50).
+    A lobe must meet the object across no neck, and a core must lie under
+    the box's middle for a tenth of it."""
+    image, labels = stack[0][z], stack[1][z]
+    truth = ndi.binary_fill_holes(labels == label)
+    rows, cols = np.nonzero(truth)
+    lo, hi = np.array([rows.min(), cols.min()], float), np.array([rows.max(), cols.max()], float)
+    centre, half = (lo + hi) / 2, hi - lo + 1
+    (a0, a1), (b0, b1) = centre - half, centre + half
+    res, iou = segmented(image, truth, np.array([[a0, a1], [a0, b1], [b0, b1], [b0, a1]]))
+    assert res.converged
+    assert iou > 0.9, iou
+
+
 def test_a_click_on_a_coins_relief_grows_to_the_coin():
     """The same on coin c05 of skimage.data.coins() (IoU 0.02 before)."""
     from skimage import data, filters, measure, segmentation
