@@ -291,19 +291,20 @@ def test_a_click_whose_near_rings_lie_on_texture_grows_to_the_nucleus(stack, z, 
 
 
 @pytest.mark.parametrize("z, label, centre, radius", [(38, 14, (156, 190), 2.4), (35, 12, (207, 195), 2.3),
-                                                      (29, 17, (148, 230), 3.0)],
-                         ids=["z38-n14", "z35-n12", "z29-n17"])
+                                                      (29, 17, (148, 230), 3.0), (38, 19, (118, 246), 1.8)],
+                         ids=["z38-n14", "z35-n12", "z29-n17", "z38-n19-cut-by-the-side"])
 def test_a_click_among_dark_texture_grows_to_the_whole_nucleus(stack, z, label, centre, radius):
     """A click with the right levels, inside a nucleus whose dark texture
     falls below the midpoint: its holes in the object-like pixels were filled
     only up to a quarter of the click's area, so they made necks, and the
     object's region was the piece of the nucleus around the click (IoU
-    0.28-0.32). Holes are filled up to a quarter of the object's area, as
-    deep as the blob the click marks with its holes filled."""
+    0.28-0.50). Holes are filled up to a quarter of the object's area, as
+    deep as the blob the click marks with its holes filled, and going on
+    beyond the image's side (z38/n19 is cut by it)."""
     image, labels = stack[0][z], stack[1][z]
     res, iou = segmented(image, ndi.binary_fill_holes(labels == label), circle(np.array(centre, float), radius))
     assert res.converged and res.polarity == 1
-    assert iou > 0.9, iou
+    assert iou > 0.85, iou  # the label ends short of the side for z38/n19: 0.90
 
 
 @pytest.mark.parametrize("z, label", [(38, 10), (32, 3), (35, 13)])

@@ -566,7 +566,8 @@ def _area_held(like: np.ndarray, marks: np.ndarray, reach: np.ndarray) -> float:
     drawing inside it marks, which its dark texture (holes, necks between
     them) hides."""
     solid = ndi.binary_fill_holes(like)
-    depth = cv2.distanceTransform(np.pad(solid, 1).view(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
+    # An object cut by the image's side goes on beyond it.
+    depth = cv2.distanceTransform(np.pad(solid, 1, mode="edge").view(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
     pieces, _ = _label(solid)
     held = np.unique(pieces[marks & solid])
     blob = np.isin(pieces, held[held > 0]) & reach
