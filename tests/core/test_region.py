@@ -121,6 +121,27 @@ def test_lobes_and_thin_parts_drawn_around_are_kept():
     assert (region & ~mask).sum() < 0.05 * mask.sum()
 
 
+def test_box_twice_the_object_leaves_out_touching_neighbours():
+    """A disk between two smaller ones that touch it along a contact as wide
+    as their radius, and a box twice its size that holds their cores: they
+    are not its lobes (they meet it at a neck), so the region is the middle
+    disk only."""
+    shape, radius, small = (120, 200), 18, 12
+    half_contact = 0.5 * small
+    gap = np.sqrt(radius**2 - half_contact**2) + np.sqrt(small**2 - half_contact**2)
+    middle = disk(shape, (60, 100), radius)
+    neighbours = disk(shape, (60, 100 - gap), small) | disk(shape, (60, 100 + gap), small)
+    lo, hi = 60 - 2 * radius, 60 + 2 * radius
+    box = np.array([[lo, 100 - 2 * radius], [lo, 100 + 2 * radius], [hi, 100 + 2 * radius], [hi, 100 - 2 * radius]], float)
+    # Most of each neighbour lies inside the box.
+    inside = neighbours[lo:hi, 100 - 2 * radius : 100 + 2 * radius].sum()
+    assert inside > 0.8 * neighbours.sum()
+    model, region = region_for(render(middle | neighbours), box)
+    assert model.drawn_around
+    assert overlap(region, middle) > 0.95
+    assert (region & neighbours & ~middle).sum() < 0.05 * neighbours.sum()
+
+
 def test_neighbour_cut_by_the_same_image_side_is_split_off():
     """Two nuclei cut by the image's right side, touching along it over a
     contact wider than the smaller one's visible part: at half its inscribed
