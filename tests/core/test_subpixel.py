@@ -2,8 +2,11 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
+from scipy import ndimage as ndi
+from skimage.draw import polygon2mask
 
-from napari_physeg.core.contour import signed_area
+from napari_physeg.core.contour import crosses_itself, resample, signed_area
 from napari_physeg.core.subpixel import _solve_cyclic_tridiagonal, polish
 
 CENTRE, RADIUS = (64.3, 63.6), 30.25
@@ -90,3 +93,26 @@ def test_noise_is_averaged_along_the_contour_without_shrinking_it(coverage):
     assert np.abs(averaged - averaged.mean()).mean() < 0.5 * np.abs(alone - alone.mean()).mean()
     assert np.abs(averaged - averaged.mean()).mean() < 0.06
     assert abs(averaged.mean() - alone.mean()) < 0.01
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_polish_never_makes_a_simple_contour_cross_itself(seed):
+    """A blurred, noisy star polygon and its outline resampled 1-2.5 px
+    apart, each node jittered by up to 0.7 px: each node's move along its
+    own normal would, in a sharp concave corner, carry an edge across its
+    neighbour's (in about 4 of 10 such cases before the moves were
+    untangled). The polished contour is simple whenever it was given one."""
+    rng = np.random.default_rng(seed)
+    k = rng.integers(5, 9)
+    angle, radius = np.sort(rng.uniform(0, 2 * np.pi, k)), rng.uniform(6, 18, k)
+    star = np.column_stack([32 + radius * np.sin(angle), 32 + radius * np.cos(angle)])
+    image = ndi.gaussian_filter(polygon2mask((64, 64), star).astype(float), rng.uniform(0.5, 1.5))
+    image += 0.05 * rng.standard_normal(image.shape)
+    nodes = resample(star, spacing=rng.uniform(1, 2.5))
+    nodes += rng.uniform(-0.7, 0.7, nodes.shape)
+    if crosses_itself(nodes):
+        return
+    out = polish(image, nodes, polarity=1)
+    assert not crosses_itself(out)
+    assert np.linalg.norm(out - nodes, axis=1).max() <= 1.5 + 1e-9

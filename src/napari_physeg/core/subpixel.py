@@ -51,7 +51,7 @@ import numpy as np
 from scipy.linalg import solve_banded
 from scipy.ndimage import correlate1d, gaussian_filter1d, maximum_filter1d
 
-from .contour import outward_normals, segment_lengths
+from .contour import _crossing_pairs, outward_normals, segment_lengths
 from .features import _noise_sigma
 
 __all__ = ["polish"]
@@ -270,4 +270,30 @@ def polish(image: np.ndarray, nodes: np.ndarray, *, polarity: int = 0, noise: fl
     move = frame + delta[:, None] * normals - nodes
     dist = np.linalg.norm(move, axis=1)
     move *= np.minimum(1.0, reach / np.maximum(dist, 1e-12))[:, None]
-    return nodes + move
+    return nodes + _untangled(nodes, move)
+
+
+#: Times a polish's moves near a crossing are halved before they are dropped.
+_UNTANGLE_HALVINGS = 4
+
+
+def _untangled(nodes: np.ndarray, move: np.ndarray) -> np.ndarray:
+    """``move`` with the moves that make the polygon ``nodes`` cross itself shrunk.
+
+    Each node moves along its own normal, up to ``reach``: in a concave
+    corner sharper than the nodes are spaced, two such moves can carry an
+    edge across its neighbour's. The moves of the nodes of crossing edges,
+    and their neighbours', are halved until no edge crosses, or dropped
+    after a few halvings (a polish never makes a simple contour cross
+    itself: with every move dropped it is the contour it was given).
+    """
+    if len(_crossing_pairs(nodes)):
+        return move  # it crossed itself before: nothing to keep
+    n = len(nodes)
+    move = move.copy()
+    halvings = 0
+    while len(pairs := _crossing_pairs(nodes + move)):
+        near = (pairs[:, :, None] + np.arange(-1, 3)[None, None, :]).ravel() % n
+        move[near] *= 0.5 if halvings < _UNTANGLE_HALVINGS else 0.0
+        halvings += 1
+    return move
