@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from scipy import ndimage as ndi
 
 from napari_physeg.core.region import drawing_levels, object_region, objectness
 
@@ -185,3 +186,27 @@ def test_drawn_inside_a_nucleus_with_a_dim_textured_centre():
     assert model.polarity == 1 and not model.drawn_around
     assert overlap(region, nucleus) > 0.95
     assert (region & ~nucleus).sum() < 0.05 * nucleus.sum()
+
+
+def test_click_on_a_dim_elongated_object_among_bright_neighbours():
+    """A click on a dim elliptic nucleus whose circular rings straddle its
+    border (a ramp that reads like texture), bright neighbours further out
+    (a crowded fluorescence field): the bright class of the far rings lies
+    aside, in holes of the dark background, not around the nucleus; the
+    object is the dim one, bright (it was read as dark, and the contour
+    spread over the background)."""
+    shape = (160, 160)
+    rows, cols = np.mgrid[: shape[0], : shape[1]]
+
+    def ellipse(centre, a, b):
+        return ((rows - centre[0]) / a) ** 2 + ((cols - centre[1]) / b) ** 2 <= 1
+
+    nucleus = ellipse((80, 80), 9, 16)
+    neighbours = np.zeros(shape, bool)
+    for angle in np.radians([20, 160, 270]):
+        neighbours |= ellipse((80 + 26 * np.sin(angle), 80 + 30 * np.cos(angle)), 8, 11)
+    image = ndi.gaussian_filter(np.where(neighbours, 0.9, np.where(nucleus, 0.3, 0.1)), 1.5)
+    image += 0.03 * np.random.default_rng(0).standard_normal(shape)
+    model, region = region_for(image, circle((80, 80), 4))
+    assert model.polarity == 1 and not model.drawn_around
+    assert overlap(region, nucleus) > 0.9 and not (region & neighbours).any()

@@ -283,9 +283,44 @@ def _outside_level(intensity, drawing, centre, on_line, along, within, floor) ->
         # Far out the background may be a small part of a ring that still
         # lies mostly on the object: the ring's class furthest from the centre.
         level = _other_level(ring, centre, floor) if far else _median(ring)
+        # Read through near rings that differ from the centre one way, a
+        # level the other way is the background only if it surrounds the
+        # object (a click on a dark spot of a bright nucleus, whose dark
+        # background lies beyond its brighter body); not if it lies aside
+        # (a click on a dim nucleus, darker background around it, and bright
+        # neighbours further out).
+        if through and (level - centre) * (outside - centre) < 0 and \
+                not _surrounded(intensity, drawing, centre, level):
+            continue
         if not np.isnan(level) and abs(level - centre) > (2 * near_best if through else best):
             outside, best, best_ring = level, abs(level - centre), ring
     return outside
+
+
+def _surrounded(intensity, drawing, level, other) -> bool:
+    """Whether the pixels on ``other``'s side of its midpoint with ``level``
+    surround the body of those on ``level``'s side under the middle of the
+    drawing: not if at least half of them lie in its holes (bright
+    neighbours within a dim nucleus' dark background, not the background
+    around it)."""
+    shape = intensity.shape
+    side = (intensity - 0.5 * (level + other)) * np.sign(level - other) > 0
+    middle = _fill(_scaled(drawing, 0.5), shape)
+    body, _ = _marked_piece(intensity, level, other, middle if (middle & side).any() else _fill(drawing, shape))
+    if body is None:
+        return True
+    held = ndi.binary_fill_holes(body) & ~side
+    return held.sum() < 0.5 * (~side).sum()
+
+
+def _enclosed(body: np.ndarray, extent: np.ndarray) -> bool | None:
+    """Whether ``body`` reaches neither the outer edge of ``extent`` (within
+    the image: cv2.erode keeps the image's sides) nor half its area; None
+    where ``extent`` has no such edge (it covers the whole image)."""
+    edge = extent & ~cv2.erode(extent.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+    if not edge.any():
+        return None
+    return not (body & edge).any() and body.sum() <= 0.5 * extent.sum()
 
 
 def _enclosing_background(intensity, drawing, line, on_line, texture, floor, traced=False) -> float | None:
@@ -320,11 +355,7 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, tra
     body, on_body = _marked_piece(intensity, on_line, far, line, extent)
     if body is None or (traced and on_body < 0.9 * line.sum()):
         return None
-    # The rings' outer edge within the image (cv2.erode keeps the image's sides).
-    edge = extent & ~cv2.erode(extent.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
-    if not edge.any() or (body & edge).any() or body.sum() > 0.5 * extent.sum():
-        return None
-    return far
+    return far if _enclosed(body, extent) else None
 
 
 def _held_within(intensity, middle, drawn, line, centre, on_line, outside, floor) -> bool:
