@@ -210,3 +210,20 @@ def test_click_on_a_dim_elongated_object_among_bright_neighbours():
     model, region = region_for(image, circle((80, 80), 4))
     assert model.polarity == 1 and not model.drawn_around
     assert overlap(region, nucleus) > 0.9 and not (region & neighbours).any()
+
+
+def test_box_around_a_dim_object_with_a_far_brighter_neighbour_in_its_corner():
+    """A dim disk (a tenth of the contrast of its neighbour above the
+    background) at the middle of a box twice its size, a saturated disk in
+    the box's corner: the box's middle is near the line's level, as when a
+    drawing is far larger than its object, but the bright class lies in the
+    corner, not at the middle, so the dim disk is the object (the contour
+    ended on the bright one)."""
+    shape = (140, 140)
+    dim, bright = disk(shape, (70, 70), 12), disk(shape, (42, 44), 9)
+    image = ndi.gaussian_filter(np.where(bright, 1.0, np.where(dim, 0.2, 0.1)), 1.0)
+    image += 0.02 * np.random.default_rng(1).standard_normal(shape)
+    box = np.array([[46, 46], [46, 94], [94, 94], [94, 46]], float)
+    model, region = region_for(image, box)
+    assert model.drawn_around and model.object_level < 0.3
+    assert overlap(region, dim) > 0.95 and not (region & bright).any()

@@ -217,10 +217,13 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     if around:
         obj, background = centre, on_line
         # A drawing far larger than the object: its centre is mostly
-        # background too (within a fifth of the way to the other class).
+        # background too (within a fifth of the way to the other class),
+        # and the other class lies mostly at the centre (not a far brighter
+        # neighbour in a corner of a box around a dim object).
         if abs(centre - on_line) < 0.2 * span:
             other = _other_level(within, on_line, floor)
-            if abs(centre - on_line) < 0.2 * abs(other - on_line):
+            if abs(centre - on_line) < 0.2 * abs(other - on_line) and \
+                    _centred(intensity, middle, drawn & ~middle, on_line, other):
                 obj = other
     elif (beyond := _beyond_the_border(intensity, drawn, line, centre, outside, size)) is not None:
         # Traced on the object's edge (a label's outline, an earlier result):
@@ -251,6 +254,13 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         obj, background = (max(obj, background), min(obj, background)) if polarity > 0 else \
             (min(obj, background), max(obj, background))
     return RegionModel(int(polarity), float(obj), float(background), bool(around), floor)
+
+
+def _centred(intensity, middle, rest, level, other) -> bool:
+    """Whether the pixels on ``other``'s side of its midpoint with ``level``
+    make a larger share of ``middle`` than of ``rest``."""
+    side = (intensity - 0.5 * (level + other)) * np.sign(other - level) > 0
+    return bool(middle.any()) and side[middle].mean() > (side[rest].mean() if rest.any() else 0.0)
 
 
 def _outside_level(intensity, drawing, centre, on_line, along, within, floor) -> float:
