@@ -289,10 +289,17 @@ def low_share(rows, timelapse_alt):
     groups = list(dict.fromkeys(r["group"] for r in kept))
     per_group = ", ".join(f"{g} {sum(c.startswith(g + '/') for c in low)} of {sum(r['group'] == g for r in kept)}"
                           for g in groups)
+    # Cases are named where a group has few (a group with many: see the CSV).
+    named = [c for c in low if sum(d.split("/")[0] == c.split("/")[0] for d in low) <= LIST_AT_MOST]
     return [f"- ours below {LOW}: {all_low} of {len(rows)} cases ({all_low / max(len(rows), 1):.1%}); with the "
             f"ambiguous truths set apart (the nuclei above left out, the time-lapse scored against the ramp's "
             f"middle): {len(low)} of {len(kept)} ({len(low) / max(len(kept), 1):.1%}; {per_group})"
-            + (": " + ", ".join(low) if low else "")]
+            + (": " + ", ".join(named) if named else "")
+            + (" (the others' cases: benchmark_output/real_cases.csv)" if len(named) < len(low) else "")]
+
+
+#: low_share() names a group's cases below LOW when it has at most this many.
+LIST_AT_MOST = 30
 
 
 def border_offsets(rows, groups):
