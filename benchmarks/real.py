@@ -45,6 +45,7 @@ import csv  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
+from collections import Counter  # noqa: E402
 from pathlib import Path  # noqa: E402
 from types import SimpleNamespace  # noqa: E402
 
@@ -290,7 +291,8 @@ def low_share(rows, timelapse_alt):
     per_group = ", ".join(f"{g} {sum(c.startswith(g + '/') for c in low)} of {sum(r['group'] == g for r in kept)}"
                           for g in groups)
     # Cases are named where a group has few (a group with many: see the CSV).
-    named = [c for c in low if sum(d.split("/")[0] == c.split("/")[0] for d in low) <= LIST_AT_MOST]
+    low_in = Counter(c.split("/")[0] for c in low)
+    named = [c for c in low if low_in[c.split("/")[0]] <= LIST_AT_MOST]
     return [f"- ours below {LOW}: {all_low} of {len(rows)} cases ({all_low / max(len(rows), 1):.1%}); with the "
             f"ambiguous truths set apart (the nuclei above left out, the time-lapse scored against the ramp's "
             f"middle): {len(low)} of {len(kept)} ({len(low) / max(len(kept), 1):.1%}; {per_group})"

@@ -140,14 +140,18 @@ def nuclei(slices=NUCLEI_SLICES) -> list[Obj]:
 
     d = sample_dir()
     stack, labels = tifffile.imread(d / "nuclei.tif"), tifffile.imread(d / "nuclei_label.tif")
+    return [o for z in slices for o in labelled("nuclei", normalise(stack[z]), labels[z], f"z{z}/")]
+
+
+def labelled(group: str, image: np.ndarray, labels: np.ndarray, prefix: str = "") -> list[Obj]:
+    """One object per label of at least ``MIN_AREA`` px, named ``<prefix>n<label>``, its truth
+    the label's largest part, holes filled."""
     out = []
-    for z in slices:
-        image = normalise(stack[z])
-        for lab in np.unique(labels[z]):
-            mask = labels[z] == lab
-            if lab == 0 or mask.sum() < MIN_AREA:
-                continue
-            out.append(Obj("nuclei", f"z{z}/n{lab}", image, largest_filled(mask)))
+    for lab in np.unique(labels):
+        mask = labels == lab
+        if lab == 0 or mask.sum() < MIN_AREA:
+            continue
+        out.append(Obj(group, f"{prefix}n{lab}", image, largest_filled(mask)))
     return out
 
 
@@ -285,14 +289,7 @@ def dsb() -> list[Obj]:
     import tifffile
 
     d = dsb_dir()
-    image, labels = normalise(tifffile.imread(d / "img2d.tif")), tifffile.imread(d / "mask2d.tif")
-    out = []
-    for lab in np.unique(labels):
-        mask = labels == lab
-        if lab == 0 or mask.sum() < MIN_AREA:
-            continue
-        out.append(Obj("dsb", f"n{lab}", image, largest_filled(mask)))
-    return out
+    return labelled("dsb", normalise(tifffile.imread(d / "img2d.tif")), tifffile.imread(d / "mask2d.tif"))
 
 
 def cell_truth() -> np.ndarray:

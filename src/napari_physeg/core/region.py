@@ -259,7 +259,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
 def _centred(intensity, middle, rest, level, other) -> bool:
     """Whether the pixels on ``other``'s side of its midpoint with ``level``
     make a larger share of ``middle`` than of ``rest``."""
-    side = (intensity - 0.5 * (level + other)) * np.sign(other - level) > 0
+    side = _on_side(intensity, other, level)
     return bool(middle.any()) and side[middle].mean() > (side[rest].mean() if rest.any() else 0.0)
 
 
@@ -314,7 +314,7 @@ def _surrounded(intensity, drawing, level, other) -> bool:
     neighbours within a dim nucleus' dark background, not the background
     around it)."""
     shape = intensity.shape
-    side = (intensity - 0.5 * (level + other)) * np.sign(level - other) > 0
+    side = _on_side(intensity, level, other)
     middle = _fill(_scaled(drawing, 0.5), shape)
     body, _ = _marked_piece(intensity, level, other, middle if (middle & side).any() else _fill(drawing, shape))
     if body is None:
@@ -389,12 +389,17 @@ def _held_within(intensity, middle, drawn, line, centre, on_line, outside, floor
     return blob is not None and not (blob & (line | ~drawn)).any() and blob.sum() >= 0.25 * drawn.sum()
 
 
+def _on_side(intensity, level, other) -> np.ndarray:
+    """The pixels on ``level``'s side of the midpoint between ``level`` and ``other``."""
+    return (intensity - 0.5 * (level + other)) * np.sign(level - other) > 0
+
+
 def _marked_piece(intensity, level, other, marks, within=None):
     """The 4-connected piece of the pixels on ``level``'s side of the midpoint
     between ``level`` and ``other`` (those ``within`` it, if given) that holds
     most of the pixels ``marks``, and how many of ``marks`` lie on that side;
     ``(None, 0)`` when none does."""
-    side = (intensity - 0.5 * (level + other)) * np.sign(level - other) > 0
+    side = _on_side(intensity, level, other)
     if within is not None:
         side &= within
     pieces, _ = _label(side)

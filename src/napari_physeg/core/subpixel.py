@@ -51,7 +51,7 @@ import numpy as np
 from scipy.linalg import solve_banded
 from scipy.ndimage import correlate1d, gaussian_filter1d, maximum_filter1d
 
-from .contour import _crossing_pairs, outward_normals, segment_lengths
+from .contour import _crossing_pairs, crosses_itself, outward_normals, segment_lengths
 from .features import _noise_sigma
 
 __all__ = ["polish"]
@@ -287,7 +287,7 @@ def _untangled(nodes: np.ndarray, move: np.ndarray) -> np.ndarray:
     after a few halvings (a polish never makes a simple contour cross
     itself: with every move dropped it is the contour it was given).
     """
-    if len(_crossing_pairs(nodes)):
+    if crosses_itself(nodes):
         return move  # it crossed itself before: nothing to keep
     n = len(nodes)
     move = move.copy()
