@@ -257,14 +257,27 @@ def test_dim_coin_without_an_edge_pixel(factor):
     assert (found & truth).sum() / (found | truth).sum() > 0.95
 
 
-def test_a_click_that_collapses_is_told_to_draw_larger(stack):
-    """A 3-px circle on the background between nuclei (slice 26) finds no
-    border within reach and collapses: the error says to draw around the
-    object or, inside it, larger than a click."""
+def test_a_click_on_the_background_outlines_the_dark_gap_not_a_nucleus(stack):
+    """A 3-px circle on the background between nuclei (slice 26) lies in a
+    dark gap ringed by the nuclei's glow: it outlines that gap as a dark
+    object, with no nucleus pixel in it. It collapsed while the noise was
+    measured on the smoothed intensity (ten times too low): the gap's
+    levels were then read otherwise."""
     centre = np.array([110.0, 205.0])
-    assert stack[1][26][110, 205] == 0
+    image, labels = stack[0][26], stack[1][26]
+    assert labels[110, 205] == 0
+    res = segment(image, circle(centre, 1.5))
+    found = polygon2mask(labels.shape, res.contour)
+    assert res.polarity == -1
+    assert found.sum() > 500 and not (found & (labels > 0)).any()
+
+
+def test_a_click_on_shading_that_collapses_is_told_to_draw_larger():
+    """A 3-px circle on a shading ramp (no border anywhere) collapses: the
+    error says to draw around the object or, inside it, larger than a click."""
+    ramp = np.arange(96)[None, :] / 96.0 + np.random.default_rng(0).normal(0, 0.05, (96, 96))
     with pytest.raises(ValueError, match=r"draw it around the object.*larger than this 3-px click"):
-        segment(stack[0][26], circle(centre, 1.5))
+        segment(ramp, circle(np.array([48.0, 48.0]), 1.5))
 
 
 @pytest.mark.parametrize("z, label, centre, radius", [(26, 9, (235, 138), 3.4), (26, 14, (148, 191), 4.3),

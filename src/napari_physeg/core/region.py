@@ -165,7 +165,8 @@ def _median(values: np.ndarray) -> float:
     return float(np.median(values)) if values.size else np.nan
 
 
-def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | None = None) -> RegionModel:
+def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | None = None,
+                   noise: float | None = None) -> RegionModel:
     """Object and background levels, polarity, and whether the drawing is around the object.
 
     Parameters
@@ -176,6 +177,10 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         The contour the user drew, ``(row, col)`` in ``intensity``'s frame.
     polarity : {None, 1, -1}, optional
         Known polarity (+1 bright object); None to infer it.
+    noise : float, optional
+        Standard deviation of the noise in ``intensity``. Measured on it when
+        None, which is right only for an unsmoothed image: smoothing hides
+        white noise from the measure far more than it lowers it.
 
     Returns
     -------
@@ -193,7 +198,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     centre = _median(intensity[middle])
     if np.isnan(centre):  # a drawing too thin to have a centre
         centre = on_line
-    floor = _least_contrast(intensity)
+    floor = _least_contrast(intensity, noise)
     drawn = _fill(drawing, shape)
     within = intensity[drawn]
     within = within[:: max(1, within.size // _MAX_SAMPLES)]
@@ -436,9 +441,10 @@ def _scatter(values: np.ndarray) -> float:
     return 1.4826 * float(np.median(np.abs(values - np.median(values))))
 
 
-def _least_contrast(intensity: np.ndarray) -> float:
-    """The least difference of levels that is a contrast in ``intensity``."""
-    return max(MIN_CONTRAST_SIGMAS * _noise_sigma(intensity), MIN_CONTRAST)
+def _least_contrast(intensity: np.ndarray, noise: float | None = None) -> float:
+    """The least difference of levels that is a contrast in ``intensity``
+    (whose noise has the standard deviation ``noise``, or as measured on it)."""
+    return max(MIN_CONTRAST_SIGMAS * (_noise_sigma(intensity) if noise is None else noise), MIN_CONTRAST)
 
 
 def _other_level(values: np.ndarray, level: float, floor: float) -> float:

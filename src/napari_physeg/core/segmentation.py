@@ -23,7 +23,7 @@ from .contour import (as_contour, contour_gap, cut_pinches, nodes_for_spacing, o
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
-from .features import chamfer_distance, normalized_intensity, shen_castan_edges
+from .features import _noise_sigma, chamfer_distance, normalized_intensity, shen_castan_edges
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .materials import Material, get_material
 from .region import _disk, _fill, _scaled, drawing_levels, object_region, objectness
@@ -160,7 +160,8 @@ def _near_window_border(nodes: np.ndarray, window, shape, guard: float) -> bool:
 EDGE_GATE = 3.0
 
 
-def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_sides=(True, True, True, True)):
+def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_sides=(True, True, True, True),
+                    noise=None):
     """Object-ness and edge images for the object the user drew.
 
     Parameters
@@ -179,6 +180,9 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
     image_sides : 4 bools, optional
         Which sides of the window (top, bottom, left, right) are the image's
         own; all by default (the window is the whole image).
+    noise : float, optional
+        Standard deviation of the noise in ``intensity`` (see
+        :func:`~.region.drawing_levels`).
 
     Returns
     -------
@@ -188,7 +192,7 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
         band around that region.
     polarity : int
     """
-    model = drawing_levels(intensity, drawing, polarity)
+    model = drawing_levels(intensity, drawing, polarity, noise)
     if not model.is_visible:
         # No object here that the eye could tell from its background: no
         # region force (edges may still guide the contour).
@@ -401,6 +405,7 @@ class FrameFeatures:
 
     edges: np.ndarray
     intensity: np.ndarray  # normalised, lightly smoothed (sigma 1 px)
+    noise: float | None = None  # standard deviation of the noise in intensity (None: unknown)
 
     @classmethod
     def of(cls, image, isef_b: float = 0.7) -> FrameFeatures:
@@ -408,14 +413,22 @@ class FrameFeatures:
         return cls(*_edges_and_intensity(image, isef_b))
 
 
-def _edges_and_intensity(image, isef_b: float) -> tuple[np.ndarray, np.ndarray]:
+#: White noise's standard deviation is multiplied by 1 / (2 sqrt(pi) sigma)
+#: by a Gaussian of sigma px (here the intensity's, sigma = 1).
+_SMOOTHED_NOISE_GAIN = 1.0 / (2.0 * np.sqrt(np.pi))
+
+
+def _edges_and_intensity(image, isef_b: float) -> tuple[np.ndarray, np.ndarray, float]:
     """The edge map (Shen-Castan on the normalised image, as
-    :func:`~.features.compute_features` finds it) and the lightly smoothed
-    normalised intensity: the region force needs the border where it is, a
-    light denoising, not the strong ISEF smoothing used for edge detection."""
+    :func:`~.features.compute_features` finds it), the lightly smoothed
+    normalised intensity (the region force needs the border where it is, a
+    light denoising, not the strong ISEF smoothing used for edge detection)
+    and the standard deviation of its noise. The noise is measured before
+    the smoothing: after it, the measure (a second difference) sees a tenth of it."""
     normalised = normalized_intensity(image)
+    noise = _SMOOTHED_NOISE_GAIN * _noise_sigma(normalised)
     return (shen_castan_edges(normalised, b=isef_b),
-            cv2.GaussianBlur(normalised, (0, 0), 1.0, borderType=cv2.BORDER_REFLECT))
+            cv2.GaussianBlur(normalised, (0, 0), 1.0, borderType=cv2.BORDER_REFLECT), noise)
 
 
 class _FeatureWindow:
@@ -449,9 +462,9 @@ class _FeatureWindow:
         sub = self.image[window]
         origin = np.array([window[0].start, window[1].start], dtype=float)
         if self.shared is not None:
-            edges, intensity = self.shared.edges[window], self.shared.intensity[window]
+            edges, intensity, noise = self.shared.edges[window], self.shared.intensity[window], self.shared.noise
         else:
-            edges, intensity = _edges_and_intensity(sub, self.isef_b)
+            edges, intensity, noise = _edges_and_intensity(sub, self.isef_b)
         if not edges.any() and np.ptp(intensity) <= 1e-12:
             if sub.shape != self.image.shape:  # nothing here: look at the whole image
                 return self._compute(self._whole_image)
@@ -461,7 +474,7 @@ class _FeatureWindow:
         image_sides = (rows.start == 0, rows.stop == self.image.shape[0], cols.start == 0,
                        cols.stop == self.image.shape[1])
         signed, edges, self.polarity = region_features(intensity, edges, self.drawing - origin, self.polarity,
-                                                       avoid, image_sides)
+                                                       avoid, image_sides, noise)
         distance = _distance_with_image_border(edges, signed, window, self.image.shape)
         self.anchor = _anchor(signed, self.drawing - origin)
         field = ForceField.from_features(edges, distance, signed, self.weights, max_length=self.max_line_length)
