@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from napari_physeg.core.region import drawing_levels, object_region, objectness
+from napari_physeg.core.region import drawing_levels, object_region, objectness, stronger_than_object
 
 
 def disk(shape, center, radius):
@@ -227,3 +227,44 @@ def test_box_around_a_dim_object_with_a_far_brighter_neighbour_in_its_corner():
     model, region = region_for(image, box)
     assert model.drawn_around and model.object_level < 0.3
     assert overlap(region, dim) > 0.95 and not (region & bright).any()
+
+
+def dim_disk_beside_a_saturated_one(gap, seed=0):
+    """A dim disk (radius 14, a quarter of the contrast) and a saturated disk
+    (radius 11) ``gap`` px from its centre, overlapping it: a broad contact,
+    no neck. Blurred (sigma 2 px) and noisy, as in a crowded fluorescence field."""
+    shape = (160, 160)
+    dim, bright = disk(shape, (80, 66), 14), disk(shape, (80, 66 + gap), 11)
+    image = ndi.gaussian_filter(np.where(bright, 1.0, np.where(dim, 0.35, 0.1)), 2.0)
+    return image + 0.02 * np.random.default_rng(seed).standard_normal(shape), dim & ~bright, bright
+
+
+@pytest.mark.parametrize("gap", [20, 22, 24])
+def test_click_on_a_dim_disk_beside_a_saturated_one_reads_the_background_around_it(gap):
+    """A click inside the dim disk: its near rings lie on the disk, the far
+    ones on the saturated neighbour and the dark background. The far rings'
+    class furthest from the click's level is the neighbour's, which lies
+    aside, in a hole of the dark background; the background that surrounds
+    the disk is the dark one, so the disk is bright (it was read as a dark
+    object on a bright background: IoU 0.03)."""
+    image, dim, _ = dim_disk_beside_a_saturated_one(gap)
+    model = drawing_levels(image, circle((80, 66), 3))
+    assert model.polarity == 1 and not model.drawn_around
+    assert model.background_level < 0.25 < model.object_level < 0.5  # not the neighbour's 0.8
+
+
+@pytest.mark.parametrize("gap", [20, 22])
+def test_saturated_neighbour_in_broad_contact_is_left_out(gap):
+    """A circle 1.3 times the dim disk around it: the disk and the saturated
+    neighbour make one object-like blob with no neck. The neighbour's pixels,
+    twice the contrast beyond the disk's level, are a blob of their own that
+    the drawing's middle does not mark: a neighbour, parted from the disk where
+    the watershed from it meets the disk's (without it the region took the
+    neighbour's half inside the drawing)."""
+    image, dim, bright = dim_disk_beside_a_saturated_one(gap)
+    drawing = circle((80, 66), 18.2)
+    model = drawing_levels(image, drawing)
+    region = object_region(objectness(image, model), drawing, model, stronger=stronger_than_object(image, model))
+    assert model.drawn_around and model.polarity == 1
+    assert overlap(region, dim) > 0.9
+    assert (region & bright).sum() < 0.1 * region.sum()

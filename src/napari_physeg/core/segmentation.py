@@ -26,7 +26,7 @@ from .element import coefficient_system, rayleigh_coefficients, reference_freque
 from .features import _noise_sigma, chamfer_distance, normalized_intensity, shen_castan_edges
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .materials import Material, get_material
-from .region import _disk, _fill, _scaled, drawing_levels, object_region, objectness
+from .region import _disk, _fill, _scaled, drawing_levels, object_region, objectness, stronger_than_object
 from .subpixel import polish
 
 __all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "FrameFeatures", "region_features"]
@@ -200,7 +200,7 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
     signed = objectness(intensity, model)
     if avoid is not None:
         signed[avoid] = -1.0
-    region = object_region(signed, drawing, model, image_sides)
+    region = object_region(signed, drawing, model, image_sides, stronger_than_object(intensity, model))
     if region is None:
         return signed, edges, model.polarity
     signed = np.where(region, np.where(signed > 0, signed, 1.0), np.where(signed > 0, -1.0, signed))
