@@ -268,3 +268,36 @@ def test_saturated_neighbour_in_broad_contact_is_left_out(gap):
     assert model.drawn_around and model.polarity == 1
     assert overlap(region, dim) > 0.9
     assert (region & bright).sum() < 0.1 * region.sum()
+
+
+@pytest.mark.parametrize("distance", [16, 17])
+def test_equal_neighbour_in_broad_contact_crossed_by_the_drawing_is_left_out(distance):
+    """Two equal disks (radius 14) overlapping broadly: their neck is 0.82
+    (0.79) of their depth, and their cores (deeper than half of it) join. A circle
+    1.3 times one of them, around it, crosses the other: that disk's depth
+    basin lies mostly beyond the drawing, and is a neighbour (the region took
+    the part of it inside the drawing)."""
+    shape = (160, 180)
+    ours, other = disk(shape, (80, 70), 14), disk(shape, (80, 70 + distance), 14)
+    image = render(ours | other)
+    drawing = circle((80, 70), 18.2)
+    model, region = region_for(image, drawing)
+    assert model.drawn_around
+    assert overlap(region, ours & ~other) > 0.95
+    assert (region & other & ~ours).sum() < 0.1 * (other & ~ours).sum()
+    # The half of the shared lens on the drawn disk's side, not the other's.
+    assert region[:, 70 + distance // 2 + 3 :].sum() < 0.02 * region.sum()
+
+
+def test_lobes_poking_out_of_the_drawing_are_not_crossed_neighbours():
+    """A dumbbell (two disks joined by a bar 0.9 of their depth wide) drawn
+    around by a circle that its ends poke out of by 6 px: the seed marks the
+    bar, not the lobes, but a lobe that lies mostly inside the drawing is the
+    object's, not a neighbour the drawing crosses."""
+    shape = (160, 160)
+    rows, cols = np.mgrid[: shape[0], : shape[1]]
+    body = disk(shape, (80, 56), 12) | disk(shape, (80, 104), 12) | ((abs(rows - 80) <= 11) & (abs(cols - 80) <= 24))
+    image = render(body)
+    model, region = region_for(image, circle((80, 80), 30))
+    assert model.drawn_around
+    assert overlap(region, body) > 0.97

@@ -646,12 +646,45 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     depth = cv2.distanceTransform(np.pad(like, 1).view(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
     if model.drawn_around:
         region = _split_at_cores(depth, like, seed, drawn, reach, stronger=stronger)
+        region &= ~_crossed_neighbours(depth, like, seed, drawn)
     else:
         # No drawing line bounds it: neighbours touching at a neck narrow
         # for their own size are parted too (small crowded nuclei).
         region = (_split_at_cores(depth, like, seed, None, reach, _side_distance(shape, image_sides), stronger)
                   & _marked_basins(depth, like, seed))
     return _smoothed(region & limit, image_sides)
+
+
+#: Around the object, a depth basin of the object-like pixels (basins joined
+#: across necks of at least CROSSED_NECK of the smaller one's depth) is a
+#: neighbour that the drawing crosses when at least CROSSED_OUTSIDE of it lies
+#: beyond the drawing, the seed marks less than MARKED_CORE_SHARE of it, and
+#: it is at least CROSSED_DEPTH times as deep as the object (see
+#: _crossed_neighbours). Touching neighbours met the nuclei of the real-image
+#: benchmark at necks of 0.75 of the smaller one's depth or less, the
+#: nuclei's own lobes at 0.97 or more (see NECK).
+CROSSED_OUTSIDE = 0.3
+CROSSED_NECK = 0.9
+CROSSED_DEPTH = 0.7
+
+
+def _crossed_neighbours(depth, like, seed, drawn) -> np.ndarray:
+    """The depth basins of ``like`` that the drawing around the object
+    crosses (see CROSSED_OUTSIDE): neighbours in broad contact with the
+    object, which share its core (see _cores) but not its basin. A shallow
+    lobe of the object that pokes out of a tight drawing, or that the
+    image's side cuts off, is not one."""
+    groups = _basin_groups(depth, like, CROSSED_NECK)
+    n = groups.max() + 1
+    area = np.maximum(np.bincount(groups.ravel(), minlength=n), 1)
+    beyond = np.bincount(groups[~drawn], minlength=n) / area
+    marked = np.bincount(groups[seed], minlength=n) / area
+    peak = np.zeros(n)
+    np.maximum.at(peak, groups.ravel(), depth.ravel())
+    crossed = (beyond >= CROSSED_OUTSIDE) & (marked < MARKED_CORE_SHARE) & (peak >= CROSSED_DEPTH * depth[seed].max())
+    # The basin most of the seed lies in is the object's, whatever else it holds.
+    crossed[[0, np.argmax(np.bincount(groups[seed], minlength=n)[1:]) + 1]] = False
+    return crossed[groups]
 
 
 def _area_held(like: np.ndarray, marks: np.ndarray, reach: np.ndarray) -> float:
@@ -782,11 +815,20 @@ NECK = 0.8
 
 def _marked_basins(depth: np.ndarray, like: np.ndarray, seed: np.ndarray) -> np.ndarray:
     """The pixels of ``like`` in the depth basins the seed marks, basins
-    joined across the necks that are no neck (:data:`NECK`).
+    joined across the necks that are no neck (see :func:`_basin_groups`)."""
+    groups = _basin_groups(depth, like)
+    ours = np.unique(groups[seed])
+    return np.isin(groups, ours[ours > 0]) & like
+
+
+def _basin_groups(depth: np.ndarray, like: np.ndarray, neck: float = NECK) -> np.ndarray:
+    """Labels of the depth basins of ``like`` joined across the necks that
+    are no neck (at least ``neck`` times the smaller one's depth, see
+    :data:`NECK`); 0 off ``like``.
 
     The basins are the watershed of the depth from its local maxima. Joining
     them from the widest neck down (a maximum spanning forest), two groups
-    merge when the neck between them is at least NECK times the smaller
+    merge when the neck between them is at least ``neck`` times the smaller
     group's deepest point: a lobe, or a ridge's maxima, joins its object; a
     neighbour that touches it at a narrower neck stays apart, however large
     or small either is (a fraction of the object's depth alone would spare
@@ -808,12 +850,11 @@ def _marked_basins(depth: np.ndarray, like: np.ndarray, seed: np.ndarray) -> np.
 
     for i in np.argsort(-s, kind="stable"):
         ra, rb = root(a[i]), root(b[i])
-        if ra != rb and s[i] >= NECK * min(peak[ra], peak[rb]):
+        if ra != rb and s[i] >= neck * min(peak[ra], peak[rb]):
             group[rb] = ra
             peak[ra] = max(peak[ra], peak[rb])
     roots = np.array([root(i) for i in range(n + 1)])
-    ours = np.unique(roots[basins[seed]])
-    return np.isin(roots[basins], ours[ours > 0]) & like
+    return np.where(like, roots[basins], 0)
 
 
 def _necks(basins: np.ndarray, depth: np.ndarray):
