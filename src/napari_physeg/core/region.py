@@ -679,8 +679,7 @@ def _crossed_neighbours(depth, like, seed, drawn) -> np.ndarray:
     area = np.maximum(np.bincount(groups.ravel(), minlength=n), 1)
     beyond = np.bincount(groups[~drawn], minlength=n) / area
     marked = np.bincount(groups[seed], minlength=n) / area
-    peak = np.zeros(n)
-    np.maximum.at(peak, groups.ravel(), depth.ravel())
+    peak = _label_maxima(depth, groups, n)
     crossed = (beyond >= CROSSED_OUTSIDE) & (marked < MARKED_CORE_SHARE) & (peak >= CROSSED_DEPTH * depth[seed].max())
     # The basin most of the seed lies in is the object's, whatever else it holds.
     crossed[[0, np.argmax(np.bincount(groups[seed], minlength=n)[1:]) + 1]] = False
@@ -837,8 +836,7 @@ def _basin_groups(depth: np.ndarray, like: np.ndarray, neck: float = NECK) -> np
     peaks = (depth > 0) & (depth >= cv2.dilate(depth, np.ones((3, 3), np.uint8)))
     markers, n = _label(peaks)
     basins = segmentation.watershed(-depth, markers, mask=like)
-    peak = np.zeros(n + 1)
-    np.maximum.at(peak, basins.ravel(), depth.ravel())
+    peak = _label_maxima(depth, basins, n + 1)
     a, b, s = _necks(basins, depth)
     group = np.arange(n + 1)
 
@@ -855,6 +853,14 @@ def _basin_groups(depth: np.ndarray, like: np.ndarray, neck: float = NECK) -> np
             peak[ra] = max(peak[ra], peak[rb])
     roots = np.array([root(i) for i in range(n + 1)])
     return np.where(like, roots[basins], 0)
+
+
+def _label_maxima(values: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
+    """The largest of ``values`` under each label ``0..n-1`` (0 where none)."""
+    # ufunc.at is fast only when the output has the values' own dtype.
+    peak = np.zeros(n, values.dtype)
+    np.maximum.at(peak, labels.ravel(), values.ravel())
+    return peak
 
 
 def _necks(basins: np.ndarray, depth: np.ndarray):
