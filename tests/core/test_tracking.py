@@ -247,3 +247,21 @@ def test_rigid_motion_between_frames_is_found_in_full(degrees):
     back = source @ rotation.T + shift  # on the untouched outline again
     dense = resample(outline, spacing=0.05)
     assert np.sqrt(((back[:, None] - dense[None]) ** 2).sum(-1)).min(1).max() < 0.05
+
+
+def test_a_frame_starts_on_the_predicted_contour_and_reads_its_levels_from_the_drawing(movie):
+    """Each frame's contour starts where the previous result and the motion
+    predict it, on the border, with the margin-grown drawing around it read
+    only for the object's levels: the same outline, in fewer steps, than
+    starting from the drawing and travelling its margin back."""
+    from napari_physeg.core import segment
+    from napari_physeg.core.segmentation import _segment_from
+    from napari_physeg.core.tracking import _next_init
+
+    drawing, predicted = _next_init(track(movie.frames[:2], movie.init).contours[0])
+    from_drawing = segment(movie.frames[2], drawing)
+    from_predicted = _segment_from(movie.frames[2], drawing, predicted)
+    assert from_predicted.converged and from_drawing.converged
+    assert from_predicted.steps < from_drawing.steps
+    assert iou(from_predicted.contour, movie.masks[2]) > 0.98
+    assert abs(iou(from_predicted.contour, movie.masks[2]) - iou(from_drawing.contour, movie.masks[2])) < 0.01

@@ -31,7 +31,7 @@ from .contour import (area_centroid, as_contour, closest_on_polyline, outward_no
                       positively_oriented, remove_loops, resample, signed_area)
 from .dynamics import DivergenceError
 from .matching import match
-from .segmentation import FrameFeatures, check_segment_options, segment
+from .segmentation import FrameFeatures, _segment_from, check_segment_options, segment
 
 __all__ = ["track", "iter_track", "TrackingResult", "TrackingProgress", "TRACKED", "LOST", "LEFT"]
 
@@ -218,13 +218,15 @@ def _grown(contour: np.ndarray, by: float) -> np.ndarray:
     return remove_loops(nodes + by * outward_normals(nodes))
 
 
-def _next_init(history: list[np.ndarray]) -> np.ndarray:
-    """The previous contour moved by the centroid's last displacement and
-    grown by a margin: the next frame's starting contour."""
+def _next_init(history: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The next frame's drawing and start: the previous contour moved by the
+    centroid's last displacement (the start), and that grown by a margin (the
+    drawing around the object, whose line reads the background)."""
     prev = history[-1]
     shift = area_centroid(prev) - area_centroid(history[-2]) if len(history) > 1 else 0.0
     radius = np.sqrt(abs(signed_area(prev)) / np.pi)
-    return _grown(prev + shift, float(np.clip(0.2 * radius, 3.0, 8.0)))
+    start = prev + shift
+    return _grown(start, float(np.clip(0.2 * radius, 3.0, 8.0))), start
 
 
 def _paint(owner: np.ndarray, contour: np.ndarray, value: int) -> None:
@@ -331,16 +333,16 @@ def _one_object(image, shared, owner, t, k, start, step, inits, contours, status
         # The two frames before this one, in the direction of travel.
         history = [c for c in (contours[k][t - 2 * step] if 0 <= t - 2 * step < len(contours[k]) else None,
                                contours[k][t - step]) if c is not None]
-        init = _next_init(history)
+        init, predicted = _next_init(history)
     else:
-        init = inits[k]
+        init, predicted = inits[k], None
     avoid = (owner >= 0) & (owner != k)
     try:
         with warnings.catch_warnings():
             if t != start:  # a contour predicted partly beyond the image is expected
                 warnings.filterwarnings("ignore", message=".*lie outside the image", category=UserWarning)
-            res = segment(image, init, features=shared, avoid=avoid if avoid.any() else None,
-                          polarity=polarity[k], **options)
+            res = _segment_from(image, init, predicted, features=shared, avoid=avoid if avoid.any() else None,
+                                polarity=polarity[k], **options)
     except (ValueError, DivergenceError):
         return None, LEFT if t != start and _touches_side(init, image.shape) else LOST
     if not res.converged:
