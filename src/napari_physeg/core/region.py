@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from scipy import ndimage as ndi
-from skimage import segmentation
+from skimage import measure, segmentation
 
 from .features import _noise_sigma
 
@@ -540,11 +540,20 @@ def _beyond_the_border(intensity, drawn, line, centre, outside, size) -> float |
 #: quarter of its nucleus, at 1.5 a tenth.
 STRONGER_LEVEL = 2.0
 
+#: From APART_LEVEL times the contrast beyond the object's level, a blob is a
+#: neighbour when it also lies apart from the object: convex (its solidity at
+#: least APART_SOLIDITY) or mostly beyond the object's depth basin (basins
+#: joined across necks of CROSSED_NECK). A brighter nucleus touching a dim
+#: one has a convex core of its own; the bright texture of a nucleus around a
+#: click on its dark texture is a network, in the nucleus' own basin.
+APART_LEVEL = 1.0
+APART_SOLIDITY = 0.9
+
 
 def stronger_than_object(intensity: np.ndarray, model: RegionModel) -> np.ndarray:
-    """Pixels whose level lies beyond the object's, away from its background,
-    by at least :data:`STRONGER_LEVEL` times the contrast."""
-    return model.polarity * (intensity - model.object_level) >= STRONGER_LEVEL * model.contrast
+    """How far each pixel's level lies beyond the object's, away from its
+    background, in units of the contrast (negative: on the background's side)."""
+    return (model.polarity * (intensity - model.object_level) / max(model.contrast, 1e-12)).astype(np.float32)
 
 
 def objectness(intensity: np.ndarray, model: RegionModel) -> np.ndarray:
@@ -744,7 +753,7 @@ def _split_at_cores(depth, like, seed, drawn, reach, side_distance=None, stronge
     own = np.isin(blobs, np.unique(blobs[mine]))
     others = own & (cores > 0) & ~mine
     if stronger is not None:
-        others |= own & _stronger_neighbours(stronger & like, seed, float(depth[seed].max()))
+        others |= own & _stronger_neighbours(stronger, like, depth, seed)
     if not others.any():
         return own  # no neighbour touches it
     markers = np.where(cores > 0, 2, 0).astype(np.int32)
@@ -761,17 +770,64 @@ def _split_at_cores(depth, like, seed, drawn, reach, side_distance=None, stronge
 STRONGER_CORE = 0.5
 
 
-def _stronger_neighbours(stronger: np.ndarray, seed: np.ndarray, inscribed: float) -> np.ndarray:
-    """The blobs of ``stronger`` (pixels of a level beyond the object's) as
-    large as a disk of STRONGER_CORE times the object's ``inscribed``
-    radius that the seed does not touch: a saturated nucleus touching a dim
-    one, which no neck may part from it. The watershed from them and from
-    the object's cores parts them where their floods meet."""
-    pieces, n = _label(stronger)
-    large = np.bincount(pieces.ravel(), minlength=n + 1) >= np.pi * (STRONGER_CORE * inscribed) ** 2
+def _stronger_neighbours(excess, like, depth, seed) -> np.ndarray:
+    """The neighbours of a level beyond the object's (``excess``, in units
+    of its contrast) that no neck may part from it, as markers for the
+    watershed: blobs as large as a disk of STRONGER_CORE times the object's
+    inscribed radius that the seed does not touch, STRONGER_LEVEL beyond it
+    (a saturated nucleus touching a dim one), or APART_LEVEL beyond it and
+    apart from the object (see :func:`_apart_neighbours`)."""
+    smallest = np.pi * (STRONGER_CORE * float(depth[seed].max())) ** 2
+    pieces, n = _label((excess >= STRONGER_LEVEL) & like)
+    strong = _large_blobs(pieces, n, seed, smallest)[pieces]
+    return strong | _apart_neighbours(excess, like, depth, seed, smallest, strong)
+
+
+def _apart_neighbours(excess, like, depth, seed, smallest, strong) -> np.ndarray:
+    """The blobs APART_LEVEL beyond the object's level, of at least
+    ``smallest`` px, untouched by the seed and holding none of the ``strong``
+    neighbours, that lie apart from the object (see APART_LEVEL); grown down
+    to half that level, toward where the border between two levels lies (a
+    marker on their bright core alone let the object's flood take their
+    rim). Only when the seed lies on a plateau at the object's level."""
+    pieces, n = _label((excess >= APART_LEVEL) & like)
+    large = _large_blobs(pieces, n, seed, smallest)
+    large[np.unique(pieces[strong])] = False
+    if not large.any() or not _on_a_plateau(excess, like, depth, seed):
+        return np.zeros(like.shape, bool)
+    convex = np.array([False] + [blob.solidity >= APART_SOLIDITY for blob in measure.regionprops(pieces)])
+    groups = _basin_groups(depth, like, CROSSED_NECK)
+    ours = np.argmax(np.bincount(groups[seed], minlength=groups.max() + 1)[1:]) + 1
+    in_our_basin = np.bincount(pieces[groups == ours], minlength=n + 1) / np.bincount(pieces.ravel(), minlength=n + 1)
+    apart = large & (convex | (in_our_basin < 0.5))
+    halfway, _ = _label((excess >= 0.5 * APART_LEVEL) & like)
+    reach = np.unique(halfway[apart[pieces]])
+    reach = reach[(reach > 0) & ~np.isin(reach, halfway[seed])]
+    return apart[pieces] | np.isin(halfway, reach)
+
+
+def _on_a_plateau(excess, like, depth, seed) -> bool:
+    """Whether the seed lies on a plateau at the object's level: the pixels
+    of ``like`` less than half APART_LEVEL beyond it that the seed touches
+    hold a disk STRONGER_CORE times as deep as the blob of ``like`` it lies
+    in. A click on the blurred rim of a bright nucleus reads the rim's level:
+    its nucleus is no neighbour."""
+    blobs, _ = _label(like)
+    body = float(depth[np.isin(blobs, blobs[seed])].max())
+    low, _ = _label(like & (excess < 0.5 * APART_LEVEL))
+    touched = np.unique(low[seed])
+    plateau = np.isin(low, touched[touched > 0])
+    plateau_depth = cv2.distanceTransform(np.pad(plateau, 1).view(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
+    return bool(plateau_depth.max() >= STRONGER_CORE * body)
+
+
+def _large_blobs(pieces, n, seed, smallest) -> np.ndarray:
+    """One flag per label ``0..n`` of ``pieces``: the blob has at least
+    ``smallest`` px and ``seed`` does not touch it."""
+    large = np.bincount(pieces.ravel(), minlength=n + 1) >= smallest
     large[0] = False
     large[np.unique(pieces[seed])] = False
-    return large[pieces]
+    return large
 
 
 #: Around the object, a core is the object's when at least this share of it
