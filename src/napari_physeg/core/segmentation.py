@@ -1027,6 +1027,8 @@ def segment(
         At rest when no node strayed more than ``patience * tol`` px from
         where it was over the last ``patience`` steps (less than ``tol`` px
         per step on average; a node trembling in place does not count).
+        A phase followed by another (with ``refine``: the evolution, then
+        the refinement, before the polish) stops at ``5 * tol``.
     max_line_length : float, optional
         Longest half-length of a normal line (px).
     isef_b : float, optional

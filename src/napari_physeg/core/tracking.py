@@ -2,7 +2,9 @@
 
 :func:`track` segments every object of a movie frame by frame, each frame
 starting from the previous result moved by the motion predicted from the
-frames before, so the physical contour needs only a few steps. The feature
+frames before (the object's levels read from that contour grown by a
+margin, a drawing around it), so the physical contour needs only a few
+steps. The feature
 images of a frame are computed once and shared by all its objects, and each
 object counts the others' pixels as background: objects repel each other
 and never overlap.
