@@ -435,6 +435,19 @@ def test_a_box_twice_a_dim_nucleus_does_not_end_on_a_saturated_neighbour(dsb, la
     assert (polygon2mask(truth.shape, res.contour) & truth).sum() > 0.5 * truth.sum()
 
 
+def click_or_box(truth, drawing):
+    """A click of half the object's radius at its deepest point, or a box 1.3
+    times its bounding box."""
+    if drawing == "click":
+        depth = ndi.distance_transform_edt(truth)
+        centre = np.unravel_index(np.argmax(depth), depth.shape)
+        return circle(np.array(centre, float), min(0.5 * np.sqrt(truth.sum() / np.pi), 0.9 * depth.max()))
+    rows, cols = np.nonzero(truth)
+    middle = np.array([rows.min() + rows.max(), cols.min() + cols.max()]) / 2
+    half = 1.3 * np.array([np.ptp(rows) + 1, np.ptp(cols) + 1]) / 2
+    return middle + half * np.array([[-1, -1], [-1, 1], [1, 1], [1, -1]])
+
+
 @pytest.mark.parametrize("label", [53, 177])
 @pytest.mark.parametrize("drawing", ["click", "box 1.3x"])
 def test_a_saturated_neighbour_in_broad_contact_is_left_out(dsb, label, drawing):
@@ -445,15 +458,7 @@ def test_a_saturated_neighbour_in_broad_contact_is_left_out(dsb, label, drawing)
     nucleus' area, IoU 0.31-0.55)."""
     image, labels = dsb
     truth = ndi.binary_fill_holes(labels == label)
-    if drawing == "click":
-        depth = ndi.distance_transform_edt(truth)
-        centre = np.unravel_index(np.argmax(depth), depth.shape)
-        init = circle(np.array(centre, float), min(0.5 * np.sqrt(truth.sum() / np.pi), 0.9 * depth.max()))
-    else:
-        rows, cols = np.nonzero(truth)
-        middle = np.array([rows.min() + rows.max(), cols.min() + cols.max()]) / 2
-        half = 1.3 * np.array([np.ptp(rows) + 1, np.ptp(cols) + 1]) / 2
-        init = middle + half * np.array([[-1, -1], [-1, 1], [1, 1], [1, -1]])
+    init = click_or_box(truth, drawing)
     res, iou = segmented(image, truth, init)
     assert polygon2mask(truth.shape, res.contour).sum() < 1.25 * truth.sum()
     assert iou > 0.7, iou
@@ -469,15 +474,7 @@ def test_a_brighter_neighbour_apart_from_the_nucleus_is_left_out(dsb, label, dra
     its dark texture."""
     image, labels = dsb
     truth = ndi.binary_fill_holes(labels == label)
-    if drawing == "click":
-        depth = ndi.distance_transform_edt(truth)
-        centre = np.unravel_index(np.argmax(depth), depth.shape)
-        init = circle(np.array(centre, float), min(0.5 * np.sqrt(truth.sum() / np.pi), 0.9 * depth.max()))
-    else:
-        rows, cols = np.nonzero(truth)
-        middle = np.array([rows.min() + rows.max(), cols.min() + cols.max()]) / 2
-        half = 1.3 * np.array([np.ptp(rows) + 1, np.ptp(cols) + 1]) / 2
-        init = middle + half * np.array([[-1, -1], [-1, 1], [1, 1], [1, -1]])
+    init = click_or_box(truth, drawing)
     _, iou = segmented(image, truth, init)
     assert iou > least, iou
 
