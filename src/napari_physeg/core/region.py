@@ -592,10 +592,11 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
         own: a dark spot of the object open to the image's side is a hole of
         the object there, not its background. All of them by default (``signed``
         is the whole image).
-    stronger : (H, W) ndarray of bool, optional
-        Pixels of a level beyond the object's (see :func:`stronger_than_object`):
-        where they make a large blob the drawing does not mark, that blob is
-        a neighbour, even without a neck between it and the object.
+    stronger : (H, W) ndarray of float, optional
+        How far each pixel's level lies beyond the object's, in units of its
+        contrast (see :func:`stronger_than_object`): where the pixels far
+        enough beyond make a large blob the drawing does not mark, that blob
+        is a neighbour, even without a neck between it and the object.
 
     Returns
     -------
@@ -798,7 +799,8 @@ def _apart_neighbours(excess, like, depth, seed, smallest, strong) -> np.ndarray
     convex = np.array([False] + [blob.solidity >= APART_SOLIDITY for blob in measure.regionprops(pieces)])
     groups = _basin_groups(depth, like, CROSSED_NECK)
     ours = np.argmax(np.bincount(groups[seed], minlength=groups.max() + 1)[1:]) + 1
-    in_our_basin = np.bincount(pieces[groups == ours], minlength=n + 1) / np.bincount(pieces.ravel(), minlength=n + 1)
+    area = np.maximum(np.bincount(pieces.ravel(), minlength=n + 1), 1)
+    in_our_basin = np.bincount(pieces[groups == ours], minlength=n + 1) / area
     apart = large & (convex | (in_our_basin < 0.5))
     halfway, _ = _label((excess >= 0.5 * APART_LEVEL) & like)
     reach = np.unique(halfway[apart[pieces]])
