@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from napari_physeg.core.region import drawing_levels, object_region, objectness, stronger_than_object
+from napari_physeg.core.region import drawing_levels, level_beyond_object, object_region, objectness
 
 
 def disk(shape, center, radius):
@@ -264,7 +264,7 @@ def test_saturated_neighbour_in_broad_contact_is_left_out(gap):
     image, dim, bright = dim_disk_beside_a_saturated_one(gap)
     drawing = circle((80, 66), 18.2)
     model = drawing_levels(image, drawing)
-    region = object_region(objectness(image, model), drawing, model, stronger=stronger_than_object(image, model))
+    region = object_region(objectness(image, model), drawing, model, stronger=level_beyond_object(image, model))
     assert model.drawn_around and model.polarity == 1
     assert overlap(region, dim) > 0.9
     assert (region & bright).sum() < 0.1 * region.sum()

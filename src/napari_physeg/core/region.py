@@ -40,7 +40,7 @@ from skimage import measure, segmentation
 
 from .features import _noise_sigma
 
-__all__ = ["RegionModel", "drawing_levels", "object_region", "objectness", "stronger_than_object"]
+__all__ = ["RegionModel", "drawing_levels", "level_beyond_object", "object_region", "objectness"]
 
 #: Rings outside the drawing (in multiples of its size about its centroid)
 #: tried in turn for the background of a drawing made inside the object;
@@ -550,7 +550,7 @@ APART_LEVEL = 1.0
 APART_SOLIDITY = 0.9
 
 
-def stronger_than_object(intensity: np.ndarray, model: RegionModel) -> np.ndarray:
+def level_beyond_object(intensity: np.ndarray, model: RegionModel) -> np.ndarray:
     """How far each pixel's level lies beyond the object's, away from its
     background, in units of the contrast (negative: on the background's side)."""
     return (model.polarity * (intensity - model.object_level) / max(model.contrast, 1e-12)).astype(np.float32)
@@ -594,7 +594,7 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
         is the whole image).
     stronger : (H, W) ndarray of float, optional
         How far each pixel's level lies beyond the object's, in units of its
-        contrast (see :func:`stronger_than_object`): where the pixels far
+        contrast (see :func:`level_beyond_object`): where the pixels far
         enough beyond make a large blob the drawing does not mark, that blob
         is a neighbour, even without a neck between it and the object.
 

@@ -26,7 +26,7 @@ from .element import coefficient_system, rayleigh_coefficients, reference_freque
 from .features import _noise_sigma, chamfer_distance, normalized_intensity, shen_castan_edges
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .materials import Material, get_material
-from .region import _disk, _fill, _scaled, drawing_levels, object_region, objectness, stronger_than_object
+from .region import _disk, _fill, _scaled, drawing_levels, level_beyond_object, object_region, objectness
 from .subpixel import polish
 
 __all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "FrameFeatures", "region_features"]
@@ -200,7 +200,7 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
     signed = objectness(intensity, model)
     if avoid is not None:
         signed[avoid] = -1.0
-    region = object_region(signed, drawing, model, image_sides, stronger_than_object(intensity, model))
+    region = object_region(signed, drawing, model, image_sides, level_beyond_object(intensity, model))
     if region is None:
         return signed, edges, model.polarity
     signed = np.where(region, np.where(signed > 0, signed, 1.0), np.where(signed > 0, -1.0, signed))
@@ -762,12 +762,20 @@ def iter_segment(image, init, **options):
     >>> first.step, first.phase
     (1, 'evolution')
     """
-    bound = inspect.signature(segment).bind(image, init, **options)  # a misspelt option fails here
-    bound.apply_defaults()
-    arguments = dict(bound.arguments)
-    if arguments.pop("callback") is not None:
+    arguments = _segment_arguments(image, init, options)
+    if options.get("callback") is not None:
         raise TypeError("iter_segment takes no callback: it yields its progress")
     return _evolve(**arguments)
+
+
+def _segment_arguments(image, init, options: dict) -> dict:
+    """:func:`segment`'s arguments with every default filled in, but its
+    ``callback`` (a misspelt option: TypeError)."""
+    bound = inspect.signature(segment).bind(image, init, **options)
+    bound.apply_defaults()
+    arguments = dict(bound.arguments)
+    arguments.pop("callback")
+    return arguments
 
 
 def _evolve(
@@ -1096,8 +1104,4 @@ def _segment_from(image, drawing, start, **options) -> SegmentationResult:
     border: in a time-lapse, the previous frame's result where the motion
     predicts it. Started from the drawing, it would first have to travel
     back the drawing's margin."""
-    bound = inspect.signature(segment).bind(image, drawing, **options)  # a misspelt option fails here
-    bound.apply_defaults()
-    arguments = dict(bound.arguments)
-    arguments.pop("callback")
-    return drain(_evolve(**arguments, start=start))
+    return drain(_evolve(**_segment_arguments(image, drawing, options), start=start))
