@@ -118,6 +118,20 @@ def test_coefficient_system_equals_nodal_system():
     assert cs.K.nnz < 0.8 * (2 * len(nodes)) ** 2
 
 
+@pytest.mark.parametrize("material", ["rubber", "copper"])
+def test_dense_coefficient_system_is_the_sparse_one(material):
+    # An irregular contour long enough that distant node pairs are dropped.
+    rng = np.random.default_rng(3)
+    nodes = _circle(80) * np.array([1.0, 0.4]) + rng.normal(0.0, 0.05, (80, 2))
+    sigma = default_sigma(nodes)
+    sparse = coefficient_system(nodes, sigma, material)
+    dense = coefficient_system(nodes, sigma, material, dense=True)
+    assert sparse.K.nnz < 0.8 * (2 * len(nodes)) ** 2  # the cut-off matters here
+    for name in ("G", "M", "K"):
+        assert isinstance(getattr(dense, name), np.ndarray)
+        assert np.array_equal(getattr(sparse, name).toarray(), getattr(dense, name)), name
+
+
 def test_sigma_too_large_is_rejected_with_a_clear_message():
     nodes = _circle(100)
     with pytest.raises(ValueError, match="sigma .* too large"):

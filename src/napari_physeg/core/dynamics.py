@@ -99,8 +99,13 @@ class NewmarkIntegrator:
                            options={"SymmetricMode": True})
             self._solve = lu.solve
         else:
+            # A dense system is a small one (see segmentation.DENSE_MAX_NODES):
+            # its inverse, formed once, turns every step's solve into one
+            # matrix-vector product; scipy's cho_solve spent more time checking
+            # its arguments than solving.
             cho = la.cho_factor(0.5 * (effective + effective.T), check_finite=False)
-            self._solve = lambda rhs: la.cho_solve(cho, rhs, check_finite=False)
+            inverse = la.cho_solve(cho, np.eye(len(effective)), check_finite=False)
+            self._solve = inverse.__matmul__
         n = M.shape[0]
         self.U = np.zeros(n)
         self.V = np.zeros(n)

@@ -229,26 +229,39 @@ class CoefficientSystem:
         return self.G.shape[0] // 2
 
 
-def coefficient_system(nodes, sigma: float, material: str | Material = "rubber") -> CoefficientSystem:
+def coefficient_system(nodes, sigma: float, material: str | Material = "rubber", *,
+                       dense: bool = False) -> CoefficientSystem:
     """Sparse mass, stiffness and interpolation matrices in coefficient space.
 
     Pairs of nodes farther apart than the distance where ``sqrt(g)`` falls
     below ``1e-8`` are not stored: for evenly spaced contour nodes each node
     then interacts with about 20 others whatever the node count, which keeps
     assembling, factoring and solving linear in the number of nodes.
+    ``dense=True`` gives the same matrices as ndarrays, assembled directly: a
+    small element (a hundred nodes) is built and solved several times faster
+    so, scipy.sparse's per-call overhead being most of the work.
     """
     material = get_material(material)
     nodes = np.asarray(nodes, dtype=np.float64)
     _check_sigma(nodes, sigma)
-    m = len(nodes)
     radius = 2.0 * sigma * np.sqrt(np.log(1.0 / SPARSE_TOLERANCE))
+    mass_scale = material.density * material.thickness * np.pi * sigma**2
+    stiff_scale = np.pi * material.beta * material.thickness
+    assemble = _dense_blocks if dense else _sparse_blocks
+    G, M, K = assemble(nodes, radius, lambda dx, dy: interaction_kernels(dx, dy, sigma, material),
+                       mass_scale, stiff_scale)
+    return CoefficientSystem(G=G, M=M, K=K, sigma=float(sigma))
+
+
+def _sparse_blocks(nodes, radius, kernels, mass_scale, stiff_scale):
+    """``G``, ``M`` and ``K`` as sparse matrices over the node pairs within ``radius``."""
+    m = len(nodes)
     pairs = cKDTree(nodes).query_pairs(radius, output_type="ndarray")
     diag = np.arange(m)
     rows = np.concatenate([pairs[:, 0], pairs[:, 1], diag])
     cols = np.concatenate([pairs[:, 1], pairs[:, 0], diag])
     diff = nodes[rows] - nodes[cols]
-    gamma, b11, b22, b12 = interaction_kernels(diff[:, 0], diff[:, 1], sigma, material)
-    g = gamma**2
+    gamma, b11, b22, b12 = kernels(diff[:, 0], diff[:, 1])
 
     def blocks(tl, br, off=None):
         r = np.concatenate([rows, rows + m] + ([rows, rows + m] if off is not None else []))
@@ -256,14 +269,19 @@ def coefficient_system(nodes, sigma: float, material: str | Material = "rubber")
         v = np.concatenate([tl, br] + ([off, off] if off is not None else []))
         return sp.csc_matrix((v, (r, c)), shape=(2 * m, 2 * m))
 
-    mass_scale = material.density * material.thickness * np.pi * sigma**2
-    stiff_scale = np.pi * material.beta * material.thickness
-    return CoefficientSystem(
-        G=blocks(g, g),
-        M=blocks(mass_scale * gamma, mass_scale * gamma),
-        K=blocks(stiff_scale * b11, stiff_scale * b22, stiff_scale * b12),
-        sigma=float(sigma),
-    )
+    return (blocks(gamma**2, gamma**2), blocks(mass_scale * gamma, mass_scale * gamma),
+            blocks(stiff_scale * b11, stiff_scale * b22, stiff_scale * b12))
+
+
+def _dense_blocks(nodes, radius, kernels, mass_scale, stiff_scale):
+    """``G``, ``M`` and ``K`` as ndarrays, with the same pairs as :func:`_sparse_blocks`."""
+    diff = nodes[:, None, :] - nodes[None, :, :]
+    within = (diff**2).sum(-1) <= radius**2
+    gamma, b11, b22, b12 = (k * within for k in kernels(diff[..., 0], diff[..., 1]))
+    zero = np.zeros_like(gamma)
+    return (np.block([[gamma**2, zero], [zero, gamma**2]]),
+            mass_scale * np.block([[gamma, zero], [zero, gamma]]),
+            stiff_scale * np.block([[b11, b12], [b12, b22]]))
 
 
 def natural_frequency_range(M, K) -> tuple[float, float]:

@@ -12,7 +12,7 @@ import inspect
 import time
 import warnings
 from collections import deque
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -528,11 +528,10 @@ class _ElasticBody:
         """Assemble and factor the element for the current nodes."""
         t0 = time.perf_counter()
         try:
-            system = coefficient_system(self.nodes, self.sigma, self.material)
-            if len(self.nodes) <= DENSE_MAX_NODES:
-                # A small element is faster dense: scipy.sparse's per-call
-                # overhead was most of a 45-node build (1 ms) and of each step.
-                system = replace(system, G=system.G.toarray(), M=system.M.toarray(), K=system.K.toarray())
+            # A small element is faster dense: scipy.sparse's per-call
+            # overhead was most of a 45-node build (1 ms) and of each step.
+            system = coefficient_system(self.nodes, self.sigma, self.material,
+                                        dense=len(self.nodes) <= DENSE_MAX_NODES)
             self.system = system
             M, K = system.M, system.K
             mu, gamma = self.rayleigh
