@@ -1,0 +1,54 @@
+"""The real-image benchmark's outline distance (``benchmarks/real.py``): known answers."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from skimage.draw import disk
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+@pytest.fixture(scope="module")
+def real(monkeypatch_module):
+    monkeypatch_module.syspath_prepend(str(BENCHMARKS))
+    import real
+
+    return real
+
+
+@pytest.fixture(scope="module")
+def monkeypatch_module():
+    mp = pytest.MonkeyPatch()
+    yield mp
+    mp.undo()
+    for name in ("real", "real_data", "segmentation", "_common"):
+        sys.modules.pop(name, None)
+
+
+def _disc(radius, centre=(40.0, 40.0), shape=(80, 80)):
+    mask = np.zeros(shape, bool)
+    mask[disk(centre, radius, shape=shape)] = True
+    return mask
+
+
+def test_a_mask_is_at_no_distance_from_itself(real):
+    assert real.outline_distance(_disc(10), _disc(10)) == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("inner, outer", [(10, 12), (8, 11), (15, 16)])
+def test_concentric_discs_lie_their_radii_apart(real, inner, outer):
+    d = real.outline_distance(_disc(inner), _disc(outer))
+    assert d == pytest.approx(outer - inner, abs=0.2)
+    assert d == pytest.approx(real.outline_distance(_disc(outer), _disc(inner)))  # symmetric
+
+
+def test_a_shifted_disc_is_off_by_less_than_its_shift(real):
+    # Shifted by 3 px: each outline point lies 3 |cos| px from the other outline, 2/pi * 3 on average.
+    d = real.outline_distance(_disc(12), _disc(12, centre=(43.0, 40.0)))
+    assert d == pytest.approx(3 * 2 / np.pi, abs=0.25)
+
+
+def test_an_empty_mask_is_infinitely_far(real):
+    assert real.outline_distance(np.zeros((80, 80), bool), _disc(10)) == np.inf
