@@ -656,7 +656,9 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     depth = cv2.distanceTransform(np.pad(like, 1).view(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
     if model.drawn_around:
         region = _split_at_cores(depth, like, seed, drawn, reach, stronger=stronger)
-        region &= ~_crossed_neighbours(depth, like, seed, drawn)
+        blobs, _ = _label(like)
+        if np.isin(blobs[~drawn], blobs[seed]).any():  # else the drawing crosses no basin of the object's blob
+            region &= ~_crossed_neighbours(depth, like, seed, drawn)
     else:
         # No drawing line bounds it: neighbours touching at a neck narrow
         # for their own size are parted too (small crowded nuclei).
