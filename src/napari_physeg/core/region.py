@@ -798,7 +798,9 @@ def _apart_neighbours(excess, like, depth, seed, smallest, strong) -> np.ndarray
     large[np.unique(pieces[strong])] = False
     if not large.any() or not _on_a_plateau(excess, like, depth, seed):
         return np.zeros(like.shape, bool)
-    convex = np.array([False] + [blob.solidity >= APART_SOLIDITY for blob in measure.regionprops(pieces)])
+    convex = np.zeros(n + 1, bool)
+    for blob in measure.regionprops(pieces):  # the hull (solidity) of the large blobs only
+        convex[blob.label] = large[blob.label] and blob.solidity >= APART_SOLIDITY
     groups = _basin_groups(depth, like, CROSSED_NECK)
     ours = np.argmax(np.bincount(groups[seed], minlength=groups.max() + 1)[1:]) + 1
     area = np.maximum(np.bincount(pieces.ravel(), minlength=n + 1), 1)
