@@ -76,16 +76,27 @@ def check_contour(points, name: str = "contour", *, min_nodes: int = 3) -> np.nd
     arr = node_array(points, name, min_nodes=min_nodes)
     # Centred: the tests below then see the shape, not where it lies.
     centred = arr - arr.mean(axis=0)
-    distinct = len(np.unique(arr, axis=0))
-    if distinct < min_nodes:
-        raise ValueError(
-            f"{name} has {distinct} distinct node(s); at least {min_nodes} are needed for a closed contour"
-        )
-    _check_repeats(centred, name)
+    if len(arr) < min_nodes:
+        _check_distinct(arr, name, min_nodes)
+    try:
+        _check_repeats(centred, name)
+    except ValueError:
+        # Too few distinct nodes says more than which of them repeat (counted
+        # only then: np.unique took a third of a valid contour's check).
+        _check_distinct(arr, name, min_nodes)
+        raise
     singular = np.linalg.svd(centred, compute_uv=False)
     if singular[1] <= _COLLINEAR * singular[0]:
         raise ValueError(f"{name} is degenerate: its nodes lie on one line and enclose no area")
     return np.ascontiguousarray(arr)
+
+
+def _check_distinct(arr: np.ndarray, name: str, min_nodes: int) -> None:
+    distinct = len(np.unique(arr, axis=0))
+    if distinct < min_nodes:
+        raise ValueError(
+            f"{name} has {distinct} distinct node(s); at least {min_nodes} are needed for a closed contour"
+        ) from None
 
 
 def _check_repeats(centred: np.ndarray, name: str) -> None:
