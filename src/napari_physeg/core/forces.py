@@ -170,6 +170,13 @@ class ForceField:
         frac = np.arange(1, self.n_samples + 1) / self.n_samples
         return np.concatenate([-frac[::-1], [0.0], frac])
 
+    @cached_property
+    def _line_offsets(self) -> tuple[np.ndarray, np.ndarray]:
+        """The search line's fractions (0 on the region line) and the region line's offsets (0 on the search line)."""
+        zeros = np.zeros(len(self._region_offsets))
+        return (np.concatenate([self._line_fractions, zeros])[None, :],
+                np.concatenate([np.zeros_like(self._line_fractions), self._region_offsets])[None, :])
+
     def __call__(self, nodes: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
         """Dimensionless force on each node, ``(N, 2)``: each feature contributes at
         most its weight. Multiply by the stiffness constant ``r`` (N/m) for newtons.
@@ -183,9 +190,9 @@ class ForceField:
             return (w.get("intensity", 0) * region[..., 2].mean(1)).astype(np.float64)[:, None] * normals
         lengths = self.line_lengths(nodes).astype(np.float64)
         S = self.n_samples
-        offsets = np.concatenate([lengths[:, None] * self._line_fractions[None, :],  # (N, 2S+1) search line
-                                  np.broadcast_to(self._region_offsets, (len(nodes), len(self._region_offsets)))],
-                                 axis=1)
+        # (N, 2S+1) search line, then the short region line: scaled fractions, then fixed offsets.
+        scaled, fixed = self._line_offsets
+        offsets = lengths[:, None] * scaled + fixed
         # One bilinear pass samples the search lines and the short region lines (runs every step).
         samples = self.sample(nodes[:, None, :] + offsets[..., None] * normals[:, None, :])
         values = samples[:, :2 * S + 1].astype(np.float64)  # (N, 2S+1, 3)
