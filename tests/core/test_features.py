@@ -468,8 +468,8 @@ def test_compute_features_accepts_bool_and_minimal_images():
 @pytest.mark.parametrize(
     "image, match",
     [
-        (np.zeros((20, 30, 3)), r"looks like an RGB image.*rgb2gray"),
-        (np.zeros((20, 30, 4), dtype=np.uint8), r"RGBA image.*one\s+channel"),
+        (np.zeros((20, 30, 3)), r"looks like an RGB image.*rgb2gray.*stain.*rgb2hed"),
+        (np.zeros((20, 30, 4), dtype=np.uint8), r"RGBA image.*one\s+channel.*rgb2hed\(image\[\.\.\., :3\]\)"),
         (np.zeros((5, 20, 30)), r"3D stack.*single 2D slice"),
         (np.zeros(30), r"2D"),
         (np.zeros((2, 3, 4, 5)), r"2D"),

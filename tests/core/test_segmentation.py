@@ -143,7 +143,7 @@ GOOD_INIT = data.ellipse((64, 64)).init_near
         (GOOD_IMAGE, GOOD_INIT + 500, "wholly outside"),
         (GOOD_IMAGE, GOOD_INIT[:, :1], r"\(N, 2\)"),
         (np.where(np.eye(64, dtype=bool), np.nan, GOOD_IMAGE), GOOD_INIT, "NaN"),
-        (np.dstack([GOOD_IMAGE] * 3), GOOD_INIT, "RGB"),
+        (np.dstack([GOOD_IMAGE] * 3), GOOD_INIT, r"RGB.*rgb2gray.*stain.*rgb2hed"),
         (np.stack([GOOD_IMAGE] * 5), GOOD_INIT, "2D"),
         (np.full((64, 64), 7.0), GOOD_INIT, "constant"),
         (GOOD_IMAGE.astype(complex), GOOD_INIT, "real"),

@@ -154,7 +154,8 @@ def _check_image(image, *, name: str = "image", min_size: int = 1) -> np.ndarray
                 f"channel (e.g. {name}[..., 0]) or convert it to grey, e.g. "
                 f"skimage.color.rgb2gray({name}"
                 + ("[..., :3]" if kind == "RGBA" else "")
-                + ")"
+                + "); for a brightfield stain, the stain's own channel (e.g. "
+                f"skimage.color.rgb2hed({name}" + ("[..., :3]" if kind == "RGBA" else "") + ")[..., 0], hematoxylin)"
             )
         if arr.ndim == 3:
             raise ValueError(

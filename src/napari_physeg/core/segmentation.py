@@ -95,7 +95,8 @@ def _validate_image(image) -> np.ndarray:
     if arr.ndim == 3 and arr.shape[-1] in (3, 4):
         raise ValueError(
             f"image has shape {arr.shape}: it looks like an RGB(A) image. Pass one channel "
-            "(e.g. image[..., 1]) or convert it to grey (skimage.color.rgb2gray)"
+            "(e.g. image[..., 1]) or convert it to grey (skimage.color.rgb2gray); for a brightfield "
+            "stain, the stain's own channel (e.g. skimage.color.rgb2hed(image[..., :3])[..., 0], hematoxylin)"
         )
     if arr.ndim != 2:
         raise ValueError(
