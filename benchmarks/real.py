@@ -336,9 +336,9 @@ def outline_distance(a, b):
     """
     from scipy.spatial import cKDTree
 
-    rows, cols = np.nonzero(a | b)
     if not (a.any() and b.any()):
         return float("inf")
+    rows, cols = np.nonzero(a | b)
     lo = np.maximum([rows.min() - 2, cols.min() - 2], 0)
     hi = np.array([rows.max() + 3, cols.max() + 3])
     pa, pb = (_outline_points(m[lo[0]:hi[0], lo[1]:hi[1]]) for m in (a, b))

@@ -99,10 +99,10 @@ class NewmarkIntegrator:
                            options={"SymmetricMode": True})
             self._solve = lu.solve
         else:
-            # A dense system is a small one (see segmentation.DENSE_MAX_NODES):
-            # its inverse, formed once, turns every step's solve into one
-            # matrix-vector product; scipy's cho_solve spent more time checking
-            # its arguments than solving.
+            # Dense systems come from small elements (segmentation.DENSE_MAX_NODES;
+            # larger ones are sparse): the inverse, formed once, turns every
+            # step's solve into one matrix-vector product; scipy's cho_solve
+            # spent more time checking its arguments than solving.
             cho = la.cho_factor(0.5 * (effective + effective.T), check_finite=False)
             inverse = la.cho_solve(cho, np.eye(len(effective)), check_finite=False)
             self._solve = inverse.__matmul__

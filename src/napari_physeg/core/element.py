@@ -237,9 +237,9 @@ def coefficient_system(nodes, sigma: float, material: str | Material = "rubber",
     below ``1e-8`` are not stored: for evenly spaced contour nodes each node
     then interacts with about 20 others whatever the node count, which keeps
     assembling, factoring and solving linear in the number of nodes.
-    ``dense=True`` gives the same matrices as ndarrays, assembled directly: a
-    small element (a hundred nodes) is built and solved several times faster
-    so, scipy.sparse's per-call overhead being most of the work.
+    ``dense=True`` gives the same matrices as ndarrays, assembled directly:
+    for a small element (a hundred nodes or so) scipy.sparse's per-call
+    overhead is most of the work of building and solving it.
     """
     material = get_material(material)
     nodes = np.asarray(nodes, dtype=np.float64)

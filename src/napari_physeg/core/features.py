@@ -134,6 +134,27 @@ def _as_image(image, *, name: str = "image", min_size: int = 1) -> np.ndarray:
     return _check_image(image, name=name, min_size=min_size).astype(np.float64, copy=False)
 
 
+def _check_2d(arr: np.ndarray, name: str = "image") -> None:
+    """Raise unless ``arr`` is 2D, saying how to get a 2D image from an RGB(A) image or a stack."""
+    if arr.ndim == 2:
+        return
+    if arr.ndim == 3 and arr.shape[-1] in (3, 4):
+        kind = "RGB" if arr.shape[-1] == 3 else "RGBA"
+        colours = name if kind == "RGB" else f"{name}[..., :3]"
+        raise ValueError(
+            f"{name} has shape {arr.shape}: it looks like an {kind} image; pass one "
+            f"channel (e.g. {name}[..., 0]) or convert it to grey, e.g. skimage.color.rgb2gray({colours}); "
+            f"for a brightfield stain, the stain's own channel (e.g. skimage.color.rgb2hed({colours})[..., 0], "
+            "hematoxylin)"
+        )
+    if arr.ndim == 3:
+        raise ValueError(
+            f"{name} has shape {arr.shape}: it is a 3D stack; pass a single 2D "
+            f"slice, e.g. {name}[0]"
+        )
+    raise ValueError(f"{name} must be a 2D (rows, cols) array, got shape {arr.shape}")
+
+
 def _check_image(image, *, name: str = "image", min_size: int = 1) -> np.ndarray:
     """Validate a 2D finite real image; return it as an array of its own dtype."""
     arr = np.asarray(image)
@@ -146,23 +167,7 @@ def _check_image(image, *, name: str = "image", min_size: int = 1) -> np.ndarray
         raise ValueError(f"{name} must have a real numeric dtype, got {arr.dtype}")
     if arr.size == 0:
         raise ValueError(f"{name} is empty (shape {arr.shape})")
-    if arr.ndim != 2:
-        if arr.ndim == 3 and arr.shape[-1] in (3, 4):
-            kind = "RGB" if arr.shape[-1] == 3 else "RGBA"
-            raise ValueError(
-                f"{name} has shape {arr.shape}: it looks like an {kind} image; pass one "
-                f"channel (e.g. {name}[..., 0]) or convert it to grey, e.g. "
-                f"skimage.color.rgb2gray({name}"
-                + ("[..., :3]" if kind == "RGBA" else "")
-                + "); for a brightfield stain, the stain's own channel (e.g. "
-                f"skimage.color.rgb2hed({name}" + ("[..., :3]" if kind == "RGBA" else "") + ")[..., 0], hematoxylin)"
-            )
-        if arr.ndim == 3:
-            raise ValueError(
-                f"{name} has shape {arr.shape}: it is a 3D stack; pass a single 2D "
-                f"slice, e.g. {name}[0]"
-            )
-        raise ValueError(f"{name} must be a 2D (rows, cols) array, got shape {arr.shape}")
+    _check_2d(arr, name)
     if min(arr.shape) < min_size:
         raise ValueError(
             f"{name} is too small (shape {arr.shape}): need at least "

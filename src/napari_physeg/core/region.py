@@ -656,9 +656,7 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     depth = cv2.distanceTransform(np.pad(like, 1).view(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
     if model.drawn_around:
         region = _split_at_cores(depth, like, seed, drawn, reach, stronger=stronger)
-        blobs, _ = _label(like)
-        if np.isin(blobs[~drawn], blobs[seed]).any():  # else the drawing crosses no basin of the object's blob
-            region &= ~_crossed_neighbours(depth, like, seed, drawn)
+        region &= ~_crossed_neighbours(depth, like, seed, drawn)
     else:
         # No drawing line bounds it: neighbours touching at a neck narrow
         # for their own size are parted too (small crowded nuclei).
@@ -685,7 +683,11 @@ def _crossed_neighbours(depth, like, seed, drawn) -> np.ndarray:
     crosses (see CROSSED_OUTSIDE): neighbours in broad contact with the
     object, which share its core (see _cores) but not its basin. A shallow
     lobe of the object that pokes out of a tight drawing, or that the
-    image's side cuts off, is not one."""
+    image's side cuts off, is not one. Only those that can meet the object
+    are looked for: none when the seed's blob lies within the drawing."""
+    blobs, _ = _label(like)
+    if not np.isin(blobs[~drawn], blobs[seed]).any():
+        return np.zeros(like.shape, bool)
     groups = _basin_groups(depth, like, CROSSED_NECK)
     n = groups.max() + 1
     area = np.maximum(np.bincount(groups.ravel(), minlength=n), 1)

@@ -23,7 +23,7 @@ from .contour import (as_contour, contour_gap, cut_pinches, nodes_for_spacing, o
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
-from .features import _noise_sigma, chamfer_distance, normalized_intensity, shen_castan_edges
+from .features import _check_2d, _noise_sigma, chamfer_distance, normalized_intensity, shen_castan_edges
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .materials import Material, get_material
 from .region import _disk, _fill, _scaled, drawing_levels, level_beyond_object, object_region, objectness
@@ -91,18 +91,9 @@ class SegmentationResult:
 
 
 def _validate_image(image) -> np.ndarray:
+    """``image`` as an array, refused unless 2D (its values are checked where the features read them)."""
     arr = np.asarray(image)
-    if arr.ndim == 3 and arr.shape[-1] in (3, 4):
-        raise ValueError(
-            f"image has shape {arr.shape}: it looks like an RGB(A) image. Pass one channel "
-            "(e.g. image[..., 1]) or convert it to grey (skimage.color.rgb2gray); for a brightfield "
-            "stain, the stain's own channel (e.g. skimage.color.rgb2hed(image[..., :3])[..., 0], hematoxylin)"
-        )
-    if arr.ndim != 2:
-        raise ValueError(
-            f"image must be a 2D array, got shape {arr.shape}; for a stack or volume pass the 2D "
-            "slice to segment (e.g. image[z])"
-        )
+    _check_2d(arr, "image")
     return arr
 
 
