@@ -116,3 +116,26 @@ def test_polish_never_makes_a_simple_contour_cross_itself(seed):
     out = polish(image, nodes, polarity=1)
     assert not crosses_itself(out)
     assert np.linalg.norm(out - nodes, axis=1).max() <= 1.5 + 1e-9
+
+
+def test_nodes_on_the_image_side_stay_on_it():
+    """A disc cut by the image's right side, in noise (so the polish smooths
+    along the contour): the nodes on the side stay there, however the
+    smoothing rounds the corners where the contour leaves the side, and
+    those away from the corners land on the circle."""
+    shape, centre, radius = (128, 100), (64.3, 99.5), 30.25
+    rng = np.random.default_rng(1)
+    image = 0.3 + 0.4 * disc_coverage(shape, centre, radius) + rng.normal(0.0, 0.2 * 0.4, shape)
+    side = shape[1] - 0.5
+    arc = circle(radius + 0.3, 120, centre)
+    arc = arc[arc[:, 1] < side - 1.0]
+    # The contour: the arc inside the image, closed along the side.
+    ends = np.array([[centre[0] + radius, side], [centre[0] - radius, side]])
+    wall = np.column_stack([np.linspace(ends[1, 0], ends[0, 0], 24)[1:-1], np.full(22, side)])
+    arc = arc[np.argsort(np.arctan2(arc[:, 1] - centre[1], arc[:, 0] - centre[0]) % (2 * np.pi))]
+    nodes = np.concatenate([arc, wall[::-1] if arc[0, 0] > centre[0] else wall])
+    on_side = nodes[:, 1] == side
+    out = polish(image, nodes)
+    assert np.array_equal(out[on_side], nodes[on_side])
+    away = nodes[:, 1] < side - 8.0  # beyond the corners
+    assert np.abs(np.linalg.norm(out[away] - centre, axis=1) - radius).mean() < 0.1

@@ -268,9 +268,19 @@ def polish(image: np.ndarray, nodes: np.ndarray, *, polarity: int = 0, noise: fl
     rhs = (w * a0 * b).sum(1) + np.roll((w * a1 * b).sum(1), 1)
     delta = _solve_cyclic_tridiagonal(diag, off, rhs)
     move = frame + delta[:, None] * normals - nodes
+    # A node on the image's side has no border across it to measure: the
+    # side is its border, and it stays there (the smoothed frame, which
+    # rounds the corner where the contour leaves the side, is no place for it).
+    move[_on_image_side(nodes, img.shape)] = 0.0
     dist = np.linalg.norm(move, axis=1)
     move *= np.minimum(1.0, reach / np.maximum(dist, 1e-12))[:, None]
     return nodes + _untangled(nodes, move)
+
+
+def _on_image_side(nodes: np.ndarray, shape) -> np.ndarray:
+    """Which nodes lie on the image's side (its pixels' outer edge)."""
+    high = np.asarray(shape, dtype=np.float64) - 0.5
+    return ((nodes <= -0.5 + 1e-9) | (nodes >= high - 1e-9)).any(axis=1)
 
 
 #: Times a polish's moves near a crossing are halved before they are dropped.
