@@ -268,19 +268,28 @@ def polish(image: np.ndarray, nodes: np.ndarray, *, polarity: int = 0, noise: fl
     rhs = (w * a0 * b).sum(1) + np.roll((w * a1 * b).sum(1), 1)
     delta = _solve_cyclic_tridiagonal(diag, off, rhs)
     move = frame + delta[:, None] * normals - nodes
-    # A node on the image's side has no border across it to measure: the
-    # side is its border, and it stays there (the smoothed frame, which
-    # rounds the corner where the contour leaves the side, is no place for it).
-    move[_on_image_side(nodes, img.shape)] = 0.0
+    # A node on the image's side (or where the dynamics left it, a few
+    # hundredths of a pixel off) has no border across it to measure: the side
+    # is its border, and it ends there (the smoothed frame, which rounds the
+    # corner where the contour leaves the side, is no place for it).
+    on_side, onto_side = _on_image_side(nodes, img.shape)
+    move[on_side] = onto_side[on_side] - nodes[on_side]
     dist = np.linalg.norm(move, axis=1)
     move *= np.minimum(1.0, reach / np.maximum(dist, 1e-12))[:, None]
     return nodes + _untangled(nodes, move)
 
 
-def _on_image_side(nodes: np.ndarray, shape) -> np.ndarray:
-    """Which nodes lie on the image's side (its pixels' outer edge)."""
-    high = np.asarray(shape, dtype=np.float64) - 0.5
-    return ((nodes <= -0.5 + 1e-9) | (nodes >= high - 1e-9)).any(axis=1)
+#: A node closer than this (px) to the image's side lies on it.
+_SIDE_TOLERANCE = 0.25
+
+
+def _on_image_side(nodes: np.ndarray, shape) -> tuple[np.ndarray, np.ndarray]:
+    """Which nodes lie on the image's side (its pixels' outer edge), and the
+    nodes moved onto the side they lie on."""
+    low, high = -0.5, np.asarray(shape, dtype=np.float64) - 0.5
+    near_low, near_high = nodes < low + _SIDE_TOLERANCE, nodes > high - _SIDE_TOLERANCE
+    onto = np.where(near_low, low, np.where(near_high, high, nodes))
+    return (near_low | near_high).any(axis=1), onto
 
 
 #: Times a polish's moves near a crossing are halved before they are dropped.
