@@ -301,3 +301,23 @@ def test_lobes_poking_out_of_the_drawing_are_not_crossed_neighbours():
     model, region = region_for(image, circle((80, 80), 30))
     assert model.drawn_around
     assert overlap(region, body) > 0.97
+
+
+def test_circle_around_a_nucleus_ringed_by_four_touching_neighbours():
+    """A blurred nucleus touching a neighbour on each side (a crowded
+    field): the circle drawn around it lies on the neighbours and their
+    blurred gaps for half its length, so the quarter of its line nearest the
+    background is only two thirds of the way there. Still it lies on the
+    background's side of the two levels for more of its length than a
+    drawing inside an object would: it is around the nucleus, and the region
+    is the nucleus, not the five of them."""
+    shape, radius, spacing = (90, 100), 10, 22
+    centres = [(45, 50)] + [(45 + spacing * np.sin(a), 50 + spacing * np.cos(a)) for a in np.arange(4) * np.pi / 2]
+    nuclei = [disk(shape, c, radius) for c in centres]
+    image = 0.1 + 0.5 * ndi.gaussian_filter(np.any(nuclei, axis=0).astype(float), 3.5)
+    drawing = circle(centres[0], 1.3 * radius)
+    model, region = region_for(image, drawing)
+    assert model.drawn_around and model.polarity == 1
+    neighbours = np.any(nuclei[1:], axis=0)
+    assert overlap(region, nuclei[0]) > 0.8  # the blur moves its mid-level inward
+    assert (region & neighbours).sum() < 0.05 * neighbours.sum()
