@@ -321,3 +321,20 @@ def test_circle_around_a_nucleus_ringed_by_four_touching_neighbours():
     neighbours = np.any(nuclei[1:], axis=0)
     assert overlap(region, nuclei[0]) > 0.8  # the blur moves its mid-level inward
     assert (region & neighbours).sum() < 0.05 * neighbours.sum()
+
+
+@pytest.mark.parametrize("factor", [0.35, 0.5])
+def test_click_inside_a_nucleus_ringed_by_touching_neighbours(factor):
+    """Ringed closely (the circle around it would lie on the neighbours for
+    most of its line: read as inside all of them), a nucleus is still found
+    from a click-sized circle inside it, as the user guide advises: the
+    touching neighbours meet it at necks and are parted."""
+    shape, radius, spacing = (90, 100), 10, 18
+    centres = [(45, 50)] + [(45 + spacing * np.sin(a), 50 + spacing * np.cos(a)) for a in np.arange(4) * np.pi / 2]
+    nuclei = [disk(shape, c, radius) for c in centres]
+    image = 0.1 + 0.5 * ndi.gaussian_filter(np.any(nuclei, axis=0).astype(float), 1.5)
+    model, region = region_for(image, circle(centres[0], factor * radius))
+    assert not model.drawn_around and model.polarity == 1
+    neighbours = np.any(nuclei[1:], axis=0) & ~nuclei[0]
+    assert overlap(region, nuclei[0]) > 0.9
+    assert (region & neighbours).sum() < 0.1 * neighbours.sum()

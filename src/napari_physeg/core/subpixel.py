@@ -41,6 +41,10 @@ the raw image and fits the polygon to it, in one vectorised pass:
    with nodes exactly on the border misses: IoU 0.998 instead of 0.9998 on
    ``data.blob()`` at the default spacing).
 
+A node on the image's side (within a quarter pixel of it) has no border
+across it to measure: the side is the border of an object the image cuts,
+and the node ends on it.
+
 No node moves more than ``reach`` px: the polish corrects a contour at rest
 on the border, it does not search for one.
 """
