@@ -338,3 +338,21 @@ def test_click_inside_a_nucleus_ringed_by_touching_neighbours(factor):
     neighbours = np.any(nuclei[1:], axis=0) & ~nuclei[0]
     assert overlap(region, nuclei[0]) > 0.9
     assert (region & neighbours).sum() < 0.1 * neighbours.sum()
+
+
+@pytest.mark.parametrize("factor", [1.3, 1.4])
+def test_circle_around_a_nucleus_closely_ringed_by_touching_neighbours(factor):
+    """Ringed closely (the circle's line lies on the four neighbours for
+    three quarters of its length, at the object's level), the circle is
+    still read as around the nucleus: the line's object-like pixels lie in
+    the neighbours' depth basins, deepest beyond the drawing, not in the
+    basin under its middle. The region is the nucleus, not the five."""
+    shape, radius, spacing = (90, 100), 10, 18
+    centres = [(45, 50)] + [(45 + spacing * np.sin(a), 50 + spacing * np.cos(a)) for a in np.arange(4) * np.pi / 2]
+    nuclei = [disk(shape, c, radius) for c in centres]
+    image = 0.1 + 0.5 * ndi.gaussian_filter(np.any(nuclei, axis=0).astype(float), 1.5)
+    model, region = region_for(image, circle(centres[0], factor * radius))
+    assert model.drawn_around and model.polarity == 1
+    neighbours = np.any(nuclei[1:], axis=0) & ~nuclei[0]
+    assert overlap(region, nuclei[0]) > 0.9
+    assert (region & neighbours).sum() < 0.1 * neighbours.sum()
