@@ -226,6 +226,20 @@ def test_pure_noise_has_no_edges(b, window):
     assert not shen_castan_edges(1e-9 * noise + 5.0, b=b, window=window).any()
 
 
+def test_a_given_noise_level_sets_the_floor():
+    """The noise measured beforehand (as segment() does, once for the edges
+    and the region model) gives the edges the detector finds measuring it
+    itself; a level far above the image's raises the floor over its border."""
+    from napari_physeg.core.features import _noise_sigma
+
+    image, _ = square_image()
+    image = image + np.random.default_rng(2).normal(0.0, 0.1, image.shape)
+    found = shen_castan_edges(image)
+    assert found.any()
+    assert np.array_equal(shen_castan_edges(image, noise=_noise_sigma(image)), found)
+    assert not shen_castan_edges(image, noise=100.0).any()
+
+
 @pytest.mark.parametrize("value", [0.0, 3.3, -7, 1e9])
 def test_constant_image_has_no_edges(value):
     edges, strength = shen_castan_edges(np.full((40, 50), value), return_strength=True)

@@ -392,12 +392,13 @@ def _quantile_above(strength, cand, q, floor) -> float:
 
 
 def _shen_castan(
-    image, smoothed, b, window, high_quantile, low_ratio, min_length, *, overwrite=False, work=None
+    image, smoothed, b, window, high_quantile, low_ratio, min_length, *, overwrite=False, work=None, noise=None
 ):
     """Edges and strengths from a validated image and its ISEF smoothing.
 
     With ``overwrite`` the image's buffer is reused for the strengths;
-    ``work``, if given, is a scratch float64 array of the image's shape.
+    ``work``, if given, is a scratch float64 array of the image's shape;
+    ``noise``, if given, the standard deviation of the image's noise.
     """
     shape = image.shape
 
@@ -453,7 +454,7 @@ def _shen_castan(
     bt = cv2.BORDER_REFLECT
     depth = cv2.CV_8U if n_win < 256 else cv2.CV_32F  # exact counts either way
     count = cv2.boxFilter(bli.view(np.uint8), depth, ksize, normalize=False, borderType=bt)
-    noise_sigma = _noise_sigma(image)  # before image may be overwritten
+    noise_sigma = _noise_sigma(image) if noise is None else float(noise)  # before image may be overwritten
     strength = np.multiply(smoothed, bli, out=image if overwrite else None)
     cv2.boxFilter(strength, -1, ksize, dst=strength, borderType=bt)
     mean = cv2.boxFilter(smoothed, -1, ksize, dst=work, borderType=bt)
@@ -558,6 +559,7 @@ def shen_castan_edges(
     low_ratio=0.5,
     min_length=8,
     return_strength=False,
+    noise=None,
 ):
     """Shen–Castan edge detector.
 
@@ -621,6 +623,10 @@ def shen_castan_edges(
         or pairs; 1 keeps them.
     return_strength : bool, optional
         Also return the adaptive gradient of every candidate.
+    noise : float, optional
+        Standard deviation of the image's noise, when the caller has measured
+        it already; estimated from the image (Immerkær's operator, see above)
+        when None.
 
     Returns
     -------
@@ -643,7 +649,7 @@ def shen_castan_edges(
     min_length = _check_min_length(min_length)
     image = _as_image(image)
     edges, strength = _shen_castan(
-        image, _isef(image, b), b, window, high_quantile, low_ratio, min_length
+        image, _isef(image, b), b, window, high_quantile, low_ratio, min_length, noise=noise
     )
     return (edges, strength) if return_strength else edges
 

@@ -421,9 +421,9 @@ def _edges_and_intensity(image, isef_b: float) -> tuple[np.ndarray, np.ndarray, 
     and the standard deviation of its noise. The noise is measured before
     the smoothing: after it, the measure (a second difference) sees a tenth of it."""
     normalised = normalized_intensity(image)
-    noise = _SMOOTHED_NOISE_GAIN * _noise_sigma(normalised)
-    return (shen_castan_edges(normalised, b=isef_b),
-            cv2.GaussianBlur(normalised, (0, 0), 1.0, borderType=cv2.BORDER_REFLECT), noise)
+    noise = _noise_sigma(normalised)
+    return (shen_castan_edges(normalised, b=isef_b, noise=noise),
+            cv2.GaussianBlur(normalised, (0, 0), 1.0, borderType=cv2.BORDER_REFLECT), _SMOOTHED_NOISE_GAIN * noise)
 
 
 class _FeatureWindow:
