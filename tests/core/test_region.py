@@ -303,6 +303,22 @@ def test_lobes_poking_out_of_the_drawing_are_not_crossed_neighbours():
     assert overlap(region, body) > 0.97
 
 
+RING_CENTRE, RING_RADIUS = (45, 50), 10
+
+
+def ringed_nucleus(spacing, blur):
+    """A nucleus of radius RING_RADIUS touching four equal neighbours
+    ``spacing`` px away (above, below, left, right), blurred: the image, the
+    nucleus and the neighbours' pixels beyond it."""
+    shape = (90, 100)
+    angles = np.arange(4) * np.pi / 2
+    centres = [RING_CENTRE] + [(RING_CENTRE[0] + spacing * np.sin(a), RING_CENTRE[1] + spacing * np.cos(a))
+                               for a in angles]
+    nuclei = [disk(shape, c, RING_RADIUS) for c in centres]
+    image = 0.1 + 0.5 * ndi.gaussian_filter(np.any(nuclei, axis=0).astype(float), blur)
+    return image, nuclei[0], np.any(nuclei[1:], axis=0) & ~nuclei[0]
+
+
 def test_circle_around_a_nucleus_ringed_by_four_touching_neighbours():
     """A blurred nucleus touching a neighbour on each side (a crowded
     field): the circle drawn around it lies on the neighbours and their
@@ -311,15 +327,10 @@ def test_circle_around_a_nucleus_ringed_by_four_touching_neighbours():
     background's side of the two levels for more of its length than a
     drawing inside an object would: it is around the nucleus, and the region
     is the nucleus, not the five of them."""
-    shape, radius, spacing = (90, 100), 10, 22
-    centres = [(45, 50)] + [(45 + spacing * np.sin(a), 50 + spacing * np.cos(a)) for a in np.arange(4) * np.pi / 2]
-    nuclei = [disk(shape, c, radius) for c in centres]
-    image = 0.1 + 0.5 * ndi.gaussian_filter(np.any(nuclei, axis=0).astype(float), 3.5)
-    drawing = circle(centres[0], 1.3 * radius)
-    model, region = region_for(image, drawing)
+    image, nucleus, neighbours = ringed_nucleus(spacing=22, blur=3.5)
+    model, region = region_for(image, circle(RING_CENTRE, 1.3 * RING_RADIUS))
     assert model.drawn_around and model.polarity == 1
-    neighbours = np.any(nuclei[1:], axis=0)
-    assert overlap(region, nuclei[0]) > 0.8  # the blur moves its mid-level inward
+    assert overlap(region, nucleus) > 0.8  # the blur moves its mid-level inward
     assert (region & neighbours).sum() < 0.05 * neighbours.sum()
 
 
@@ -329,14 +340,10 @@ def test_click_inside_a_nucleus_ringed_by_touching_neighbours(factor):
     most of its line: read as inside all of them), a nucleus is still found
     from a click-sized circle inside it, as the user guide advises: the
     touching neighbours meet it at necks and are parted."""
-    shape, radius, spacing = (90, 100), 10, 18
-    centres = [(45, 50)] + [(45 + spacing * np.sin(a), 50 + spacing * np.cos(a)) for a in np.arange(4) * np.pi / 2]
-    nuclei = [disk(shape, c, radius) for c in centres]
-    image = 0.1 + 0.5 * ndi.gaussian_filter(np.any(nuclei, axis=0).astype(float), 1.5)
-    model, region = region_for(image, circle(centres[0], factor * radius))
+    image, nucleus, neighbours = ringed_nucleus(spacing=18, blur=1.5)
+    model, region = region_for(image, circle(RING_CENTRE, factor * RING_RADIUS))
     assert not model.drawn_around and model.polarity == 1
-    neighbours = np.any(nuclei[1:], axis=0) & ~nuclei[0]
-    assert overlap(region, nuclei[0]) > 0.9
+    assert overlap(region, nucleus) > 0.9
     assert (region & neighbours).sum() < 0.1 * neighbours.sum()
 
 
@@ -347,12 +354,8 @@ def test_circle_around_a_nucleus_closely_ringed_by_touching_neighbours(factor):
     still read as around the nucleus: the line's object-like pixels lie in
     the neighbours' depth basins, deepest beyond the drawing, not in the
     basin under its middle. The region is the nucleus, not the five."""
-    shape, radius, spacing = (90, 100), 10, 18
-    centres = [(45, 50)] + [(45 + spacing * np.sin(a), 50 + spacing * np.cos(a)) for a in np.arange(4) * np.pi / 2]
-    nuclei = [disk(shape, c, radius) for c in centres]
-    image = 0.1 + 0.5 * ndi.gaussian_filter(np.any(nuclei, axis=0).astype(float), 1.5)
-    model, region = region_for(image, circle(centres[0], factor * radius))
+    image, nucleus, neighbours = ringed_nucleus(spacing=18, blur=1.5)
+    model, region = region_for(image, circle(RING_CENTRE, factor * RING_RADIUS))
     assert model.drawn_around and model.polarity == 1
-    neighbours = np.any(nuclei[1:], axis=0) & ~nuclei[0]
-    assert overlap(region, nuclei[0]) > 0.9
+    assert overlap(region, nucleus) > 0.9
     assert (region & neighbours).sum() < 0.1 * neighbours.sum()

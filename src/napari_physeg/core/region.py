@@ -504,7 +504,7 @@ def _line_over_neighbours(intensity, drawing, middle, line, centre, outside) -> 
     on_line, seed = line[box] & like, middle[box] & like
     if not on_line.any() or not seed.any():
         return False
-    depth = cv2.distanceTransform(np.pad(like, 1).view(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
+    depth = _depth(like)
     groups = _basin_groups(depth, like)
     n = groups.max() + 1
     own = np.bincount(groups[seed], minlength=n).argmax()
@@ -710,9 +710,9 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     seed = (marked if (marked & like).any() else drawn) & like
     if not seed.any():
         return None
-    # Depth below the object's outline; beyond the image is not object, so
-    # two objects cut by the image's side meet there at a neck too.
-    depth = cv2.distanceTransform(np.pad(like, 1).view(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
+    # Depth below the object's outline (two objects cut by the image's side
+    # meet there at a neck too).
+    depth = _depth(like)
     if model.drawn_around:
         region = _split_at_cores(depth, like, seed, drawn, reach, stronger=stronger)
         region &= ~_crossed_neighbours(depth, like, seed, drawn)
@@ -884,7 +884,7 @@ def _on_a_plateau(excess, like, depth, seed) -> bool:
     low, _ = _label(like & (excess < 0.5 * APART_LEVEL))
     touched = np.unique(low[seed])
     plateau = np.isin(low, touched[touched > 0])
-    plateau_depth = cv2.distanceTransform(np.pad(plateau, 1).view(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
+    plateau_depth = _depth(plateau)
     return bool(plateau_depth.max() >= STRONGER_CORE * body)
 
 
@@ -1045,6 +1045,13 @@ def _smoothed(region: np.ndarray, image_sides) -> np.ndarray:
     pieces, enclosed, open_to_image = _holes(region, image_sides)
     small = np.bincount(pieces.ravel(), minlength=len(enclosed)) <= 0.25 * region.sum()
     return region | (enclosed | (open_to_image & small))[pieces]
+
+
+def _depth(mask: np.ndarray) -> np.ndarray:
+    """Each pixel's distance below the outline of ``mask`` (0 off it); beyond
+    the array is not ``mask``, so two blobs cut by its side meet there at a
+    neck."""
+    return cv2.distanceTransform(np.pad(mask, 1).view(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
 
 
 def _label(mask: np.ndarray) -> tuple[np.ndarray, int]:
