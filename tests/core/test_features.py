@@ -331,6 +331,12 @@ def test_edge_parameters_are_validated(kwargs, match):
         compute_features(np.zeros((8, 8)), **kwargs)
 
 
+@pytest.mark.parametrize("noise", [-0.1, np.nan, np.inf, "0.1", True])
+def test_a_bad_noise_level_is_refused(noise):
+    with pytest.raises(ValueError, match="noise must be a finite non-negative number"):
+        shen_castan_edges(np.zeros((8, 8)), noise=noise)
+
+
 # --------------------------------------------------------------------------
 # chamfer distance
 

@@ -129,6 +129,16 @@ def _check_min_length(value) -> int:
     return int(value)
 
 
+def _check_noise(noise) -> float | None:
+    if noise is None:
+        return None
+    if isinstance(noise, (bool, np.bool_)) or not isinstance(noise, numbers.Real) or not (
+            np.isfinite(noise) and noise >= 0):
+        raise ValueError(f"noise must be a finite non-negative number (the noise's standard deviation, in the "
+                         f"image's units) or None to estimate it, got {noise!r}")
+    return float(noise)
+
+
 def _as_image(image, *, name: str = "image", min_size: int = 1) -> np.ndarray:
     """Validate a 2D real image and return it as float64 (a copy if cast)."""
     return _check_image(image, name=name, min_size=min_size).astype(np.float64, copy=False)
@@ -454,7 +464,7 @@ def _shen_castan(
     bt = cv2.BORDER_REFLECT
     depth = cv2.CV_8U if n_win < 256 else cv2.CV_32F  # exact counts either way
     count = cv2.boxFilter(bli.view(np.uint8), depth, ksize, normalize=False, borderType=bt)
-    noise_sigma = _noise_sigma(image) if noise is None else float(noise)  # before image may be overwritten
+    noise_sigma = _noise_sigma(image) if noise is None else noise  # before image may be overwritten
     strength = np.multiply(smoothed, bli, out=image if overwrite else None)
     cv2.boxFilter(strength, -1, ksize, dst=strength, borderType=bt)
     mean = cv2.boxFilter(smoothed, -1, ksize, dst=work, borderType=bt)
@@ -647,6 +657,7 @@ def shen_castan_edges(
     high_quantile = _check_fraction(high_quantile, "high_quantile")
     low_ratio = _check_fraction(low_ratio, "low_ratio")
     min_length = _check_min_length(min_length)
+    noise = _check_noise(noise)
     image = _as_image(image)
     edges, strength = _shen_castan(
         image, _isef(image, b), b, window, high_quantile, low_ratio, min_length, noise=noise
