@@ -3,6 +3,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from napari_physeg.core.contour import (
+    bounding_window,
     as_contour,
     outward_normals,
     perimeter,
@@ -146,3 +147,17 @@ def test_cut_pinches_keeps_the_piece_that_holds_the_given_points():
     kept = cut_pinches(contour, gap=0.5, keep=np.array([[25.0, 25.0], [26.0, 24.0]]))
     assert 50 < abs(signed_area(kept)) < 100
 
+
+
+def test_bounding_window_holds_the_margin_and_stays_in_the_image():
+    contour = np.array([[10.2, 20.7], [30.5, 20.0], [30.0, 45.9]])
+    rows, cols = bounding_window(contour, (100, 60), 5.0)
+    # Every pixel within 5 px of the bounding box, whole pixels, and no more.
+    assert (rows.start, rows.stop) == (5, 37)
+    assert (cols.start, cols.stop) == (15, 52)
+    # Clipped to the image's sides.
+    rows, cols = bounding_window(contour, (32, 48), 50.0)
+    assert (rows.start, rows.stop, cols.start, cols.stop) == (0, 32, 0, 48)
+    # Grown to cover a window it must keep.
+    rows, cols = bounding_window(contour, (100, 60), 0.0, keep=(slice(2, 12), slice(40, 59)))
+    assert (rows.start, rows.stop, cols.start, cols.stop) == (2, 32, 20, 59)

@@ -153,6 +153,17 @@ def mean_nearest_neighbour_distance(nodes: np.ndarray) -> float:
     return float(dist[:, 1].mean())
 
 
+def bounding_window(contour: np.ndarray, shape, margin: float, keep=None) -> tuple[slice, slice]:
+    """Rows and columns of an image of ``shape`` within ``margin`` px of
+    ``contour``'s bounding box (and covering the window ``keep``, if given)."""
+    lo = np.maximum(np.floor(contour.min(0) - margin), 0).astype(int)
+    hi = np.minimum(np.ceil(contour.max(0) + margin) + 1, shape).astype(int)
+    if keep is not None:
+        lo = np.minimum(lo, [keep[0].start, keep[1].start])
+        hi = np.maximum(hi, [keep[0].stop, keep[1].stop])
+    return slice(int(lo[0]), int(hi[0])), slice(int(lo[1]), int(hi[1]))
+
+
 def polygon_mask(contour: np.ndarray, shape) -> np.ndarray:
     """Boolean mask of the pixels whose centres lie inside the contour (even-odd rule).
 

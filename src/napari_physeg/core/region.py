@@ -38,6 +38,7 @@ import numpy as np
 from scipy import ndimage as ndi
 from skimage import measure, segmentation
 
+from .contour import bounding_window
 from .features import _noise_sigma
 
 __all__ = ["RegionModel", "drawing_levels", "level_beyond_object", "object_region", "objectness"]
@@ -494,9 +495,8 @@ def _line_over_neighbours(intensity, drawing, middle, line, centre, outside) -> 
         return False
     # Within twice the drawing: the neighbours it may cross, and their cores.
     extent = _scaled(drawing, 2.0)
-    lo = np.maximum(np.floor(extent.min(0)), 0).astype(int)
-    hi = np.minimum(np.ceil(extent.max(0)) + 1, intensity.shape).astype(int)
-    box = (slice(lo[0], hi[0]), slice(lo[1], hi[1]))
+    box = bounding_window(extent, intensity.shape, 0.0)
+    lo = np.array([box[0].start, box[1].start])
     shape = intensity[box].shape
     inner = _fill(extent - lo, shape)
     # Dark texture inside an object would make false necks: its holes are filled.
@@ -667,9 +667,9 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
     # drawing size beyond, where neighbours that could take the object lie.
     extent = _scaled(drawing, 1.0 if model.drawn_around else _INSIDE_LIMIT)
     size = float(np.sqrt(max(np.ptp(drawing[:, 0]) * np.ptp(drawing[:, 1]), 1.0)))
-    lo = np.maximum(np.floor(extent.min(0) - size - 10), 0).astype(int)
-    hi = np.minimum(np.ceil(extent.max(0) + size + 10) + 1, signed.shape).astype(int)
-    box = (slice(lo[0], hi[0]), slice(lo[1], hi[1]))
+    box = bounding_window(extent, signed.shape, size + 10)
+    lo = np.array([box[0].start, box[1].start])
+    hi = np.array([box[0].stop, box[1].stop])
     region = np.zeros(signed.shape, bool)
     if np.any(hi <= lo):
         return None

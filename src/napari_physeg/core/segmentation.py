@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .contour import (as_contour, contour_gap, cut_pinches, nodes_for_spacing, outward_normals, perimeter,
+from .contour import (as_contour, bounding_window, contour_gap, cut_pinches, nodes_for_spacing, outward_normals, perimeter,
                       remove_loops, resample, segment_lengths, signed_area)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
@@ -122,17 +122,6 @@ def _clip_to_image(init: np.ndarray, shape) -> np.ndarray:
 #: covers at most this fraction of the image (below it the saving beats the
 #: cost of the rare re-computation when the contour grows out of its window).
 WINDOW_MAX_FRACTION = 0.5
-
-
-def _window(contour: np.ndarray, shape, margin: float, keep=None) -> tuple[slice, slice]:
-    """Rows and columns of the image within ``margin`` px of ``contour``'s
-    bounding box (and covering the window ``keep``, if given)."""
-    lo = np.maximum(np.floor(contour.min(0) - margin), 0).astype(int)
-    hi = np.minimum(np.ceil(contour.max(0) + margin) + 1, shape).astype(int)
-    if keep is not None:
-        lo = np.minimum(lo, [keep[0].start, keep[1].start])
-        hi = np.maximum(hi, [keep[0].stop, keep[1].stop])
-    return slice(int(lo[0]), int(hi[0])), slice(int(lo[1]), int(hi[1]))
 
 
 def _near_window_border(nodes: np.ndarray, window, shape, guard: float) -> bool:
@@ -444,7 +433,7 @@ class _FeatureWindow:
         # A second phase with the region force alone (sub-pixel refinement).
         self.with_refinement = refine and weights.get("intensity", 0) > 0 and len(weights) > 1
         self.guard = float(max_line_length) + 8.0
-        window = _window(init, image.shape, 2.0 * self.guard)
+        window = bounding_window(init, image.shape, 2.0 * self.guard)
         if (window[0].stop - window[0].start) * (window[1].stop - window[1].start) > WINDOW_MAX_FRACTION * image.size:
             window = self._whole_image
         self._compute(window)
@@ -485,7 +474,7 @@ class _FeatureWindow:
         if not _near_window_border(nodes, self.window, self.image.shape, self.guard):
             return np.zeros(2)
         old = self.origin
-        self._compute(_window(nodes + old, self.image.shape, 2.0 * self.guard, keep=self.window))
+        self._compute(bounding_window(nodes + old, self.image.shape, 2.0 * self.guard, keep=self.window))
         return old - self.origin
 
 
