@@ -430,9 +430,9 @@ def _feature_shapes(monkeypatch):
     shapes = []
     real = seg._edges_and_intensity
 
-    def recording(image, isef_b):
+    def recording(image, *args):
         shapes.append(np.shape(image))
-        return real(image, isef_b)
+        return real(image, *args)
 
     monkeypatch.setattr(seg, "_edges_and_intensity", recording)
     return shapes
@@ -466,6 +466,29 @@ def test_contour_grows_out_of_its_feature_window(monkeypatch):
     areas = [h * w for h, w in shapes]
     assert len(areas) >= 2 and areas == sorted(areas) and areas[0] < 0.25 * disc.size
     assert np.all(res.contour >= 0) and np.all(res.contour <= np.array(disc.shape) - 1)
+
+
+def test_the_drawing_is_read_once_however_the_window_grows(monkeypatch):
+    # A click inside a large disc grows out of its feature window several
+    # times; the object's levels and polarity read from the click at the
+    # start are kept (a re-read on a wider view could take other neighbours
+    # for the background and flip them).
+    import napari_physeg.core.segmentation as seg
+
+    rows, cols = np.mgrid[:1000, :1000]
+    disc = 0.2 + 0.6 * (((rows - 500) ** 2 + (cols - 500) ** 2) < 110**2)
+    disc += np.random.default_rng(0).normal(0, 0.03, disc.shape)  # not flat: no window is constant
+    t = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    click = np.column_stack([500 + 20 * np.sin(t), 500 + 20 * np.cos(t)])
+    models = []
+    real = seg.drawing_levels
+    monkeypatch.setattr(seg, "drawing_levels", lambda *a, **k: models.append(real(*a, **k)) or models[-1])
+    shapes = _feature_shapes(monkeypatch)
+    res = segment(disc, click)
+    assert len(models) == 1 and models[0].polarity == 1 and not models[0].drawn_around
+    assert len(shapes) >= 2  # the window grew
+    radius = np.hypot(res.contour[:, 0] - 500, res.contour[:, 1] - 500)
+    assert res.converged and np.abs(radius - 110).max() < 1.0
 
 
 def test_contour_on_a_uniform_background_stalls_honestly():

@@ -704,18 +704,25 @@ def _chamfer(edges: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
-def _normalize(x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    sample = _subsample(x)
-    lo, hi = np.percentile(sample, [1.0, 99.0])
-    if out is None:
-        out = np.empty(x.shape, dtype=np.float64)
+def _intensity_range(x: np.ndarray) -> tuple[float, float]:
+    """The levels :func:`normalized_intensity` maps to 0 and 1."""
+    lo, hi = np.percentile(_subsample(x), [1.0, 99.0])
     if hi <= lo:
         # Fewer than 1 % of pixels differ (a small spot): fall back to the
         # full range rather than flatten the picture.
-        lo, hi = float(x.min()), float(x.max())
-        if hi <= lo:
-            out.fill(0.0)
-            return out
+        lo, hi = x.min(), x.max()
+    return float(lo), float(hi)
+
+
+def _normalize(x: np.ndarray, out: np.ndarray | None = None, levels: tuple[float, float] | None = None) -> np.ndarray:
+    """:func:`normalized_intensity` of a validated image, or ``x`` mapped
+    from the ``levels`` of another (a larger view of the same image)."""
+    lo, hi = _intensity_range(x) if levels is None else levels
+    if out is None:
+        out = np.empty(x.shape, dtype=np.float64)
+    if hi <= lo:
+        out.fill(0.0)
+        return out
     np.subtract(x, lo, out=out)
     out *= 1.0 / (hi - lo)
     return np.clip(out, 0.0, 1.0, out=out)

@@ -23,7 +23,8 @@ from .contour import (as_contour, bounding_window, contour_gap, cut_pinches, nod
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
-from .features import _check_2d, _noise_sigma, chamfer_distance, normalized_intensity, shen_castan_edges
+from .features import (_as_image, _check_2d, _intensity_range, _noise_sigma, _normalize, chamfer_distance,
+                       normalized_intensity, shen_castan_edges)
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .materials import Material, get_material
 from .region import _disk, _fill, _scaled, drawing_levels, level_beyond_object, object_region, objectness
@@ -123,6 +124,14 @@ def _clip_to_image(init: np.ndarray, shape) -> np.ndarray:
 #: cost of the rare re-computation when the contour grows out of its window).
 WINDOW_MAX_FRACTION = 0.5
 
+#: Margins, in guard bands (the forces' longest normal line and a margin),
+#: of the window the drawing is read on (its object's and background's
+#: levels, which rings far around it may tell) and of the window of the
+#: feature images around the contour (one guard band, and a quarter more
+#: before the contour nears its side and the window grows).
+CONTEXT_MARGIN = 2.0
+FORCE_MARGIN = 1.25
+
 
 def _near_window_border(nodes: np.ndarray, window, shape, guard: float) -> bool:
     """True when a node of ``nodes`` (window coordinates) is within ``guard`` px
@@ -142,7 +151,7 @@ EDGE_GATE = 3.0
 
 
 def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_sides=(True, True, True, True),
-                    noise=None):
+                    noise=None, model=None):
     """Object-ness and edge images for the object the user drew.
 
     Parameters
@@ -164,6 +173,10 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
     noise : float, optional
         Standard deviation of the noise in ``intensity`` (see
         :func:`~.region.drawing_levels`).
+    model : RegionModel, optional
+        The drawing's levels when already read (on a larger view of the same
+        image, in the units of ``intensity``); ``polarity`` and ``noise`` are
+        then not used.
 
     Returns
     -------
@@ -173,7 +186,8 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
         band around that region.
     polarity : int
     """
-    model = drawing_levels(intensity, drawing, polarity, noise)
+    if model is None:
+        model = drawing_levels(intensity, drawing, polarity, noise)
     if not model.is_visible:
         # No object here that the eye could tell from its background: no
         # region force (edges may still guide the contour).
@@ -394,7 +408,7 @@ class FrameFeatures:
     @classmethod
     def of(cls, image, isef_b: float = 0.7) -> FrameFeatures:
         image = _validate_image(image)
-        return cls(*_edges_and_intensity(image, isef_b))
+        return cls(*_edges_and_intensity(normalized_intensity(image), isef_b))
 
 
 #: White noise's standard deviation is multiplied by 1 / (2 sqrt(pi) sigma)
@@ -402,15 +416,16 @@ class FrameFeatures:
 _SMOOTHED_NOISE_GAIN = 1.0 / (2.0 * np.sqrt(np.pi))
 
 
-def _edges_and_intensity(image, isef_b: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """The edge map (Shen-Castan on the normalised image, as
-    :func:`~.features.compute_features` finds it), the lightly smoothed
-    normalised intensity (the region force needs the border where it is, a
-    light denoising, not the strong ISEF smoothing used for edge detection)
-    and the standard deviation of its noise. The noise is measured before
-    the smoothing: after it, the measure (a second difference) sees a tenth of it."""
-    normalised = normalized_intensity(image)
-    noise = _noise_sigma(normalised)
+def _edges_and_intensity(normalised, isef_b: float, noise=None) -> tuple[np.ndarray, np.ndarray, float]:
+    """The edge map of a normalised image (Shen-Castan, as
+    :func:`~.features.compute_features` finds it), its lightly smoothed
+    intensity (the region force needs the border where it is, a light
+    denoising, not the strong ISEF smoothing used for edge detection) and the
+    standard deviation of the noise there. The noise is measured before the
+    smoothing (after it, the measure, a second difference, sees a tenth of
+    it), unless given (read on a larger view of the same image)."""
+    if noise is None:
+        noise = _noise_sigma(normalised)
     return (shen_castan_edges(normalised, b=isef_b, noise=noise),
             cv2.GaussianBlur(normalised, (0, 0), 1.0, borderType=cv2.BORDER_REFLECT), _SMOOTHED_NOISE_GAIN * noise)
 
@@ -419,10 +434,12 @@ class _FeatureWindow:
     """The image forces, computed on a window around the contour.
 
     The forces read the feature images along normal lines of at most
-    ``max_line_length`` px, so a guard band of that width (and as much again
-    as margin) around the contour suffices; the window grows when the contour
-    nears its border. On a large image with a small object this is most of
-    the cost of a segmentation.
+    ``max_line_length`` px, so a guard band of that width (and a margin)
+    around the contour suffices; the window grows when the contour nears its
+    border. On a large image with a small object this is most of the cost of
+    a segmentation. The drawing is read once, on a wider window: its levels
+    and their units (the intensity range the images are normalised to) stay
+    those of the start however the window grows.
     """
 
     def __init__(self, image, drawing, init, *, polarity, weights, max_line_length, isef_b, refine,
@@ -433,14 +450,41 @@ class _FeatureWindow:
         # A second phase with the region force alone (sub-pixel refinement).
         self.with_refinement = refine and weights.get("intensity", 0) > 0 and len(weights) > 1
         self.guard = float(max_line_length) + 8.0
-        window = bounding_window(init, image.shape, 2.0 * self.guard)
-        if (window[0].stop - window[0].start) * (window[1].stop - window[1].start) > WINDOW_MAX_FRACTION * image.size:
-            window = self._whole_image
-        self._compute(window)
+        self._read_drawing(self._bounded(bounding_window(init, image.shape, CONTEXT_MARGIN * self.guard)))
+        self._compute(self._bounded(bounding_window(init, image.shape, FORCE_MARGIN * self.guard)))
 
     @property
     def _whole_image(self):
         return slice(0, self.image.shape[0]), slice(0, self.image.shape[1])
+
+    def _bounded(self, window):
+        """``window``, or the whole image when ``window`` would cover most of it."""
+        area = (window[0].stop - window[0].start) * (window[1].stop - window[1].start)
+        return self._whole_image if area > WINDOW_MAX_FRACTION * self.image.size else window
+
+    def _read_drawing(self, context) -> None:
+        """The drawing's levels (see :func:`~.region.drawing_levels`), read on
+        ``context``, and the units of every window's feature images: the
+        intensity range ``context`` is normalised to and its noise there
+        (the frame's own when the features are shared)."""
+        if self.shared is not None:
+            self.levels, self.noise = None, None
+            intensity, noise = self.shared.intensity[context], self.shared.noise
+        else:
+            sub = _as_image(self.image[context])
+            self.levels = _intensity_range(sub)
+            normalised = _normalize(sub, levels=self.levels)
+            self.noise = _noise_sigma(normalised)
+            self._normalised_context = context, normalised  # the window is often the context (the whole image)
+            intensity = cv2.GaussianBlur(normalised, (0, 0), 1.0, borderType=cv2.BORDER_REFLECT)
+            noise = _SMOOTHED_NOISE_GAIN * self.noise
+        if np.ptp(intensity) <= 1e-12:
+            if context != self._whole_image:  # nothing here: look at the whole image
+                return self._read_drawing(self._whole_image)
+            raise ValueError("image is constant: there is no object border to segment")
+        origin = np.array([context[0].start, context[1].start], dtype=float)
+        self.model = drawing_levels(intensity, self.drawing - origin, self.polarity, noise)
+        self.polarity = self.model.polarity
 
     def _compute(self, window) -> None:
         sub = self.image[window]
@@ -448,17 +492,18 @@ class _FeatureWindow:
         if self.shared is not None:
             edges, intensity, noise = self.shared.edges[window], self.shared.intensity[window], self.shared.noise
         else:
-            edges, intensity, noise = _edges_and_intensity(sub, self.isef_b)
-        if not edges.any() and np.ptp(intensity) <= 1e-12:
-            if sub.shape != self.image.shape:  # nothing here: look at the whole image
-                return self._compute(self._whole_image)
-            raise ValueError("image is constant: there is no object border to segment")
+            context, normalised = self._normalised_context
+            if window != context:
+                normalised = _normalize(_as_image(sub), levels=self.levels)
+            edges, intensity, noise = _edges_and_intensity(normalised, self.isef_b, self.noise)
+        if not edges.any() and np.ptp(intensity) <= 1e-12 and sub.shape != self.image.shape:
+            return self._compute(self._whole_image)  # nothing here: look at the whole image
         avoid = None if self.avoid is None else self.avoid[window]
         rows, cols = window
         image_sides = (rows.start == 0, rows.stop == self.image.shape[0], cols.start == 0,
                        cols.stop == self.image.shape[1])
-        signed, edges, self.polarity = region_features(intensity, edges, self.drawing - origin, self.polarity,
-                                                       avoid, image_sides, noise)
+        signed, edges, _ = region_features(intensity, edges, self.drawing - origin, avoid=avoid,
+                                           image_sides=image_sides, model=self.model)
         distance = _distance_with_image_border(edges, signed, window, self.image.shape)
         self.anchor = _anchor(signed, self.drawing - origin)
         field = ForceField.from_features(edges, distance, signed, self.weights, max_length=self.max_line_length)
@@ -474,7 +519,7 @@ class _FeatureWindow:
         if not _near_window_border(nodes, self.window, self.image.shape, self.guard):
             return np.zeros(2)
         old = self.origin
-        self._compute(bounding_window(nodes + old, self.image.shape, 2.0 * self.guard, keep=self.window))
+        self._compute(bounding_window(nodes + old, self.image.shape, FORCE_MARGIN * self.guard, keep=self.window))
         return old - self.origin
 
 
