@@ -18,8 +18,8 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .contour import (as_contour, bounding_window, contour_gap, cut_pinches, nodes_for_spacing, outward_normals, perimeter,
-                      remove_loops, resample, segment_lengths, signed_area)
+from .contour import (as_contour, bounding_window, contour_gap, cut_pinches, nodes_for_spacing, outward_normals,
+                      perimeter, remove_loops, resample, segment_lengths, signed_area)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
@@ -416,18 +416,25 @@ class FrameFeatures:
 _SMOOTHED_NOISE_GAIN = 1.0 / (2.0 * np.sqrt(np.pi))
 
 
-def _edges_and_intensity(normalised, isef_b: float, noise=None) -> tuple[np.ndarray, np.ndarray, float]:
+def _lightly_smoothed(normalised: np.ndarray) -> np.ndarray:
+    """The intensity the region force reads: the region force needs the
+    border where it is, a light denoising (sigma 1 px), not the strong ISEF
+    smoothing used for edge detection."""
+    return cv2.GaussianBlur(normalised, (0, 0), 1.0, borderType=cv2.BORDER_REFLECT)
+
+
+def _edges_and_intensity(normalised, isef_b: float, noise=None, smoothed=None) -> tuple[np.ndarray, np.ndarray, float]:
     """The edge map of a normalised image (Shen-Castan, as
     :func:`~.features.compute_features` finds it), its lightly smoothed
-    intensity (the region force needs the border where it is, a light
-    denoising, not the strong ISEF smoothing used for edge detection) and the
-    standard deviation of the noise there. The noise is measured before the
-    smoothing (after it, the measure, a second difference, sees a tenth of
-    it), unless given (read on a larger view of the same image)."""
+    intensity (see :func:`_lightly_smoothed`, unless given) and the standard
+    deviation of the noise there. The noise is measured before the smoothing
+    (after it, the measure, a second difference, sees a tenth of it), unless
+    given (read on a larger view of the same image)."""
     if noise is None:
         noise = _noise_sigma(normalised)
-    return (shen_castan_edges(normalised, b=isef_b, noise=noise),
-            cv2.GaussianBlur(normalised, (0, 0), 1.0, borderType=cv2.BORDER_REFLECT), _SMOOTHED_NOISE_GAIN * noise)
+    if smoothed is None:
+        smoothed = _lightly_smoothed(normalised)
+    return shen_castan_edges(normalised, b=isef_b, noise=noise), smoothed, _SMOOTHED_NOISE_GAIN * noise
 
 
 class _FeatureWindow:
@@ -475,9 +482,10 @@ class _FeatureWindow:
             self.levels = _intensity_range(sub)
             normalised = _normalize(sub, levels=self.levels)
             self.noise = _noise_sigma(normalised)
-            self._normalised_context = context, normalised  # the window is often the context (the whole image)
-            intensity = cv2.GaussianBlur(normalised, (0, 0), 1.0, borderType=cv2.BORDER_REFLECT)
+            intensity = _lightly_smoothed(normalised)
             noise = _SMOOTHED_NOISE_GAIN * self.noise
+            # The first feature window is often the context (the whole image).
+            self._context = context, normalised, intensity
         if np.ptp(intensity) <= 1e-12:
             if context != self._whole_image:  # nothing here: look at the whole image
                 return self._read_drawing(self._whole_image)
@@ -492,10 +500,10 @@ class _FeatureWindow:
         if self.shared is not None:
             edges, intensity, noise = self.shared.edges[window], self.shared.intensity[window], self.shared.noise
         else:
-            context, normalised = self._normalised_context
+            context, normalised, smoothed = self._context
             if window != context:
-                normalised = _normalize(_as_image(sub), levels=self.levels)
-            edges, intensity, noise = _edges_and_intensity(normalised, self.isef_b, self.noise)
+                normalised, smoothed = _normalize(_as_image(sub), levels=self.levels), None
+            edges, intensity, noise = _edges_and_intensity(normalised, self.isef_b, self.noise, smoothed)
         if not edges.any() and np.ptp(intensity) <= 1e-12 and sub.shape != self.image.shape:
             return self._compute(self._whole_image)  # nothing here: look at the whole image
         avoid = None if self.avoid is None else self.avoid[window]
