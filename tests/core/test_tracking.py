@@ -265,3 +265,26 @@ def test_a_frame_starts_on_the_predicted_contour_and_reads_its_levels_from_the_d
     assert from_predicted.steps < from_drawing.steps
     assert iou(from_predicted.contour, movie.masks[2]) > 0.98
     assert abs(iou(from_predicted.contour, movie.masks[2]) - iou(from_drawing.contour, movie.masks[2])) < 0.01
+
+
+def test_a_carried_contour_on_the_border_skips_the_evolution(movie):
+    """A contour carried over that already rests on the object's border
+    starts in the refinement (the region force alone): bringing it there is
+    the evolution's job. One carried far inside the object does not."""
+    from napari_physeg.core.segmentation import _evolve, _segment_arguments
+    from napari_physeg.core.tracking import _grown
+
+    image, outline = movie.frames[3], movie.outlines[3][::8]
+    drawing = _grown(outline, 6.0)
+    centre = outline.mean(0)
+
+    def run(start):
+        steps = list(_evolve(**_segment_arguments(image, drawing, {}), start=start))
+        return steps[0].phase, steps[-1].contour
+
+    phase, on_border = run(outline)
+    assert phase == "refinement"
+    assert iou(on_border, movie.masks[3]) > 0.98
+    phase, from_inside = run(centre + 0.6 * (outline - centre))
+    assert phase == "evolution"
+    assert iou(from_inside, movie.masks[3]) > 0.98
