@@ -683,6 +683,20 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
     return region
 
 
+#: A drawing around the object may cut into it (a hasty hand): the
+#: object's region reaches beyond the drawing by HASTY_MARGIN times the
+#: drawing's radius, 2 to MAX_HASTY_MARGIN px.
+HASTY_MARGIN = 0.15
+MAX_HASTY_MARGIN = 8
+
+
+def hasty_margin(drawn_area: float) -> int:
+    """How far (px) the object's region may reach beyond a drawing around it
+    that encloses ``drawn_area`` px (see HASTY_MARGIN)."""
+    radius = np.sqrt(max(float(drawn_area), 1.0) / np.pi)
+    return int(np.clip(round(HASTY_MARGIN * radius), 2, MAX_HASTY_MARGIN))
+
+
 def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
                         image_sides, stronger=None) -> np.ndarray | None:
     """:func:`object_region` on a crop around the drawing."""
@@ -694,7 +708,7 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     # times the drawing when drawn inside it (its reach). Growth past that
     # is a leak.
     if model.drawn_around:
-        margin = int(np.clip(round(0.15 * drawn_size), 2, 8))
+        margin = hasty_margin(drawn.sum())
         reach = limit = cv2.dilate(drawn.view(np.uint8), _disk(margin)).view(bool)
         marked = _fill(_scaled(drawing, 0.5), shape)
     else:
