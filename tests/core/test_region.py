@@ -359,3 +359,18 @@ def test_circle_around_a_nucleus_closely_ringed_by_touching_neighbours(factor):
     assert model.drawn_around and model.polarity == 1
     assert overlap(region, nucleus) > 0.9
     assert (region & neighbours).sum() < 0.1 * neighbours.sum()
+
+
+@pytest.mark.parametrize("visible", [True, False])
+def test_other_objects_are_background_whether_or_not_the_object_is_visible(visible):
+    """``avoid`` (the pixels of objects tracked together) reads as background
+    for this object, also where no object shows under the drawing (a tracked
+    nucleus that vanished), so that no region force draws its contour into them."""
+    from napari_physeg.core.segmentation import region_features
+
+    shape = (64, 96)
+    other = disk(shape, (32, 70), 10)
+    image = render(disk(shape, (32, 24), 10) if visible else np.zeros(shape, bool), noise=0.01)
+    signed, _, _ = region_features(image, np.zeros(shape), circle((32, 24), 14), polarity=1, avoid=other)
+    assert np.all(signed[other] == -1.0)
+    assert (signed[disk(shape, (32, 24), 6)] > 0).all() == visible

@@ -188,13 +188,13 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
     """
     if model is None:
         model = drawing_levels(intensity, drawing, polarity, noise)
-    if not model.is_visible:
-        # No object here that the eye could tell from its background: no
-        # region force (edges may still guide the contour).
-        return np.zeros(intensity.shape, np.float32), edges, model.polarity
-    signed = objectness(intensity, model)
+    # No object here that the eye could tell from its background: no region
+    # force (edges may still guide the contour) but out of other objects.
+    signed = objectness(intensity, model) if model.is_visible else np.zeros(intensity.shape, np.float32)
     if avoid is not None:
         signed[avoid] = -1.0
+    if not model.is_visible:
+        return signed, edges, model.polarity
     region = object_region(signed, drawing, model, image_sides, level_beyond_object(intensity, model))
     if region is None:
         return signed, edges, model.polarity

@@ -280,14 +280,30 @@ def _touches_side(contour: np.ndarray, shape) -> bool:
     return bool(np.any((contour <= 0.0) | (contour >= np.array(shape) - 1.0)))
 
 
-def _judge(contour, previous, whole_area, shape) -> str:
-    """Is ``contour`` the object seen on ``previous``, or has it gone?"""
+def _judge(contour, previous, predicted, whole_area, shape) -> str:
+    """Is ``contour`` the object seen on ``previous`` (and ``predicted`` on
+    this frame), or has it gone?"""
     area, prev_area = abs(signed_area(contour)), abs(signed_area(previous))
     if _touches_side(contour, shape) and area < LEFT_FRACTION * whole_area:
         return LEFT
     if not (prev_area / MAX_AREA_CHANGE <= area <= MAX_AREA_CHANGE * prev_area):
         return LOST
+    # A contour that holds no pixel of where the object was predicted has
+    # found another object (a vanished one's contour is drawn to the next
+    # edges within reach), not this one moved.
+    if not _overlap(contour, predicted, shape):
+        return LOST
     return TRACKED
+
+
+def _overlap(a: np.ndarray, b: np.ndarray, shape) -> bool:
+    """Whether the regions of contours ``a`` and ``b`` share a pixel of an image of ``shape``."""
+    lo = np.maximum(np.floor(np.minimum(a.min(0), b.min(0))).astype(int), 0)
+    hi = np.minimum(np.ceil(np.maximum(a.max(0), b.max(0))).astype(int) + 1, shape)
+    if np.any(hi <= lo):
+        return False
+    box = tuple(hi - lo)
+    return bool((polygon_mask(a - lo, box) & polygon_mask(b - lo, box)).any())
 
 
 def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_options: dict | None = None,
@@ -395,7 +411,7 @@ def _one_object(image, shared, owner, t, k, start, step, inits, contours, status
         polarity[k] = "bright" if res.polarity > 0 else "dark"
         whole_area[k] = abs(signed_area(contour))
         return contour, TRACKED
-    verdict = _judge(contour, contours[k][t - step], whole_area[k], image.shape)
+    verdict = _judge(contour, contours[k][t - step], predicted, whole_area[k], image.shape)
     if verdict == TRACKED and not _touches_side(contour, image.shape):
         whole_area[k] = abs(signed_area(contour))
     return (contour if verdict == TRACKED else None), verdict
