@@ -12,6 +12,8 @@ Two movies:
   (no contour, or one whose centroid is more than 10 px off). A track is *followed* when
   none of its frames is lost. Points within 2 px of the image's side are not scored: the
   CTC annotation puts a nucleus cut by the side on the side, not at its centre.
+* **Other drawings** - the CTC nuclei from a circle of 25 px about each annotated centre, a
+  circle 1.3 times the nucleus, a box 1.2 times its extent and a 4-px click inside it.
 * **Faster motion** - the CTC movie with every 2nd, 3rd and 4th frame only, as a movie
   taken at a lower frame rate: the nuclei move 2-4 times as far between frames.
 * **Synthetic** - ``napari_physeg.data.deforming_cell()`` (30 frames, known material
@@ -60,7 +62,7 @@ import real_data  # noqa: E402
 from _common import machine, write_section  # noqa: E402
 from napari_physeg import data  # noqa: E402
 from napari_physeg.core import TRACKED, track  # noqa: E402
-from napari_physeg.core.contour import outward_normals, polygon_mask, remove_loops, resample  # noqa: E402
+from napari_physeg.core.contour import outward_normals, polygon_mask, remove_loops, resample, signed_area  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "benchmark_output"
@@ -285,6 +287,34 @@ def faster_motion(frames, truth, ids, inits, starts, out, steps=(2, 3, 4)):
         out(f"| {k} | {cells[0]} | {1e3 * t_ours / (len(ids) * len(keep)):.1f} | {cells[1]} | {cells[2]} |")
 
 
+def other_drawings(frames, truth, ids, inits, out):
+    """Ours from other frame-0 drawings of the CTC nuclei, as people draw them: a circle of
+    25 px about each annotated centre (the user guide's recipe), a circle 1.3 times the
+    nucleus, a box 1.2 times its extent, a 4-px click inside it."""
+    angles = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    unit = np.column_stack([np.sin(angles), np.cos(angles)])
+
+    def box(init, factor):
+        centre, half = init.mean(0), factor * np.ptp(init, axis=0) / 2
+        return centre + half * np.array([[-1, -1], [-1, 1], [1, 1], [1, -1]])
+
+    drawings = {
+        "circle of 25 px about the centre": [truth[k][0] + 25 * unit for k in ids],
+        "circle 1.3 times the nucleus": [i.mean(0) + 1.3 * np.sqrt(abs(signed_area(i)) / np.pi) * unit for i in inits],
+        "box 1.2 times its extent": [box(i, 1.2) for i in inits],
+        "4-px click inside": [truth[k][0] + 4 * unit for k in ids],
+    }
+    out("Other drawings on frame 0 (ours; one run each):")
+    out()
+    out("| drawing | tracks followed | frames lost | median centroid error (px) | ms per object-frame |")
+    out("|---|---|---|---|---|")
+    for name, drawn in drawings.items():
+        centroids, elapsed, _ = run_ours(frames, drawn)
+        c = ctc_scores(centroids, truth, ids, frames.shape[1:])
+        out(f"| {name} | {c['followed']} / {len(ids)} | {c['lost']} | {c['median']:.2f} "
+            f"| {1e3 * elapsed / (len(ids) * len(frames)):.1f} |")
+
+
 def kymograph_figure(tr, path):
     import matplotlib
 
@@ -368,6 +398,8 @@ def main(argv=None):
     out(f"- ours on the CTC movie: {statuses.count(TRACKED)} object-frames tracked, "
         f"{statuses.count('lost')} lost, {statuses.count('left the field of view')} left the field of view; "
         f"segmentation {tr.timings['segmentation']:.1f} s, correspondences {tr.timings['correspondence']:.1f} s")
+    out()
+    other_drawings(frames, truth, ids, inits, out)
     out()
     faster_motion(frames, truth, ids, inits, starts, out)
     kymo = (ROOT / "docs" / "images" if args.write else OUT) / "tracking_membrane_maps.png"
