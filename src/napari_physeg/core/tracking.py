@@ -4,10 +4,13 @@
 starting from the previous result moved by the motion predicted from the
 frames before (the object's levels read from that contour grown by a
 margin, a drawing around it), so the physical contour needs only a few
-steps. The feature
-images of a frame are computed once and shared by all its objects, and each
-object counts the others' pixels as background: objects repel each other
-and never overlap.
+steps, and none of the evolution's when it starts on the object's border.
+A contour that comes to rest against its drawing's limit is drawn around
+again (the object moved further than predicted); one that ends with no
+pixel where its object was predicted found another object: the object is
+lost. The feature images of a frame are computed once and shared by all its
+objects, and each object counts the others' pixels as background: objects
+repel each other and never overlap.
 
 Once the contours are known, consecutive contours of an object are matched
 node to node by the order-preserving modal matching of :func:`.match`, as
@@ -264,6 +267,20 @@ def _against_the_limit(contour: np.ndarray, drawing: np.ndarray) -> bool:
     return bool(np.mean(-inside >= margin - 1.5) >= AT_LIMIT_SHARE)
 
 
+def _redrawn(segment_here, drawing: np.ndarray, predicted: np.ndarray):
+    """``segment_here(drawing, predicted)``, drawn around again (up to
+    MAX_REDRAWS times) while the contour rests against its drawing's limit:
+    a tracked frame's drawing is a guess, and an object that moved further
+    than predicted reaches beyond it."""
+    res = segment_here(drawing, predicted)
+    for _ in range(MAX_REDRAWS):
+        if not (res.converged and _against_the_limit(res.contour, drawing)):
+            break
+        drawing = _drawing_around(res.contour)
+        res = segment_here(drawing, res.contour)
+    return res
+
+
 def _paint(owner: np.ndarray, contour: np.ndarray, value: int) -> None:
     """Set the pixels of ``owner`` inside ``contour`` to ``value`` (rasterised
     in the contour's bounding box only: a frame holds many small objects)."""
@@ -394,14 +411,7 @@ def _one_object(image, shared, owner, t, k, start, step, inits, contours, status
         with warnings.catch_warnings():
             if t != start:  # a contour predicted partly beyond the image is expected
                 warnings.filterwarnings("ignore", message=".*lie outside the image", category=UserWarning)
-            res = segment_here(init, predicted)
-            # The drawing of a tracked frame is a guess: an object that moved
-            # further than predicted reaches beyond it.
-            for _ in range(MAX_REDRAWS if t != start else 0):
-                if not (res.converged and _against_the_limit(res.contour, init)):
-                    break
-                init = _drawing_around(res.contour)
-                res = segment_here(init, res.contour)
+            res = segment_here(init, predicted) if t == start else _redrawn(segment_here, init, predicted)
     except (ValueError, DivergenceError):
         return None, LEFT if t != start and _touches_side(init, image.shape) else LOST
     if not res.converged:
