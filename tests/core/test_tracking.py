@@ -169,6 +169,23 @@ def test_an_object_that_vanishes_is_lost_not_returned_as_garbage():
     assert (table[table.frame >= 4].status == LOST).all() and table[table.frame >= 4].row.isna().all()
 
 
+def test_an_object_that_fades_away_is_lost_one_that_bleaches_is_not():
+    """A cell that leaves the focal plane fades to its out-of-focus glow: once
+    its contrast is below FADED_CONTRAST of the start frame's it is lost,
+    not followed as a dim blob. Bleaching to a third is still the cell."""
+    rr, cc = np.mgrid[:96, :96]
+    disk = (rr - 48) ** 2 + (cc - 48) ** 2 <= 12**2
+    rng = np.random.default_rng(0)
+
+    def movie(contrasts):
+        return np.stack([0.2 + c * disk + 0.01 * rng.standard_normal(disk.shape) for c in contrasts])
+
+    faded = track(movie([0.6, 0.45, 0.3, 0.15, 0.09, 0.06]), _circle((48, 48), 16))
+    assert faded.status[0] == [TRACKED] * 4 + [LOST] * 2
+    bleached = track(movie([0.6, 0.5, 0.4, 0.3, 0.25, 0.2]), _circle((48, 48), 16))
+    assert bleached.status[0] == [TRACKED] * 6
+
+
 def test_an_object_that_moves_out_of_the_image_has_left_the_field_of_view():
     centres = [[(48, 60 + 8 * t)] for t in range(7)]  # out by the right side
     tr = track(_disk_movie(centres), _circle((48, 60), 16))
