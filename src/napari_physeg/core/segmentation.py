@@ -1125,10 +1125,12 @@ def segment(
     Notes
     -----
     The feature images are computed on a window around the contour (its
-    bounding box plus ``2 (max_line_length + 8)`` px) when that window covers
-    at most half the image, and on a larger window whenever the contour comes
-    within ``max_line_length + 8`` px of its border; so a small object in a
-    large image costs about what it would cost in a small one.
+    bounding box plus ``1.25 (max_line_length + 8)`` px) when that window
+    covers at most half the image, and on a larger window whenever the
+    contour comes within ``max_line_length + 8`` px of its border; so a small
+    object in a large image costs about what it would cost in a small one.
+    The drawing is read once, on its bounding box plus
+    ``2 (max_line_length + 8)`` px (or the whole image, likewise).
 
     Examples
     --------

@@ -34,8 +34,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._drain import drain
-from .contour import (area_centroid, as_contour, closest_on_polyline, outward_normals, perimeter, polygon_mask,
-                      positively_oriented, remove_loops, resample, signed_area)
+from .contour import (area_centroid, as_contour, bounding_window, closest_on_polyline, outward_normals, perimeter,
+                      polygon_mask, positively_oriented, remove_loops, resample, signed_area)
 from .dynamics import DivergenceError
 from .matching import match
 from .region import hasty_margin
@@ -290,15 +290,22 @@ def _redrawn(segment_here, drawing: np.ndarray, predicted: np.ndarray):
     return res
 
 
+def _inside(contour: np.ndarray, box) -> np.ndarray | None:
+    """The mask of ``contour``'s pixels within the window ``box`` (see
+    contour.bounding_window), or None for an empty window: objects are
+    rasterised around themselves only, as a frame holds many small ones."""
+    if box[0].stop <= box[0].start or box[1].stop <= box[1].start:
+        return None
+    shape = (box[0].stop - box[0].start, box[1].stop - box[1].start)
+    return polygon_mask(contour - [box[0].start, box[1].start], shape)
+
+
 def _paint(owner: np.ndarray, contour: np.ndarray, value: int) -> None:
-    """Set the pixels of ``owner`` inside ``contour`` to ``value`` (rasterised
-    in the contour's bounding box only: a frame holds many small objects)."""
-    lo = np.maximum(np.floor(contour.min(0)).astype(int), 0)
-    hi = np.minimum(np.ceil(contour.max(0)).astype(int) + 1, owner.shape)
-    if np.any(hi <= lo):
-        return
-    inside = polygon_mask(contour - lo, tuple(hi - lo))
-    owner[lo[0]:hi[0], lo[1]:hi[1]][inside] = value
+    """Set the pixels of ``owner`` inside ``contour`` to ``value``."""
+    box = bounding_window(contour, owner.shape, 0.0)
+    inside = _inside(contour, box)
+    if inside is not None:
+        owner[box][inside] = value
 
 
 def _touches_side(contour: np.ndarray, shape) -> bool:
@@ -324,12 +331,9 @@ def _judge(contour, previous, predicted, whole_area, shape) -> str:
 
 def _overlap(a: np.ndarray, b: np.ndarray, shape) -> bool:
     """Whether the regions of contours ``a`` and ``b`` share a pixel of an image of ``shape``."""
-    lo = np.maximum(np.floor(np.minimum(a.min(0), b.min(0))).astype(int), 0)
-    hi = np.minimum(np.ceil(np.maximum(a.max(0), b.max(0))).astype(int) + 1, shape)
-    if np.any(hi <= lo):
-        return False
-    box = tuple(hi - lo)
-    return bool((polygon_mask(a - lo, box) & polygon_mask(b - lo, box)).any())
+    box = bounding_window(np.vstack([a, b]), shape, 0.0)
+    in_a, in_b = _inside(a, box), _inside(b, box)
+    return in_a is not None and bool((in_a & in_b).any())
 
 
 def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_options: dict | None = None,
@@ -456,13 +460,14 @@ def _contrast(image: np.ndarray, contour: np.ndarray, polarity: int, avoid: np.n
     """The object's contrast: the median intensity inside ``contour`` less that
     of a ring 2-4 px outside it (others' pixels, ``avoid``, left out), signed
     by ``polarity``; NaN when either is empty."""
-    lo = np.maximum(np.floor(contour.min(0)).astype(int) - 6, 0)
-    hi = np.minimum(np.ceil(contour.max(0)).astype(int) + 7, image.shape)
-    box = (slice(lo[0], hi[0]), slice(lo[1], hi[1]))
-    inside = polygon_mask(contour - lo, tuple(hi - lo)).astype(np.uint8)
+    box = bounding_window(contour, image.shape, 6.0)
+    inside = _inside(contour, box)
+    if inside is None or not inside.any():
+        return np.nan
+    inside = inside.astype(np.uint8)
     ring = cv2.dilate(inside, np.ones((9, 9), np.uint8)) > cv2.dilate(inside, np.ones((3, 3), np.uint8))
     ring &= ~avoid[box]
-    if not inside.any() or not ring.any():
+    if not ring.any():
         return np.nan
     return float(polarity * (np.median(image[box][inside.view(bool)]) - np.median(image[box][ring])))
 
