@@ -85,3 +85,31 @@ def test_normalize_weights_validates():
         normalize_weights(("edges", "gravity"))
     with pytest.raises(ValueError, match="positive"):
         normalize_weights(FORCE_NAMES, {"edges": 0, "intensity": 0, "distance": 0})
+
+
+def test_beyond_the_image_the_border_is_a_wall_and_the_distance_its_mirror():
+    rng = np.random.default_rng(3)
+    field = ForceField.from_features(rng.random((30, 40)), rng.random((30, 40)) * 9, rng.uniform(-1, 1, (30, 40)),
+                                     {"edges": 1.0})
+    inside = np.column_stack([rng.uniform(0, 29, 50), rng.uniform(0, 39, 50)])
+    # Mirror about the outermost pixels: row -r reads row r, row 29 + r reads 29 - r.
+    flips = {"top": (-inside[:, 0], inside[:, 1]), "bottom": (58 - inside[:, 0], inside[:, 1]),
+             "left": (inside[:, 0], -inside[:, 1]), "right": (inside[:, 0], 78 - inside[:, 1])}
+    for side, (r, c) in flips.items():
+        beyond = np.column_stack([r, c])
+        far = np.any((beyond < -1) | (beyond > [30, 40]), axis=1)
+        got, mirror = field.sample(beyond), field.sample(inside)
+        np.testing.assert_allclose(got[:, 1], mirror[:, 1], atol=1e-3, err_msg=side)
+        assert np.all(got[far, 0] == 1.0) and np.all(got[far, 2] == -1.0), side
+
+
+@pytest.mark.parametrize("n", [1, 7, 4096, 4097, 9000])
+def test_samples_of_one_image_are_those_of_all_three(n):
+    # Points fold into rows of 4096 for cv2.remap: any number comes back whole.
+    rng = np.random.default_rng(n)
+    field = ForceField.from_features(rng.random((20, 30)), rng.random((20, 30)) * 5, rng.uniform(-1, 1, (20, 30)),
+                                     {"edges": 1.0})
+    points = rng.uniform(-3, 33, (n, 3, 2))
+    every = field.sample(points)
+    np.testing.assert_array_equal(field.distance_at(points), every[..., 1])
+    np.testing.assert_array_equal(field.objectness_at(points), every[..., 2])

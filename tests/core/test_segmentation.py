@@ -468,6 +468,25 @@ def test_contour_grows_out_of_its_feature_window(monkeypatch):
     assert np.all(res.contour >= 0) and np.all(res.contour <= np.array(disc.shape) - 1)
 
 
+def test_a_click_that_grows_within_reach_of_its_window_keeps_it(monkeypatch):
+    # A click inside a disc that ends 38 px from its feature window's side:
+    # within the longest line (40 px) and margin, but its nodes then cast
+    # lines of a few px on the border, so the window is not recomputed; the
+    # contour is the one found with the whole image in view.
+    rows, cols = np.mgrid[:1000, :1000]
+    disc = 0.2 + 0.6 * (((rows - 500) ** 2 + (cols - 500) ** 2) < 30**2)
+    disc += np.random.default_rng(1).normal(0, 0.03, disc.shape)
+    t = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    click = np.column_stack([500 + 8 * np.sin(t), 500 + 8 * np.cos(t)])
+    shapes = _feature_shapes(monkeypatch)
+    res = segment(disc, click)
+    assert len(shapes) == 1 and shapes[0][0] < 200  # one window, around the click
+    crop = disc[400:600, 400:600]  # small enough to be its own window
+    whole = segment(crop, click - 400)
+    assert res.converged and whole.converged
+    np.testing.assert_allclose(res.contour - 400, whole.contour, atol=0.05)
+
+
 def test_the_drawing_is_read_once_however_the_window_grows(monkeypatch):
     # A click inside a large disc grows out of its feature window several
     # times; the object's levels and polarity read from the click at the

@@ -117,39 +117,42 @@ class ForceField:
         single bilinear ``cv2.remap`` samples them all."""
         return np.ascontiguousarray(np.dstack([self.edges, self.distance, self.objectness]).astype(np.float32))
 
-    def sample(self, points: np.ndarray) -> np.ndarray:
-        """Bilinear samples of (edges, distance, objectness) at ``points`` (..., 2)."""
-        pts = np.asarray(points, dtype=np.float32)
-        flat = pts.reshape(-1, 2)
-        # cv2.remap wants a 2D map with sides below 2**15: fold the points.
-        n = len(flat)
-        width = min(max(n, 1), 4096)
-        rows = -(-n // width)
-        grid = np.zeros((rows * width, 2), dtype=np.float32)
-        grid[:n] = flat
-        grid = grid.reshape(rows, width, 2)
-        # The image's border is a wall: an edge, with no object beyond it, so
-        # a contour around an object cut by the border rests on the border.
-        out = cv2.remap(self._stack, np.ascontiguousarray(grid[..., 1]), np.ascontiguousarray(grid[..., 0]),
-                        interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                        borderValue=(1.0, 0.0, -1.0, 0.0)).reshape(-1, 3)[:n]
-        # Beyond the border the distance to the nearest edge is unknown: it is
-        # read as its mirror image inside, so the border neither pulls nor
-        # pushes a node by the distance force (the edge and region forces say
-        # whether the object ends there).
-        size = self._last_pixel
-        # (Column by column: numpy's reduction along axis 0 of an (n, 2) array is ~15x slower.)
-        if n and (flat.min() < 0 or flat[:, 0].max() > size[0] or flat[:, 1].max() > size[1]):
-            beyond = np.any((flat < 0) | (flat > size), axis=1)
-            mirrored = np.clip(size - np.abs(size - np.abs(flat[beyond])), 0, size)
-            out[beyond, 1] = cv2.remap(self.distance, np.ascontiguousarray(mirrored[None, :, 1]),
-                                       np.ascontiguousarray(mirrored[None, :, 0]),
-                                       interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[0]
-        return out.reshape(pts.shape[:-1] + (3,))
+    @cached_property
+    def _distance32(self) -> np.ndarray:
+        return np.ascontiguousarray(self.distance, dtype=np.float32)
 
     @cached_property
-    def _last_pixel(self) -> np.ndarray:
-        return np.array(self.objectness.shape, dtype=np.float32) - 1
+    def _objectness32(self) -> np.ndarray:
+        return np.ascontiguousarray(self.objectness, dtype=np.float32)
+
+    def sample(self, points: np.ndarray) -> np.ndarray:
+        """Bilinear samples of (edges, distance, objectness) at ``points`` (..., 2)."""
+        row_map, col_map, n = _remap_grid(points)
+        # The image's border is a wall: an edge, with no object beyond it, so
+        # a contour around an object cut by the border rests on the border.
+        out = cv2.remap(self._stack, col_map, row_map, interpolation=cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_CONSTANT, borderValue=(1.0, 0.0, -1.0, 0.0)).reshape(-1, 3)[:n]
+        out[:, 1] = self._distance_on(row_map, col_map, n)
+        return out.reshape(np.shape(points)[:-1] + (3,))
+
+    def distance_at(self, points: np.ndarray) -> np.ndarray:
+        """Bilinear samples of the distance image alone at ``points`` (..., 2)."""
+        row_map, col_map, n = _remap_grid(points)
+        return self._distance_on(row_map, col_map, n).reshape(np.shape(points)[:-1])
+
+    def objectness_at(self, points: np.ndarray) -> np.ndarray:
+        """Bilinear samples of the object-ness alone at ``points`` (..., 2); -1 beyond the image."""
+        row_map, col_map, n = _remap_grid(points)
+        return cv2.remap(self._objectness32, col_map, row_map, interpolation=cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0).reshape(-1)[:n].reshape(np.shape(points)[:-1])
+
+    def _distance_on(self, row_map, col_map, n) -> np.ndarray:
+        # Beyond the border the distance to the nearest edge is unknown: it is
+        # read as its mirror image inside (about the outermost pixels), so the
+        # border neither pulls nor pushes a node by the distance force (the
+        # edge and region forces say whether the object ends there).
+        return cv2.remap(self._distance32, col_map, row_map, interpolation=cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_REFLECT_101).reshape(-1)[:n]
 
     @cached_property
     def _region_offsets(self) -> np.ndarray:
@@ -161,7 +164,7 @@ class ForceField:
 
     def line_lengths(self, nodes: np.ndarray) -> np.ndarray:
         """Adaptive half-length of each node's normal line."""
-        d = self.sample(nodes)[:, 1]
+        d = self.distance_at(nodes)
         return np.clip(1.25 * d + self.min_length, self.min_length, self.max_length)
 
     @cached_property
@@ -186,8 +189,9 @@ class ForceField:
         w = self.weights
         if w.get("edges", 0) <= 0 and w.get("distance", 0) <= 0:
             # The region force alone (the refinement phase): its short lines only.
-            region = self._sample_short_lines(nodes, normals)
-            return (w.get("intensity", 0) * region[..., 2].mean(1)).astype(np.float64)[:, None] * normals
+            lines = nodes[:, None, :] + self._region_offsets[None, :, None] * normals[:, None, :]
+            region = self.objectness_at(lines).sum(1) / lines.shape[1]
+            return (w.get("intensity", 0) * region).astype(np.float64)[:, None] * normals
         lengths = self.line_lengths(nodes).astype(np.float64)
         S = self.n_samples
         # (N, 2S+1) search line, then the short region line: scaled fractions, then fixed offsets.
@@ -214,7 +218,8 @@ class ForceField:
             # The region force is local: averaged over the shortest line only,
             # so a long search line crossing a thin part of the object (a
             # finger) cannot pull the node through it.
-            total += w["intensity"] * samples[:, 2 * S + 1:, 2].mean(1)
+            region = samples[:, 2 * S + 1:, 2]
+            total += w["intensity"] * (region.sum(1) / region.shape[1])
         return total[:, None] * normals
 
     def on_border(self, nodes: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
@@ -227,6 +232,19 @@ class ForceField:
         crossing = (region.min(1) < 0) & (region.max(1) > 0)
         near = np.abs(self._region_offsets) <= 1.5
         return crossing | (values[:, near, 0].max(1) > 0.3)
+
+
+def _remap_grid(points: np.ndarray):
+    """``points`` (..., 2) as the row and column maps of ``cv2.remap`` (2D,
+    sides below 2**15: the points are folded into rows of 4096), and their number."""
+    flat = np.asarray(points, dtype=np.float32).reshape(-1, 2)
+    n = len(flat)
+    width = min(max(n, 1), 4096)
+    rows = -(-n // width)
+    maps = np.zeros((2, rows * width), dtype=np.float32)
+    maps[:, :n] = flat.T
+    row_map, col_map = maps.reshape(2, rows, width)
+    return row_map, col_map, n
 
 
 def _central_difference(values: np.ndarray) -> np.ndarray:

@@ -526,6 +526,11 @@ class _FeatureWindow:
         """Grow the window if ``nodes`` (window frame) near its border; the shift of the frame."""
         if not _near_window_border(nodes, self.window, self.image.shape, self.guard):
             return np.zeros(2)
+        # Near its border, most lines are shorter than the longest allowed:
+        # the window need only hold the lines the nodes now cast (and the margin).
+        reach = float(self.fields[0].line_lengths(nodes).max()) + self.guard - self.max_line_length
+        if not _near_window_border(nodes, self.window, self.image.shape, reach):
+            return np.zeros(2)
         old = self.origin
         self._compute(bounding_window(nodes + old, self.image.shape, FORCE_MARGIN * self.guard, keep=self.window))
         return old - self.origin
@@ -613,7 +618,7 @@ class _ElasticBody:
         (and half a pixel): a node that starts on its border (a contour
         carried over from the previous frame, or one entering refinement)
         needs no 2-px jump to find it, and would overshoot and swing back."""
-        reach = field.sample(self.nodes)[:, 1] + 0.5
+        reach = field.distance_at(self.nodes) + 0.5
         self.cap = np.clip(reach, 0.25 * self.tol, self.max_step_length)
         self.last_sign = np.zeros(len(self.nodes))
 
