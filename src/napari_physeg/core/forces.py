@@ -128,31 +128,41 @@ class ForceField:
     def sample(self, points: np.ndarray) -> np.ndarray:
         """Bilinear samples of (edges, distance, objectness) at ``points`` (..., 2)."""
         row_map, col_map, n = _remap_grid(points)
-        # The image's border is a wall: an edge, with no object beyond it, so
-        # a contour around an object cut by the border rests on the border.
-        out = cv2.remap(self._stack, col_map, row_map, interpolation=cv2.INTER_LINEAR,
-                        borderMode=cv2.BORDER_CONSTANT, borderValue=(1.0, 0.0, -1.0, 0.0)).reshape(-1, 3)[:n]
-        out[:, 1] = self._distance_on(row_map, col_map, n)
-        return out.reshape(np.shape(points)[:-1] + (3,))
+        return self._sample_maps(row_map, col_map).reshape(-1, 3)[:n].reshape(np.shape(points)[:-1] + (3,))
 
     def distance_at(self, points: np.ndarray) -> np.ndarray:
         """Bilinear samples of the distance image alone at ``points`` (..., 2)."""
         row_map, col_map, n = _remap_grid(points)
-        return self._distance_on(row_map, col_map, n).reshape(np.shape(points)[:-1])
+        return self._distance_maps(row_map, col_map).reshape(-1)[:n].reshape(np.shape(points)[:-1])
 
     def objectness_at(self, points: np.ndarray) -> np.ndarray:
         """Bilinear samples of the object-ness alone at ``points`` (..., 2); -1 beyond the image."""
         row_map, col_map, n = _remap_grid(points)
-        return cv2.remap(self._objectness32, col_map, row_map, interpolation=cv2.INTER_LINEAR,
-                         borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0).reshape(-1)[:n].reshape(np.shape(points)[:-1])
+        return self._objectness_maps(row_map, col_map).reshape(-1)[:n].reshape(np.shape(points)[:-1])
 
-    def _distance_on(self, row_map, col_map, n) -> np.ndarray:
+    # The samplers proper, on cv2.remap's maps: 2D float32 arrays of the
+    # points' rows and columns, sides below 2**15. The normal lines of the
+    # nodes are such maps as they are (a node per row, a sample per column).
+
+    def _sample_maps(self, row_map, col_map) -> np.ndarray:
+        # The image's border is a wall: an edge, with no object beyond it, so
+        # a contour around an object cut by the border rests on the border.
+        out = cv2.remap(self._stack, col_map, row_map, interpolation=cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_CONSTANT, borderValue=(1.0, 0.0, -1.0, 0.0))
+        out[..., 1] = self._distance_maps(row_map, col_map)
+        return out
+
+    def _distance_maps(self, row_map, col_map) -> np.ndarray:
         # Beyond the border the distance to the nearest edge is unknown: it is
         # read as its mirror image inside (about the outermost pixels), so the
         # border neither pulls nor pushes a node by the distance force (the
         # edge and region forces say whether the object ends there).
         return cv2.remap(self._distance32, col_map, row_map, interpolation=cv2.INTER_LINEAR,
-                         borderMode=cv2.BORDER_REFLECT_101).reshape(-1)[:n]
+                         borderMode=cv2.BORDER_REFLECT_101)
+
+    def _objectness_maps(self, row_map, col_map) -> np.ndarray:
+        return cv2.remap(self._objectness32, col_map, row_map, interpolation=cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
 
     @cached_property
     def _region_offsets(self) -> np.ndarray:
@@ -160,11 +170,11 @@ class ForceField:
 
     def _sample_short_lines(self, nodes: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """Samples (N, 7, 3) along each node's shortest normal line (the region force's)."""
-        return self.sample(nodes[:, None, :] + self._region_offsets[None, :, None] * normals[:, None, :])
+        return self._sample_maps(*_line_maps(nodes, normals, self._region_offsets[None, :]))
 
     def line_lengths(self, nodes: np.ndarray) -> np.ndarray:
         """Adaptive half-length of each node's normal line."""
-        d = self.distance_at(nodes)
+        d = self._distance_maps(nodes[None, :, 0].astype(np.float32), nodes[None, :, 1].astype(np.float32))[0]
         return np.clip(1.25 * d + self.min_length, self.min_length, self.max_length)
 
     @cached_property
@@ -189,8 +199,8 @@ class ForceField:
         w = self.weights
         if w.get("edges", 0) <= 0 and w.get("distance", 0) <= 0:
             # The region force alone (the refinement phase): its short lines only.
-            lines = nodes[:, None, :] + self._region_offsets[None, :, None] * normals[:, None, :]
-            region = self.objectness_at(lines).sum(1) / lines.shape[1]
+            region = self._objectness_maps(*_line_maps(nodes, normals, self._region_offsets[None, :]))
+            region = region.sum(1) / region.shape[1]
             return (w.get("intensity", 0) * region).astype(np.float64)[:, None] * normals
         lengths = self.line_lengths(nodes).astype(np.float64)
         S = self.n_samples
@@ -198,7 +208,7 @@ class ForceField:
         scaled, fixed = self._line_offsets
         offsets = lengths[:, None] * scaled + fixed
         # One bilinear pass samples the search lines and the short region lines (runs every step).
-        samples = self.sample(nodes[:, None, :] + offsets[..., None] * normals[:, None, :])
+        samples = self._sample_maps(*_line_maps(nodes, normals, offsets))
         values = samples[:, :2 * S + 1].astype(np.float64)  # (N, 2S+1, 3)
         total = np.zeros(len(nodes))
         if w.get("edges", 0) > 0:
@@ -232,6 +242,14 @@ class ForceField:
         crossing = (region.min(1) < 0) & (region.max(1) > 0)
         near = np.abs(self._region_offsets) <= 1.5
         return crossing | (values[:, near, 0].max(1) > 0.3)
+
+
+def _line_maps(nodes: np.ndarray, normals: np.ndarray, offsets: np.ndarray):
+    """The row and column maps (N, L) of the points ``offsets`` (N or 1, L)
+    px along each node's normal (N nodes of fewer than 2**15)."""
+    rows = nodes[:, :1] + offsets * normals[:, :1]
+    cols = nodes[:, 1:] + offsets * normals[:, 1:]
+    return rows.astype(np.float32), cols.astype(np.float32)
 
 
 def _remap_grid(points: np.ndarray):
