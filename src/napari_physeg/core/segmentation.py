@@ -916,7 +916,7 @@ def _evolve(
                 stop_reason = _rest_reason(features.fields[phase], body.nodes)
                 break
             phase += 1
-            rest = _RestDetector(tol * HANDOVER, int(__import__('os').environ.get('RP', patience)))
+            rest = _RestDetector(tol * HANDOVER, patience)
             body.cap_by_reach(features.fields[phase])
     if stop_reason != "cancelled" and body.collapsed:
         # Nothing held it: the region force shrinks a contour drawn on a
