@@ -113,3 +113,17 @@ def test_samples_of_one_image_are_those_of_all_three(n):
     every = field.sample(points)
     np.testing.assert_array_equal(field.distance_at(points), every[..., 1])
     np.testing.assert_array_equal(field.objectness_at(points), every[..., 2])
+
+
+def test_a_contour_of_more_nodes_than_a_remap_map_holds():
+    # cv2.remap takes maps of fewer than 2**15 rows: a node per row is cut into runs.
+    t = np.linspace(0, 2 * np.pi, 40000, endpoint=False)
+    nodes = np.column_stack([64 + 30 * np.sin(t), 64 + 30 * np.cos(t)])
+    rows, cols = np.mgrid[:128, :128]
+    disc = (np.hypot(rows - 64, cols - 64) < 40).astype(float)
+    field = ForceField.from_features(np.zeros_like(disc), np.full(disc.shape, 10.0), 2 * disc - 1,
+                                     {"intensity": 1.0, "distance": 1.0})
+    forces = field(nodes)
+    assert forces.shape == nodes.shape and np.all(np.isfinite(forces))
+    outward = (forces * outward_normals(nodes)).sum(1)
+    assert np.all(outward > 0)  # inside the disc the region force pushes out

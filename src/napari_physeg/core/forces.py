@@ -141,14 +141,13 @@ class ForceField:
         return self._objectness_maps(row_map, col_map).reshape(-1)[:n].reshape(np.shape(points)[:-1])
 
     # The samplers proper, on cv2.remap's maps: 2D float32 arrays of the
-    # points' rows and columns, sides below 2**15. The normal lines of the
-    # nodes are such maps as they are (a node per row, a sample per column).
+    # points' rows and columns. The normal lines of the nodes are such maps
+    # as they are (a node per row, a sample per column).
 
     def _sample_maps(self, row_map, col_map) -> np.ndarray:
         # The image's border is a wall: an edge, with no object beyond it, so
         # a contour around an object cut by the border rests on the border.
-        out = cv2.remap(self._stack, col_map, row_map, interpolation=cv2.INTER_LINEAR,
-                        borderMode=cv2.BORDER_CONSTANT, borderValue=(1.0, 0.0, -1.0, 0.0))
+        out = _remap(self._stack, row_map, col_map, cv2.BORDER_CONSTANT, (1.0, 0.0, -1.0, 0.0))
         out[..., 1] = self._distance_maps(row_map, col_map)
         return out
 
@@ -157,12 +156,10 @@ class ForceField:
         # read as its mirror image inside (about the outermost pixels), so the
         # border neither pulls nor pushes a node by the distance force (the
         # edge and region forces say whether the object ends there).
-        return cv2.remap(self._distance32, col_map, row_map, interpolation=cv2.INTER_LINEAR,
-                         borderMode=cv2.BORDER_REFLECT_101)
+        return _remap(self._distance32, row_map, col_map, cv2.BORDER_REFLECT_101)
 
     def _objectness_maps(self, row_map, col_map) -> np.ndarray:
-        return cv2.remap(self._objectness32, col_map, row_map, interpolation=cv2.INTER_LINEAR,
-                         borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
+        return _remap(self._objectness32, row_map, col_map, cv2.BORDER_CONSTANT, -1.0)
 
     @cached_property
     def _region_offsets(self) -> np.ndarray:
@@ -174,7 +171,7 @@ class ForceField:
 
     def line_lengths(self, nodes: np.ndarray) -> np.ndarray:
         """Adaptive half-length of each node's normal line."""
-        d = self._distance_maps(nodes[None, :, 0].astype(np.float32), nodes[None, :, 1].astype(np.float32))[0]
+        d = self.distance_at(nodes)
         return np.clip(1.25 * d + self.min_length, self.min_length, self.max_length)
 
     @cached_property
@@ -244,17 +241,32 @@ class ForceField:
         return crossing | (values[:, near, 0].max(1) > 0.3)
 
 
+#: cv2.remap's maps must have sides below 2**15: longer ones are cut into
+#: runs of this many rows.
+_REMAP_ROWS = 2**14
+
+
+def _remap(image: np.ndarray, row_map: np.ndarray, col_map: np.ndarray, border: int, value=0.0) -> np.ndarray:
+    """Bilinear samples of ``image`` at the points of the maps (2D float32, of
+    fewer than 2**15 columns and any number of rows)."""
+    options = dict(interpolation=cv2.INTER_LINEAR, borderMode=border, borderValue=value)
+    if len(row_map) <= _REMAP_ROWS:
+        return cv2.remap(image, col_map, row_map, **options)
+    return np.concatenate([cv2.remap(image, col_map[i:i + _REMAP_ROWS], row_map[i:i + _REMAP_ROWS], **options)
+                           for i in range(0, len(row_map), _REMAP_ROWS)])
+
+
 def _line_maps(nodes: np.ndarray, normals: np.ndarray, offsets: np.ndarray):
     """The row and column maps (N, L) of the points ``offsets`` (N or 1, L)
-    px along each node's normal (N nodes of fewer than 2**15)."""
+    px along each node's normal."""
     rows = nodes[:, :1] + offsets * normals[:, :1]
     cols = nodes[:, 1:] + offsets * normals[:, 1:]
     return rows.astype(np.float32), cols.astype(np.float32)
 
 
 def _remap_grid(points: np.ndarray):
-    """``points`` (..., 2) as the row and column maps of ``cv2.remap`` (2D,
-    sides below 2**15: the points are folded into rows of 4096), and their number."""
+    """``points`` (..., 2) as the row and column maps of ``cv2.remap`` (folded
+    into rows of 4096 points), and their number."""
     flat = np.asarray(points, dtype=np.float32).reshape(-1, 2)
     n = len(flat)
     width = min(max(n, 1), 4096)
