@@ -1,5 +1,6 @@
 """Image forces along normal lines: direction, balance on the border, symmetry."""
 
+import cv2
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -8,6 +9,7 @@ from napari_physeg import data
 from napari_physeg.core.contour import outward_normals
 from napari_physeg.core.features import compute_features
 from napari_physeg.core.forces import FORCE_NAMES, ForceField, normalize_weights
+from napari_physeg.core.segmentation import segment
 from napari_physeg.core.region import drawing_levels, objectness
 
 
@@ -127,3 +129,31 @@ def test_a_contour_of_more_nodes_than_a_remap_map_holds():
     assert forces.shape == nodes.shape and np.all(np.isfinite(forces))
     outward = (forces * outward_normals(nodes)).sum(1)
     assert np.all(outward > 0)  # inside the disc the region force pushes out
+
+
+def test_an_image_too_large_for_cv2_is_sampled_alike():
+    # cv2.remap refuses images of 2**15 px on a side: those are sampled by
+    # scipy, with the same wall, the same mirror and the same interpolation.
+    from napari_physeg.core import forces
+
+    rng = np.random.default_rng(4)
+    field = ForceField.from_features(rng.random((25, 35)), rng.random((25, 35)) * 9, rng.uniform(-1, 1, (25, 35)),
+                                     {"edges": 1.0})
+    rows = rng.uniform(-4, 29, (40, 9)).astype(np.float32)
+    cols = rng.uniform(-4, 39, (40, 9)).astype(np.float32)
+    cases = [(field._stack, cv2.BORDER_CONSTANT, (1.0, 0.0, -1.0, 0.0)),
+             (field._distance32, cv2.BORDER_REFLECT_101, 0.0), (field._objectness32, cv2.BORDER_CONSTANT, -1.0)]
+    for image, border, value in cases:
+        np.testing.assert_allclose(forces._remap_large(image, rows, cols, border, value),
+                                   forces._remap(image, rows, cols, border, value), atol=1e-5)
+
+
+def test_a_contour_across_an_image_too_large_for_cv2():
+    image = np.zeros((40, 40000))
+    image[10:30, 100:39900] = 1.0
+    top = np.column_stack([np.full(200, 4.0), np.linspace(50, 39950, 200)])
+    init = np.vstack([top, top[::-1] + [32.0, 0.0]])
+    res = segment(image, init)
+    along = (res.contour[:, 1] > 300) & (res.contour[:, 1] < 39700)
+    assert res.converged
+    np.testing.assert_allclose(np.sort(np.abs(res.contour[along, 0] - 19.5)), 10.0, atol=0.1)  # rows 9.5 and 29.5

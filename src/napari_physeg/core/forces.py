@@ -31,6 +31,7 @@ from functools import cached_property
 
 import cv2
 import numpy as np
+from scipy import ndimage as ndi
 
 from .contour import outward_normals
 
@@ -241,19 +242,35 @@ class ForceField:
         return crossing | (values[:, near, 0].max(1) > 0.3)
 
 
-#: cv2.remap's maps must have sides below 2**15: longer ones are cut into
-#: runs of this many rows.
+#: cv2.remap's maps and images must have sides below 2**15: longer maps are
+#: cut into runs of this many rows, larger images sampled by scipy instead.
 _REMAP_ROWS = 2**14
 
 
 def _remap(image: np.ndarray, row_map: np.ndarray, col_map: np.ndarray, border: int, value=0.0) -> np.ndarray:
     """Bilinear samples of ``image`` at the points of the maps (2D float32, of
     fewer than 2**15 columns and any number of rows)."""
+    if max(image.shape[:2]) >= 2**15:
+        return _remap_large(image, row_map, col_map, border, value)
     options = dict(interpolation=cv2.INTER_LINEAR, borderMode=border, borderValue=value)
     if len(row_map) <= _REMAP_ROWS:
         return cv2.remap(image, col_map, row_map, **options)
     return np.concatenate([cv2.remap(image, col_map[i:i + _REMAP_ROWS], row_map[i:i + _REMAP_ROWS], **options)
                            for i in range(0, len(row_map), _REMAP_ROWS)])
+
+
+def _remap_large(image: np.ndarray, row_map: np.ndarray, col_map: np.ndarray, border: int, value) -> np.ndarray:
+    """:func:`_remap` for an image too large for cv2 (a window 2**15 px or more
+    across): scipy's linear interpolation, with the same borders."""
+    points = np.stack([row_map.ravel(), col_map.ravel()]).astype(np.float64)
+    channels = [image] if image.ndim == 2 else [image[..., c] for c in range(image.shape[2])]
+    values = np.broadcast_to(np.atleast_1d(np.asarray(value, dtype=np.float64)), (4,))
+    sampled = [ndi.map_coordinates(channel, points, order=1, prefilter=False,
+                                   mode="mirror" if border == cv2.BORDER_REFLECT_101 else "grid-constant",
+                                   cval=float(values[c])).astype(np.float32)
+               for c, channel in enumerate(channels)]
+    out = np.stack(sampled, axis=-1).reshape(row_map.shape + (len(channels),))
+    return out[..., 0] if image.ndim == 2 else out
 
 
 def _line_maps(nodes: np.ndarray, normals: np.ndarray, offsets: np.ndarray):
