@@ -242,15 +242,16 @@ class ForceField:
         return crossing | (values[:, near, 0].max(1) > 0.3)
 
 
-#: cv2.remap's maps and images must have sides below 2**15: longer maps are
-#: cut into runs of this many rows, larger images sampled by scipy instead.
+#: cv2.remap's maps and images must have sides below 2**15 - 1 (SHRT_MAX):
+#: longer maps are cut into runs of this many rows, larger images sampled by
+#: scipy instead.
 _REMAP_ROWS = 2**14
 
 
 def _remap(image: np.ndarray, row_map: np.ndarray, col_map: np.ndarray, border: int, value=0.0) -> np.ndarray:
     """Bilinear samples of ``image`` at the points of the maps (2D float32, of
     fewer than 2**15 columns and any number of rows)."""
-    if max(image.shape[:2]) >= 2**15:
+    if max(image.shape[:2]) >= 2**15 - 1:  # cv2 wants sides below SHRT_MAX
         return _remap_large(image, row_map, col_map, border, value)
     options = dict(interpolation=cv2.INTER_LINEAR, borderMode=border, borderValue=value)
     if len(row_map) <= _REMAP_ROWS:
