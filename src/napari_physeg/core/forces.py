@@ -136,11 +136,6 @@ class ForceField:
         row_map, col_map, n = _remap_grid(points)
         return self._distance_maps(row_map, col_map).reshape(-1)[:n].reshape(np.shape(points)[:-1])
 
-    def objectness_at(self, points: np.ndarray) -> np.ndarray:
-        """Bilinear samples of the object-ness alone at ``points`` (..., 2); -1 beyond the image."""
-        row_map, col_map, n = _remap_grid(points)
-        return self._objectness_maps(row_map, col_map).reshape(-1)[:n].reshape(np.shape(points)[:-1])
-
     # The samplers proper, on cv2.remap's maps: 2D float32 arrays of the
     # points' rows and columns. The normal lines of the nodes are such maps
     # as they are (a node per row, a sample per column).
@@ -148,6 +143,9 @@ class ForceField:
     def _sample_maps(self, row_map, col_map) -> np.ndarray:
         # The image's border is a wall: an edge, with no object beyond it, so
         # a contour around an object cut by the border rests on the border.
+        # (The stack keeps the distance, read again below with its own
+        # border: cv2 interpolates 3-channel float images exactly, 2-channel
+        # ones in fixed point.)
         out = _remap(self._stack, row_map, col_map, cv2.BORDER_CONSTANT, (1.0, 0.0, -1.0, 0.0))
         out[..., 1] = self._distance_maps(row_map, col_map)
         return out
@@ -261,8 +259,8 @@ def _remap(image: np.ndarray, row_map: np.ndarray, col_map: np.ndarray, border: 
 
 
 def _remap_large(image: np.ndarray, row_map: np.ndarray, col_map: np.ndarray, border: int, value) -> np.ndarray:
-    """:func:`_remap` for an image too large for cv2 (a window 2**15 px or more
-    across): scipy's linear interpolation, with the same borders."""
+    """:func:`_remap` for an image too large for cv2 (a window SHRT_MAX px or
+    more across): scipy's linear interpolation, with the same borders."""
     points = np.stack([row_map.ravel(), col_map.ravel()]).astype(np.float64)
     channels = [image] if image.ndim == 2 else [image[..., c] for c in range(image.shape[2])]
     values = np.broadcast_to(np.atleast_1d(np.asarray(value, dtype=np.float64)), (4,))

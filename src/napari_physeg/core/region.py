@@ -702,7 +702,6 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     """:func:`object_region` on a crop around the drawing."""
     shape = signed.shape
     drawn = _fill(drawing, shape)
-    drawn_size = np.sqrt(max(drawn.sum(), 1) / np.pi)
     # The object is about where the user drew it: nothing beyond the drawing
     # (and a margin for a hasty hand) when drawn around it, within a few
     # times the drawing when drawn inside it (its reach). Growth past that

@@ -1132,8 +1132,9 @@ def segment(
     The feature images are computed on a window around the contour (its
     bounding box plus ``1.25 (max_line_length + 8)`` px) when that window
     covers at most half the image, and on a larger window whenever the
-    contour comes within ``max_line_length + 8`` px of its border; so a small
-    object in a large image costs about what it would cost in a small one.
+    normal lines the contour's nodes cast (at most ``max_line_length`` px)
+    and 8 px reach its border; so a small object in a large image costs about
+    what it would cost in a small one.
     The drawing is read once, on its bounding box plus
     ``2 (max_line_length + 8)`` px (or the whole image, likewise).
 
