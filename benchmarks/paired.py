@@ -90,7 +90,8 @@ def paired_tracking(ref, new, repeat: int) -> None:
     import tracking as bench
 
     frames, _, _, inits = bench.ctc()
-    ref.track(frames[:3], inits), new.track(frames[:3], inits)  # warm-up: imports, caches
+    for module in (ref, new):  # warm-up: imports, caches
+        module.track(frames[:3], inits)
     n = len(inits) * len(frames)
     times, contours = {"ref": [], "new": []}, {}
     for i in range(repeat):

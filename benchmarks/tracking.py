@@ -95,12 +95,21 @@ def ctc():
         lab = labels[r, c]
         if lab == 0:
             continue
-        mask = real_data.largest_filled(labels == lab)
-        outline = max(measure.find_contours(np.pad(mask, 1).astype(float), 0.5), key=len)[:-1] - 1
-        outline = resample(outline, spacing=2.0)
         ids.append(k)
-        inits.append(remove_loops(outline + GROW * outward_normals(outline)))
+        inits.append(drawn_around(real_data.largest_filled(labels == lab)))
     return movie, truth, ids, inits
+
+
+def outline_of(mask, spacing):
+    """The outline of ``mask``'s largest piece, nodes ``spacing`` px apart."""
+    return resample(max(measure.find_contours(np.pad(mask, 1).astype(float), 0.5), key=len)[:-1] - 1,
+                    spacing=spacing)
+
+
+def drawn_around(mask):
+    """A drawing around the object ``mask``: its outline grown by GROW px."""
+    outline = outline_of(mask, 2.0)
+    return remove_loops(outline + GROW * outward_normals(outline))
 
 
 # --------------------------------------------------------------------------- methods
@@ -245,8 +254,7 @@ def synthetic_scores_ours(movie, tr):
 
 def synthetic_scores_masks(movie, masks):
     """Normal velocity and drift without correspondences: nearest points on the previous outline."""
-    outlines = [resample(max(measure.find_contours(np.pad(m, 1).astype(float), 0.5), key=len)[:-1] - 1, spacing=2.7)
-                for m in masks]
+    outlines = [outline_of(m, 2.7) for m in masks]
     nv = []
     for t in range(1, len(masks)):
         c = outlines[t]
@@ -336,12 +344,7 @@ def through_z(out, starts=(28, 35, 42)):
     out("|---|---|---|---|---|---|---|")
     for z0 in starts:
         ids = [int(i) for i in np.unique(labels[z0])[1:]]
-        inits = []
-        for i in ids:
-            mask = real_data.largest_filled(labels[z0] == i)
-            outline = resample(max(measure.find_contours(np.pad(mask, 1).astype(float), 0.5), key=len)[:-1] - 1,
-                               spacing=2.0)
-            inits.append(remove_loops(outline + GROW * outward_normals(outline)))
+        inits = [drawn_around(real_data.largest_filled(labels[z0] == i)) for i in ids]
         _, elapsed, tr = run_ours(stack, inits, start=z0)
         ious, missed, beyond = [], 0, 0
         for k, i in enumerate(ids):
