@@ -2,7 +2,8 @@
 
 Objects and truths (``benchmarks/real_data.py`` says how each truth was made): nuclei of a
 confocal stack with its shipped labels, nuclei of a fluorescence time-lapse, the 24 coins of
-``skimage.data.coins()`` and the cell of ``skimage.data.cell()``. Each object is segmented
+``skimage.data.coins()``, the cell of ``skimage.data.cell()``, and the hand-labelled nuclei of
+a Data Science Bowl image and slices of a labelled 3D volume, both shipped in ``stardist``. Each object is segmented
 from the initial contours people draw: a rough circle around it, a jittery freehand lasso,
 a small circle inside it, a box as napari's rectangle tool draws it (``real_data.INIT_KINDS`` lists which for which group). Run::
 
@@ -322,6 +323,55 @@ def border_offsets(rows, groups):
             + ", ".join(f"{g} {np.median(per_group[g]):+.1f}" for g in groups if g in per_group)]
 
 
+#: ramp_positions() reads each outline point's edge profile this far either side (px).
+RAMP_REACH = 5.0
+
+
+def ramp_positions(rows, groups):
+    """Lines: where on the edge's ramp ours' and the truth's outlines lie, per group: the median
+    over the cases of the median over the outline's points of ``(I - foot) / (top - foot)``, with
+    ``I`` the image smoothed by a 1 px Gaussian at the point, and ``top`` and ``foot`` its highest
+    and lowest values along the point's normal within ``RAMP_REACH`` px inside and outside (0:
+    the foot of the ramp, 1: its top; for a bright object). Truths made by different
+    conventions lie at different heights; ours is at one height everywhere."""
+    from scipy import ndimage as ndi
+    from skimage.measure import find_contours
+
+    from napari_physeg.core.contour import positively_oriented
+
+    smoothed = {}
+    heights = {}
+    for r in rows:
+        if r["contour"] is None:
+            continue
+        image = r["obj"].image
+        key = id(image)
+        if key not in smoothed:
+            smoothed[key] = ndi.gaussian_filter(image, 1.0)
+        truth = max(find_contours(np.pad(r["obj"].mask, 1).astype(float), 0.5), key=len)[:-1] - 1.0
+        pair = [_ramp_height(smoothed[key], positively_oriented(c)) for c in (r["contour"], truth)]
+        heights.setdefault(r["group"], []).append(pair)
+    return ["- where on the edge's ramp the outlines lie (median height, 0 its foot, 1 its top, within "
+            f"{RAMP_REACH:.0f} px either side), ours / truth: "
+            + ", ".join(f"{g} {np.nanmedian(np.array(heights[g])[:, 0]):.2f} / {np.nanmedian(np.array(heights[g])[:, 1]):.2f}"
+                        for g in groups if g in heights)]
+
+
+def _ramp_height(smoothed, outline):
+    from scipy import ndimage as ndi
+
+    from napari_physeg.core.contour import outward_normals
+
+    if len(outline) < 5:
+        return np.nan
+    offsets = np.linspace(-RAMP_REACH, RAMP_REACH, 21)
+    points = outline[:, None, :] + offsets[None, :, None] * outward_normals(outline)[:, None, :]
+    profile = ndi.map_coordinates(smoothed, [points[..., 0], points[..., 1]], order=1, mode="nearest")
+    at, top, foot = profile[:, 10], profile[:, :11].max(1), profile[:, 10:].min(1)
+    ok = top - foot > 1e-6
+    return float(np.median((at[ok] - foot[ok]) / (top[ok] - foot[ok]))) if ok.any() else np.nan
+
+
 #: A result whose outline lies within this many pixels of the truth's, in the mean, is as close as
 #: two pixel masks of one outline can be: see outline_distance() and pixel_ambiguity().
 PIXEL = 1.0
@@ -556,6 +606,10 @@ def worst_figure(rows, path, n=8, n_exceptions=4):
     plt.close(fig)
 
 
+#: truth_figures() puts at most this many views (slices, frames) in a row.
+TRUTH_COLUMNS = 4
+
+
 def truth_figures(outdir, groups):
     """Overlays of the truths on their images, to check them by eye."""
     import matplotlib
@@ -568,7 +622,11 @@ def truth_figures(outdir, groups):
     for g in groups:
         objs = real_data.GROUPS[g]()
         views = sorted({o.name.split("/")[0] if "/" in o.name else "" for o in objs})
-        fig, axes = plt.subplots(1, len(views), figsize=(6 * len(views), 6.6), squeeze=False)
+        n_cols = min(len(views), TRUTH_COLUMNS)
+        n_rows = -(-len(views) // n_cols)
+        fig, axes = plt.subplots(n_rows, n_cols, figsize=(6 * n_cols, 6.6 * n_rows), squeeze=False)
+        for ax in axes.flat[len(views):]:
+            ax.axis("off")
         for ax, v in zip(axes.flat, views):
             sel = [o for o in objs if (o.name.split("/")[0] if "/" in o.name else "") == v]
             ax.imshow(sel[0].image, cmap="gray", vmin=0, vmax=1)
@@ -660,6 +718,8 @@ def main(argv=None):
         out(s)
     for s in border_offsets(rows, args.groups):
         out(s)
+    for s in ramp_positions(rows, args.groups):
+        out(s)
     out()
     for s in traced_outlines(rows, args.groups):
         out(s)
@@ -696,7 +756,8 @@ made: nuclei of a confocal stack with their shipped labels (`napari-bio-sample-d
 a fluorescence time-lapse, the 24 coins of `skimage.data.coins()` and `skimage.data.cell()`
 (truths of the last three from classical pipelines, described in `benchmarks/real_data.py`),
 and, held out since session 12, the hand-labelled nuclei of the 2018 Data Science Bowl image
-shipped in `stardist` (group dsb),
+shipped in `stardist` (group dsb), and since session 20 slices of the labelled 3D volume of
+crowded nuclei shipped beside it (group stack3d),
 each from the contours people draw: a rough circle around the object, a jittery freehand lasso,
 a small circle inside it, a box 1.1-1.5x the object's bounding box (napari's rectangle tool).
 The anchors run on a crop around the init and the truth; ours on the whole image. Per-case

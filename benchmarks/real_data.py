@@ -47,6 +47,15 @@ Images and truths:
   holes filled. Its labels were drawn by hand for the challenge and sit up to 1-2 px either
   side of the edge, some off a nucleus' visible outline. Added in session 12 as a held-out
   check: no rule was made on it (one was found wrong on it; see docs/benchmarks.md).
+* ``stack3d`` - the 3D test volume of the same ``stardist`` wheel (``img3d.tif``,
+  ``mask3d.tif``: 31 x 61 x 57 px of crowded fluorescence nuclei, 51 instance labels drawn in
+  3D), held out since session 20: every third slice, each label whose slice covers at least
+  ``STACK3D_SECTION`` of its largest slice (and ``SMALL_MIN_AREA`` px) is an object, its truth
+  that slice of the label (largest part, holes filled). The nuclei are 8-20 px across,
+  blurred along z, often touching or cut by the image's side. The labels partition the volume
+  down to the valleys between nuclei: their outlines lie near the foot of each edge's ramp,
+  where the other groups' truths lie about halfway up it (see the ramp line of
+  docs/benchmarks.md), so IoUs here are lower for every method.
 * ``cell`` - ``skimage.data.cell()``, one bright cell in a dark halo; truth: Gaussian
   sigma 2, Otsu threshold, holes filled, the largest region. Its edge is blurred over a few
   px: Li's threshold instead of Otsu's gives 2.6 % more area (IoU 0.974 between the two).
@@ -86,6 +95,8 @@ TIMELAPSE_FRAMES = (0, 15, 29)
 SMALL_SLICES = (41, 47)  # never looked at before the small group was made (session 8)
 SMALL_SHRINK = 3
 SMALL_MIN_AREA = 50  # px: 8 px across
+STACK3D_EVERY = 3  # slices: adjacent ones of the blurred volume are near repeats
+STACK3D_SECTION = 0.5  # of a label's largest slice: smaller ones are its caps
 MIN_SOLIDITY = 0.83  # time-lapse truths less convex than this are not trusted (see timelapse())
 
 
@@ -292,6 +303,23 @@ def dsb() -> list[Obj]:
     return labelled("dsb", normalise(tifffile.imread(d / "img2d.tif")), tifffile.imread(d / "mask2d.tif"))
 
 
+def stack3d() -> list[Obj]:
+    import tifffile
+
+    d = dsb_dir()
+    stack, labels = tifffile.imread(d / "img3d.tif"), tifffile.imread(d / "mask3d.tif")
+    n = int(labels.max()) + 1
+    areas = np.stack([np.bincount(s.ravel(), minlength=n) for s in labels])  # (slice, label)
+    least = np.maximum(SMALL_MIN_AREA, STACK3D_SECTION * areas.max(axis=0))
+    least[0] = np.inf  # the background
+    out = []
+    for z in range(0, len(stack), STACK3D_EVERY):
+        image = normalise(stack[z])
+        for lab in np.flatnonzero(areas[z] >= least):
+            out.append(Obj("stack3d", f"z{z}/n{lab}", image, largest_filled(labels[z] == lab)))
+    return out
+
+
 def cell_truth() -> np.ndarray:
     smooth = filters.gaussian(skdata.cell().astype(np.float64), 2)
     labels = measure.label(ndi.binary_fill_holes(smooth > filters.threshold_otsu(smooth)))
@@ -321,7 +349,7 @@ AMBIGUOUS_NUCLEI = {
 }
 
 GROUPS = {"nuclei": nuclei, "heldout": heldout, "small": small, "timelapse": timelapse, "coins": coins, "cell": cell,
-          "dsb": dsb}
+          "dsb": dsb, "stack3d": stack3d}
 INIT_KINDS = {
     "nuclei": ("circle", "freehand", "inside", "box"),
     "heldout": ("circle", "freehand", "inside", "box"),
@@ -330,6 +358,7 @@ INIT_KINDS = {
     "coins": ("circle", "inside", "box"),
     "cell": ("circle", "freehand", "inside", "box"),
     "dsb": ("circle", "freehand", "inside", "box"),
+    "stack3d": ("circle", "freehand", "inside", "box"),
 }
 
 

@@ -52,3 +52,28 @@ def test_a_shifted_disc_is_off_by_less_than_its_shift(real):
 
 def test_an_empty_mask_is_infinitely_far(real):
     assert real.outline_distance(np.zeros((80, 80), bool), _disc(10)) == np.inf
+
+
+def _ramp_disc(radius=20.0, width=6.0, shape=(80, 80)):
+    """A bright disc whose edge falls linearly from 1 at ``radius - width/2`` to 0 at ``radius + width/2``."""
+    rows, cols = np.indices(shape)
+    r = np.hypot(rows - 40.0, cols - 40.0)
+    return np.clip((radius + width / 2 - r) / width, 0.0, 1.0)
+
+
+def _circle(radius, n=90):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.column_stack([40.0 + radius * np.sin(t), 40.0 + radius * np.cos(t)])
+
+
+@pytest.mark.parametrize("radius, height", [(20.0, 0.5), (18.5, 0.75), (21.5, 0.25), (24.5, 0.0)])
+def test_an_outline_lies_at_its_height_on_a_linear_ramp(real, radius, height):
+    from scipy import ndimage as ndi
+
+    # A 6 px ramp within the 5 px reach either side: its top and foot are in view (the 1 px
+    # Gaussian rounds the foot: an outline a pixel and a half beyond it is at the bottom).
+    assert real._ramp_height(ndi.gaussian_filter(_ramp_disc(), 1.0), _circle(radius)) == pytest.approx(height, abs=0.05)
+
+
+def test_a_degenerate_outline_has_no_height(real):
+    assert np.isnan(real._ramp_height(_ramp_disc(), _circle(20.0, n=4)))
