@@ -392,3 +392,14 @@ def test_a_material_without_stiffness_gets_the_r_that_suits_it(scene, monkeypatc
     obj, image, init, tmp = scene
     assert main(["segment", str(image), "--init", str(init), "--out", str(tmp / "c.csv"), "--material", "copper"]) == 0
     assert seen[-1] == {"material": "copper", "stiffness": 1e6}
+
+
+def test_a_warning_is_one_line_of_the_program_s_own(scene, capsys):
+    obj, image, _, tmp = scene
+    # Drawn partly beyond the image's left side: clipped to it, with a warning.
+    beyond = write_shapes_csv(tmp / "beyond.csv", [obj.init_near - [0.0, obj.init_near[:, 1].min() + 5.0]])
+    main(["segment", str(image), "--init", str(beyond), "--out", str(tmp / "o.csv")])
+    err = capsys.readouterr().err
+    warned = [line for line in err.splitlines() if "outside the image" in line]
+    assert len(warned) == 1 and warned[0].startswith("napari-physeg: warning: ")
+    assert "UserWarning" not in err and ".py:" not in err

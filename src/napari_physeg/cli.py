@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import inspect
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -355,6 +356,9 @@ def _simulate(args) -> int:
 class _ProgressBar:
     """A one-line text progress bar on stderr."""
 
+    #: Whether a bar is drawn on the current line of stderr (a message must start a new one).
+    mid_line = False
+
     def __init__(self, frames=None, width: int = 30):
         self.frames, self.width = frames, width  # frames: the stack's number of each frame tracked
 
@@ -364,8 +368,17 @@ class _ProgressBar:
         frame = self.frames[progress.frame] if self.frames else progress.frame
         print(f"\r[{bar:<{self.width}}] frame {frame}, {progress.done}/{progress.total} object-frames",
               end="", file=sys.stderr, flush=True)
-        if progress.done == progress.total:
+        _ProgressBar.mid_line = progress.done < progress.total
+        if not _ProgressBar.mid_line:
             print(file=sys.stderr)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as one line of the program's (not Python's file, line and source), on a line
+    of its own when a progress bar is being drawn."""
+    if _ProgressBar.mid_line:
+        print(file=sys.stderr)
+    print(f"{PROG}: warning: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
 
 
 def _start_frame(args, leading):
@@ -588,7 +601,8 @@ def main(argv=None) -> int:
     try:
         # The core's dense problems are small: more BLAS threads only fight each
         # other (a 128 x 128 eigenproblem took 0.5 s instead of 2 ms on a busy machine).
-        with threadpool_limits(limits=1, user_api="blas"):
+        with threadpool_limits(limits=1, user_api="blas"), warnings.catch_warnings():
+            warnings.showwarning = _show_warning
             return args.run(args)
     except (ValueError, OSError) as err:  # bad input, or a file that cannot be read or written
         text = " ".join(str(err).split())
