@@ -335,7 +335,6 @@ def ramp_positions(rows, groups):
     the foot of the ramp, 1: its top; for a bright object). Truths made by different
     conventions lie at different heights; ours is at one height everywhere."""
     from scipy import ndimage as ndi
-    from skimage.measure import find_contours
 
     from napari_physeg.core.contour import positively_oriented
 
@@ -348,8 +347,8 @@ def ramp_positions(rows, groups):
         key = id(image)
         if key not in smoothed:
             smoothed[key] = ndi.gaussian_filter(image, 1.0)
-        truth = max(find_contours(np.pad(r["obj"].mask, 1).astype(float), 0.5), key=len)[:-1] - 1.0
-        pair = [_ramp_height(smoothed[key], positively_oriented(c)) for c in (r["contour"], truth)]
+        outlines = (r["contour"], real_data.outline_of(r["obj"].mask))
+        pair = [_ramp_height(smoothed[key], positively_oriented(c)) for c in outlines]
         heights.setdefault(r["group"], []).append(pair)
     return ["- where on the edge's ramp the outlines lie (median height, 0 its foot, 1 its top, within "
             f"{RAMP_REACH:.0f} px either side), ours / truth: "
@@ -364,10 +363,11 @@ def _ramp_height(smoothed, outline):
 
     if len(outline) < 5:
         return np.nan
-    offsets = np.linspace(-RAMP_REACH, RAMP_REACH, 21)
+    offsets = np.linspace(-RAMP_REACH, RAMP_REACH, 21)  # 0.5 px apart, the point in the middle
+    mid = len(offsets) // 2
     points = outline[:, None, :] + offsets[None, :, None] * outward_normals(outline)[:, None, :]
     profile = ndi.map_coordinates(smoothed, [points[..., 0], points[..., 1]], order=1, mode="nearest")
-    at, top, foot = profile[:, 10], profile[:, :11].max(1), profile[:, 10:].min(1)
+    at, top, foot = profile[:, mid], profile[:, :mid + 1].max(1), profile[:, mid:].min(1)
     ok = top - foot > 1e-6
     return float(np.median((at[ok] - foot[ok]) / (top[ok] - foot[ok]))) if ok.any() else np.nan
 

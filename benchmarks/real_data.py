@@ -190,6 +190,17 @@ def largest_filled(mask: np.ndarray) -> np.ndarray:
     return ndi.binary_fill_holes(labels == np.argmax(np.bincount(labels.ravel())[1:]) + 1)
 
 
+def outline_of(mask: np.ndarray, spacing: float | None = None) -> np.ndarray:
+    """The outline (row, col) of ``mask``'s largest piece: its 0.5 iso-line, between the last
+    pixel in and the first out; resampled to nodes ``spacing`` px apart if given."""
+    outline = max(measure.find_contours(np.pad(mask, 1).astype(float), 0.5), key=len)[:-1] - 1.0
+    if spacing is None:
+        return outline
+    from napari_physeg.core.contour import resample
+
+    return resample(outline, spacing=spacing)
+
+
 def timelapse_truth(frame: np.ndarray, points: np.ndarray, level: float | None = None) -> np.ndarray:
     """Labels of the nuclei of one ``2D_timelapse.tif`` frame (0 = background).
 
@@ -284,7 +295,7 @@ def coins() -> list[Obj]:
     return [Obj("coins", f"c{i:02d}", image, labels == p.label) for i, p in enumerate(props)]
 
 
-def dsb_dir() -> Path:
+def stardist_dir() -> Path:
     """The ``data/images`` folder of the installed stardist wheel (its 2D test image and mask).
 
     Installed with ``--no-deps`` (its loader would pull TensorFlow through csbdeep): the
@@ -299,14 +310,14 @@ def dsb_dir() -> Path:
 def dsb() -> list[Obj]:
     import tifffile
 
-    d = dsb_dir()
+    d = stardist_dir()
     return labelled("dsb", normalise(tifffile.imread(d / "img2d.tif")), tifffile.imread(d / "mask2d.tif"))
 
 
 def stack3d() -> list[Obj]:
     import tifffile
 
-    d = dsb_dir()
+    d = stardist_dir()
     stack, labels = tifffile.imread(d / "img3d.tif"), tifffile.imread(d / "mask3d.tif")
     n = int(labels.max()) + 1
     areas = np.stack([np.bincount(s.ravel(), minlength=n) for s in labels])  # (slice, label)

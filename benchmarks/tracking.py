@@ -100,15 +100,9 @@ def ctc():
     return movie, truth, ids, inits
 
 
-def outline_of(mask, spacing):
-    """The outline of ``mask``'s largest piece, nodes ``spacing`` px apart."""
-    return resample(max(measure.find_contours(np.pad(mask, 1).astype(float), 0.5), key=len)[:-1] - 1,
-                    spacing=spacing)
-
-
 def drawn_around(mask):
     """A drawing around the object ``mask``: its outline grown by GROW px."""
-    outline = outline_of(mask, 2.0)
+    outline = real_data.outline_of(mask, 2.0)
     return remove_loops(outline + GROW * outward_normals(outline))
 
 
@@ -254,7 +248,7 @@ def synthetic_scores_ours(movie, tr):
 
 def synthetic_scores_masks(movie, masks):
     """Normal velocity and drift without correspondences: nearest points on the previous outline."""
-    outlines = [outline_of(m, 2.7) for m in masks]
+    outlines = [real_data.outline_of(m, 2.7) for m in masks]
     nv = []
     for t in range(1, len(masks)):
         c = outlines[t]
