@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.spatial import cKDTree
+from scipy.spatial.distance import cdist
 
 from ._validation import node_array
 
@@ -284,25 +285,27 @@ def crosses_itself(contour) -> bool:
     return len(_crossing_pairs(np.asarray(contour, dtype=np.float64))) > 0
 
 
-def _closest_on_segments(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The point of each segment ``a[i] b[i]`` closest to ``points[i]``."""
-    d = b - a
-    u = np.clip(((points - a) * d).sum(1) / np.maximum((d * d).sum(1), 1e-12), 0.0, 1.0)
-    return a + u[:, None] * d
-
-
 def closest_on_polyline(points: np.ndarray, curve: np.ndarray, near: np.ndarray, steps=(-1, 0)):
     """The point of the closed polyline ``curve`` closest to each of ``points``,
     and its distance, among the segments that start ``steps`` nodes from the
     node ``near[i]`` of ``curve`` (the first of equally close ones)."""
-    m = len(curve)
-    closest, distance = np.empty_like(points), np.full(len(points), np.inf)
-    for step in steps:
-        point = _closest_on_segments(points, curve[(near + step) % m], curve[(near + step + 1) % m])
-        dist = np.hypot(*(point - points).T)
-        closer = dist < distance
-        closest[closer], distance[closer] = point[closer], dist[closer]
-    return closest, distance
+    # Every candidate segment at once: (steps, points, 2).
+    start = (near[None, :] + np.asarray(steps)[:, None]) % len(curve)
+    a, d = curve[start], curve[(start + 1) % len(curve)] - curve[start]
+    u = np.clip(((points - a) * d).sum(2) / np.maximum((d * d).sum(2), 1e-12), 0.0, 1.0)
+    candidates = a + u[..., None] * d
+    gaps = candidates - points
+    dist = np.hypot(gaps[..., 0], gaps[..., 1])
+    best = dist.argmin(0)  # the first of equally close ones
+    every = np.arange(len(points))
+    return candidates[best, every], dist[best, every]
+
+
+def _nearest_node(points: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """The index of the node nearest to each point."""
+    if len(points) * len(nodes) <= 128 * 128:  # all pairs: faster than a k-d tree
+        return cdist(points, nodes, "sqeuclidean").argmin(1)
+    return cKDTree(nodes).query(points)[1]
 
 
 def contour_gap(a: np.ndarray, b: np.ndarray) -> float:
@@ -314,7 +317,7 @@ def contour_gap(a: np.ndarray, b: np.ndarray) -> float:
     each other (the use: a contour and itself a few steps later).
     """
     def one_way(points, curve):
-        return float(closest_on_polyline(points, curve, cKDTree(curve).query(points)[1])[1].max())
+        return float(closest_on_polyline(points, curve, _nearest_node(points, curve))[1].max())
 
     return max(one_way(a, b), one_way(b, a))
 
