@@ -59,12 +59,11 @@ def newmark_constants(dt: float, delta: float = 0.5, alpha: float = 0.25) -> tup
 
 
 def _check_state(U: np.ndarray, limit: float) -> None:
-    if not np.all(np.isfinite(U)):
+    peak = float(np.abs(U).max()) if U.size else 0.0  # NaN or inf if any is (one pass: runs every step)
+    if not np.isfinite(peak):
         raise DivergenceError("the dynamic equilibrium equation diverged (non-finite displacement)")
-    if limit and np.abs(U).max() > limit:
-        raise DivergenceError(
-            f"the dynamic equilibrium equation diverged (displacement {np.abs(U).max():.3g} > {limit:.3g})"
-        )
+    if limit and peak > limit:
+        raise DivergenceError(f"the dynamic equilibrium equation diverged (displacement {peak:.3g} > {limit:.3g})")
 
 
 class NewmarkIntegrator:

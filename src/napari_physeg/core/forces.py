@@ -109,7 +109,7 @@ class ForceField:
     def with_weights(self, weights: dict) -> "ForceField":
         """The same images with other weights (shares the sampled stack)."""
         twin = replace(self, weights=dict(weights))
-        twin.__dict__["_stack"] = self._stack
+        twin.__dict__["_stack"], twin.__dict__["_padded_stack"] = self._stack, self._padded_stack
         return twin
 
     @cached_property
@@ -117,6 +117,31 @@ class ForceField:
         """The three feature images as one 3-channel float32 image, so that a
         single bilinear ``cv2.remap`` samples them all."""
         return np.ascontiguousarray(np.dstack([self.edges, self.distance, self.objectness]).astype(np.float32))
+
+    @cached_property
+    def _line_pad(self) -> int:
+        """Margin (px) of :attr:`_padded_stack`: the longest normal line of a
+        node on the window's border (nodes stay within half a pixel of it)."""
+        return int(np.ceil(max(self.max_length, self.min_length))) + 2
+
+    @cached_property
+    def _padded_stack(self) -> np.ndarray:
+        """:attr:`_stack` with :meth:`_sample_maps`' borders written out
+        around it, :attr:`_line_pad` px wide: the normal lines need one
+        ``cv2.remap`` where the distance's own border took a second."""
+        pad = (self._line_pad,) * 4
+        distance = cv2.copyMakeBorder(self._distance32, *pad, cv2.BORDER_REFLECT_101)
+        edges = cv2.copyMakeBorder(np.ascontiguousarray(self.edges, dtype=np.float32), *pad,
+                                   cv2.BORDER_CONSTANT, value=1.0)
+        objectness = cv2.copyMakeBorder(self._objectness32, *pad, cv2.BORDER_CONSTANT, value=-1.0)
+        return cv2.merge([edges, distance, objectness])
+
+    def _sample_lines(self, row_map, col_map) -> np.ndarray:
+        """:meth:`_sample_maps` for points within :attr:`_line_pad` px of the
+        window, as the normal lines of nodes on it are (beyond, the distance
+        reads 0: no distance force)."""
+        pad = np.float32(self._line_pad)
+        return _remap(self._padded_stack, row_map + pad, col_map + pad, cv2.BORDER_CONSTANT, (1.0, 0.0, -1.0, 0.0))
 
     @cached_property
     def _distance32(self) -> np.ndarray:
@@ -166,11 +191,12 @@ class ForceField:
 
     def _sample_short_lines(self, nodes: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """Samples (N, 7, 3) along each node's shortest normal line (the region force's)."""
-        return self._sample_maps(*_line_maps(nodes, normals, self._region_offsets[None, :]))
+        return self._sample_lines(*_line_maps(nodes, normals, self._region_offsets[None, :]))
 
     def line_lengths(self, nodes: np.ndarray) -> np.ndarray:
         """Adaptive half-length of each node's normal line."""
-        d = self.distance_at(nodes)
+        # The nodes as maps of one column (runs every step: no folding, as distance_at does).
+        d = self._distance_maps(nodes[:, :1].astype(np.float32), nodes[:, 1:].astype(np.float32)).reshape(-1)
         return np.clip(1.25 * d + self.min_length, self.min_length, self.max_length)
 
     @cached_property
@@ -178,6 +204,15 @@ class ForceField:
         """Sample positions along a normal line, in half-lengths: -1 ... 0 ... 1."""
         frac = np.arange(1, self.n_samples + 1) / self.n_samples
         return np.concatenate([-frac[::-1], [0.0], frac])
+
+    @cached_property
+    def _half_line_sums(self) -> np.ndarray:
+        """(2S+1, 2): a search line's samples times this are the sums over its
+        outer (+) and inner (-) half-lines (the node's own sample in neither)."""
+        S = self.n_samples
+        sums = np.zeros((2 * S + 1, 2))
+        sums[S + 1:, 0] = sums[:S, 1] = 1.0
+        return sums
 
     @cached_property
     def _line_offsets(self) -> tuple[np.ndarray, np.ndarray]:
@@ -204,7 +239,7 @@ class ForceField:
         scaled, fixed = self._line_offsets
         offsets = lengths[:, None] * scaled + fixed
         # One bilinear pass samples the search lines and the short region lines (runs every step).
-        samples = self._sample_maps(*_line_maps(nodes, normals, offsets))
+        samples = self._sample_lines(*_line_maps(nodes, normals, offsets))
         values = samples[:, :2 * S + 1].astype(np.float64)  # (N, 2S+1, 3)
         total = np.zeros(len(nodes))
         if w.get("edges", 0) > 0:
@@ -213,12 +248,12 @@ class ForceField:
             # object seen across it, edges within the background, and the
             # image's border beside background do not pull the node.
             e = values[..., 0] * (_central_difference(values[..., 2]) < -1e-3)
-            plus, minus = e[:, S + 1:].sum(1), e[:, :S].sum(1)
+            plus, minus = (e @ self._half_line_sums).T
             total += w["edges"] * (plus - minus) / (plus + minus + 0.1)
         if w.get("distance", 0) > 0:
-            d = values[..., 1]
+            plus, minus = (values[..., 1] @ self._half_line_sums).T
             # mean(+) - mean(-) of a linear ramp of slope g is g L (1 + 1/S)
-            slope = (d[:, S + 1:].sum(1) / S - d[:, :S].sum(1) / S) / (lengths * (1 + 1 / S))
+            slope = (plus - minus) / (S * (1 + 1 / S) * lengths)
             total += w["distance"] * np.clip(-slope, -1.0, 1.0)
         if w.get("intensity", 0) > 0:
             # The region force is local: averaged over the shortest line only,

@@ -602,19 +602,18 @@ class _ElasticBody:
             self.model_time += time.perf_counter() - t0
 
     def _displacement(self, U: np.ndarray) -> np.ndarray:
-        m = len(self.nodes)
-        return np.column_stack([U[:m], U[m:]])
+        return U.reshape(2, -1).T  # (rows..., cols...) as (M, 2)
 
     def move_under(self, forces: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """The nodes' motion over one time step under ``forces`` (M, 2)."""
         G = self.system.G
-        f = np.concatenate([forces[:, 0], forces[:, 1]])
+        f = forces.T.ravel()  # (rows..., cols...)
         if self.reference == "incremental":
             # The current shape is the rest shape and the body starts the
             # step at rest: one solve of the dynamic equation over dt.
             move = self._displacement(G @ self.sim.from_rest(G @ f))
             self._update_caps(move, normals)
-            reach = np.linalg.norm(move, axis=1)
+            reach = np.hypot(move[:, 0], move[:, 1])
             return move * np.minimum(1.0, self.cap / np.maximum(reach, 1e-12))[:, None]
         move = self._displacement(G @ self.sim.trial(G @ f)) + self.rest - self.nodes
         self._update_caps(move, normals)
