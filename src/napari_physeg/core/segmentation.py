@@ -455,6 +455,16 @@ def _edges_and_intensity(normalised, isef_b: float, noise=None, smoothed=None) -
     return shen_castan_edges(normalised, b=isef_b, noise=noise), smoothed, _SMOOTHED_NOISE_GAIN * noise
 
 
+def _shortest_line(signed: np.ndarray) -> float:
+    """Half-length of the shortest normal line (the region force's): at most
+    the radius of the object's region (``signed > 0``), so that the inward
+    half-line of a node on the border of an object a few pixels across
+    does not cross it and read the background beyond (it shrank such
+    objects to a point)."""
+    radius = np.sqrt(np.count_nonzero(signed > 0) / np.pi)
+    return float(np.clip(radius, 1.0, ForceField.min_length))  # the field's default on larger objects
+
+
 class _FeatureWindow:
     """The image forces, computed on a window around the contour.
 
@@ -532,7 +542,8 @@ class _FeatureWindow:
                                            image_sides=image_sides, model=self.model)
         distance = _distance_with_image_border(edges, signed, window, self.image.shape)
         self.anchor = _anchor(signed, self.drawing - origin)
-        field = ForceField.from_features(edges, distance, signed, self.weights, max_length=self.max_line_length)
+        field = ForceField.from_features(edges, distance, signed, self.weights, max_length=self.max_line_length,
+                                         min_length=_shortest_line(signed))
         self.fields = [field]
         if self.with_refinement:
             self.fields.append(field.with_weights({"intensity": sum(self.weights.values())}))
@@ -916,6 +927,7 @@ def _evolve(
     # pixels hold half a pixel off the true border; a geometric polish
     # (subpixel.polish) then ends them on the border of the raw image.
     phase = _first_phase(features, body.nodes, carried=start is not None)
+    settled = None  # where the evolution came to rest (image frame), once it has
     for steps in range(1, int(max_steps) + 1):
         body.shift(features.follow(body.nodes))
         _time_step(body, features.fields[phase], stiffness, features.bounds, steps, features.anchor)
@@ -933,9 +945,16 @@ def _evolve(
                 stop_reason = _rest_reason(features.fields[phase], body.nodes)
                 break
             phase += 1
+            settled = body.nodes + features.origin
             rest = _RestDetector(tol * HANDOVER, patience)
             body.cap_by_reach(features.fields[phase])
-    if stop_reason != "cancelled" and body.collapsed:
+    nodes = body.nodes
+    if stop_reason != "cancelled" and body.collapsed and settled is not None:
+        # The refinement lost an object a few pixels across that the evolution
+        # had found (the region force's lines cross it): keep what succeeded.
+        nodes = settled - features.origin
+        stop_reason = _rest_reason(features.fields[0], nodes)
+    elif stop_reason != "cancelled" and body.collapsed:
         # Nothing held it: the region force shrinks a contour drawn on a
         # uniform background until it is a point. Say so rather than return it.
         across = float(np.ptp(drawing, axis=0).max())
@@ -945,7 +964,6 @@ def _evolve(
             + (f", or, inside it, larger than this {across:.0f}-px click (a few pixels say too little about "
                "the object's level)" if across < SMALL_DRAWING else "")
         )
-    nodes = body.nodes
     if stop_reason == "converged" and features.with_refinement:
         # At rest every node is within a few tenths of a pixel of the border,
         # read on smoothed images and each on its own noise: measure the border
