@@ -1,0 +1,89 @@
+"""Scale probe: ``segment()`` on the real-image cases zoomed in and out.
+
+The real-image benchmark (``real.py``) has objects 8 to 90 px across, as its images came. A user's
+magnification is another: this probe zooms every ``--every``-th case of each group (image, truth
+and drawing together) by each ``--scale`` and runs our defaults on it, as a user would. It reports,
+per group and scale, the mean IoU, the cases that raised, and the steps; the 1.0 column is the
+same cases unzoomed. Ours only: the probe asks whether the defaults hold across sizes, not who wins.
+
+    python benchmarks/scale.py --scale 0.5 1 2 3 --every 4
+
+Zoom: ``cv2.resize`` of the image (area averaging to shrink, bilinear to enlarge), the truth
+resized bilinearly and cut at 0.5, the drawing's nodes mapped with the pixel grid
+(``(p + 0.5) s - 0.5``). Two worker processes; times are not reported.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import warnings
+from dataclasses import replace
+from multiprocessing import Pool
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+import real  # noqa: E402
+import real_data  # noqa: E402
+
+
+def zoomed(obj, init, scale: float):
+    """``obj`` (image and truth) and ``init`` zoomed by ``scale``."""
+    h, w = obj.image.shape
+    size = (max(int(round(w * scale)), 1), max(int(round(h * scale)), 1))  # cv2: (width, height)
+    shrink = cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR
+    image = cv2.resize(obj.image.astype(np.float32), size, interpolation=shrink).astype(np.float64)
+    mask = cv2.resize(obj.mask.astype(np.float32), size, interpolation=cv2.INTER_LINEAR) > 0.5
+    factor = np.array([image.shape[0] / h, image.shape[1] / w])
+    return replace(obj, image=image, mask=mask), (init + 0.5) * factor - 0.5
+
+
+def run_group(job):
+    """Rows ``(group, scale, iou, raised, steps)`` of one group at every scale."""
+    group, scales, every = job
+    warnings.simplefilter("ignore")
+    rows = []
+    for i, (_, _, obj, init) in enumerate(real_data.cases([group])):
+        if i % every:
+            continue
+        for scale in scales:
+            result, _ = real.run_ours(*zoomed(obj, init, scale))
+            rows.append((group, scale, result["iou"], bool(result["error"]), result["steps"] or np.nan))
+    return rows
+
+
+def table(rows, scales) -> str:
+    groups = list(dict.fromkeys(r[0] for r in rows))
+    head = "| group | cases | " + " | ".join(f"IoU x{s:g}" for s in scales) + " | " + \
+        " | ".join(f"raised x{s:g}" for s in scales) + " | " + " | ".join(f"steps x{s:g}" for s in scales) + " |"
+    lines = [head, "|" + "---|" * (2 + 3 * len(scales))]
+    for g in groups + ["all"]:
+        mine = [r for r in rows if g in ("all", r[0])]
+        at = {s: [r for r in mine if r[1] == s] for s in scales}
+        lines.append(f"| {g} | {len(at[scales[0]])} | "
+                     + " | ".join(f"{np.mean([r[2] for r in at[s]]):.3f}" for s in scales) + " | "
+                     + " | ".join(str(sum(r[3] for r in at[s])) for s in scales) + " | "
+                     + " | ".join(f"{np.nanmean([r[4] for r in at[s]]):.0f}" for s in scales) + " |")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scale", nargs="+", type=float, default=[0.5, 1.0, 2.0])
+    ap.add_argument("--every", type=int, default=4, help="every n-th case of each group")
+    ap.add_argument("--groups", nargs="+", choices=list(real_data.GROUPS), default=list(real_data.GROUPS))
+    args = ap.parse_args(argv)
+    scales = sorted(set(args.scale) | {1.0})
+    with Pool(2) as pool:
+        rows = [r for part in pool.map(run_group, [(g, scales, args.every) for g in args.groups]) for r in part]
+    print(f"Command: `python benchmarks/scale.py --scale {' '.join(f'{s:g}' for s in args.scale)} "
+          f"--every {args.every}`\n")
+    print(table(rows, scales))
+
+
+if __name__ == "__main__":
+    main()
