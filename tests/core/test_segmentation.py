@@ -554,6 +554,19 @@ def test_iter_segment_yields_every_step_and_returns_what_segment_returns():
     np.testing.assert_array_equal(res.contour, segment(obj.image, obj.init_far).contour)
 
 
+@pytest.mark.parametrize("patience", [5, 8])
+def test_the_refinement_hands_over_to_the_polish_after_two_steps_still(patience):
+    """The polish measures the border itself: the refinement need not be
+    seen still for ``patience`` steps (it took patience + 1 at least)."""
+    obj = data.ellipse(noise=0.1)
+    states = []
+    res = drain(iter_segment(obj.image, obj.init_far, patience=patience), states.append)
+    refinement = [s for s in states if s.phase == "refinement"]
+    assert res.converged and iou(res.contour, obj.mask) > 0.98
+    assert 3 <= len(refinement) < patience + 1
+    assert sum(s.phase == "evolution" for s in states) >= patience + 1
+
+
 def test_iter_segment_stops_when_told_and_keeps_the_contour():
     obj = data.ellipse()
     run = iter_segment(obj.image, obj.init_far)
