@@ -20,8 +20,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist
 
-from .contour import (as_contour, bounding_window, contour_gap, cut_pinches, nodes_for_spacing, outward_normals,
-                      perimeter, remove_loops, resample, segment_lengths, signed_area)
+from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, cut_pinches, nodes_for_spacing,
+                      outward_normals, pair_indices, _pairs_within, perimeter, remove_loops, resample, segment_lengths, signed_area)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
@@ -328,15 +328,11 @@ class _RemeshWatch:
         return bool(closest <= self.gap)  # as cKDTree.query_pairs(gap): distances <= gap
 
 
-#: Up to this many nodes the closest pairs are found among all pairs, not by a k-d tree.
-DENSE_PAIRS_MAX_NODES = 128
-
-
 @lru_cache(maxsize=16)
 def _non_neighbour_pairs(n: int) -> np.ndarray:
     """Which pairs of ``pdist``'s condensed order join two nodes of a closed
     contour of ``n`` nodes that are not neighbours along it."""
-    i, j = np.triu_indices(n, k=1)
+    i, j = pair_indices(n)
     return (j - i > 1) & (j - i < n - 1)
 
 
@@ -345,7 +341,7 @@ def _closest_non_neighbours(nodes: np.ndarray) -> float:
     n = len(nodes)
     if n < 4:
         return np.inf
-    if n <= DENSE_PAIRS_MAX_NODES:
+    if n <= DENSE_PAIRS_MAX_POINTS:
         # Every pair at once: on a contour of tens of nodes this is three
         # times faster than building a k-d tree (it runs up to every step).
         return float(np.sqrt(pdist(nodes, "sqeuclidean")[_non_neighbour_pairs(n)].min()))
@@ -706,7 +702,7 @@ def _repaired(nodes: np.ndarray, bounds: np.ndarray, spacing: float, keep=None) 
     # puts new nodes on top of each other: cut again until none pinch.
     for _ in range(3):
         fixed = resample(remove_loops(cut_pinches(fixed, gap, keep=keep)), spacing=spacing)
-        if len(fixed) < 4 or not cKDTree(fixed).query_pairs(gap):
+        if len(fixed) < 4 or not len(_pairs_within(fixed, gap)[0]):
             break
     distinct = np.linalg.norm(fixed - np.roll(fixed, 1, axis=0), axis=1) > 1e-3 * spacing
     return fixed[distinct] if distinct.sum() >= 3 else fixed
