@@ -1,12 +1,14 @@
-"""Scale probe: ``segment()`` on the real-image cases zoomed in and out.
+"""Scale probe: ``segment()`` on the real-image cases zoomed in and out (and inverted).
 
 The real-image benchmark (``real.py``) has objects 8 to 90 px across, as its images came. A user's
 magnification is another: this probe zooms every ``--every``-th case of each group (image, truth
 and drawing together) by each ``--scale`` and runs our defaults on it, as a user would. It reports,
 per group and scale, the mean IoU, the cases that raised, and the steps; the 1.0 column is the
-same cases unzoomed. Ours only: the probe asks whether the defaults hold across sizes, not who wins.
+same cases unzoomed. With ``--invert`` the unzoomed images are also inverted (dark objects on a
+bright background, as in bright-field or phase contrast), which a method without a polarity bias
+should score alike. Ours only: the probe asks whether the defaults hold, not who wins.
 
-    python benchmarks/scale.py --scale 0.5 1 2 3 --every 4
+    python benchmarks/scale.py --scale 0.5 2 3 --invert --every 4
 
 Zoom: ``cv2.resize`` of the image (area averaging to shrink, bilinear to enlarge), the truth
 resized bilinearly and cut at 0.5, the drawing's nodes mapped with the pixel grid
@@ -42,47 +44,55 @@ def zoomed(obj, init, scale: float):
     return replace(obj, image=image, mask=mask), (init + 0.5) * factor - 0.5
 
 
+def inverted(obj):
+    return replace(obj, image=obj.image.max() - obj.image)
+
+
 def run_group(job):
-    """Rows ``(group, scale, iou, raised, steps)`` of one group at every scale."""
-    group, scales, every = job
+    """Rows ``(group, variant, iou, raised, steps)`` of one group in every variant (a zoom
+    factor, or "inverted")."""
+    group, variants, every = job
     warnings.simplefilter("ignore")
     rows = []
     for i, (_, _, obj, init) in enumerate(real_data.cases([group])):
         if i % every:
             continue
-        for scale in scales:
-            result, _ = real.run_ours(*zoomed(obj, init, scale))
-            rows.append((group, scale, result["iou"], bool(result["error"]), result["steps"] or np.nan))
+        for variant in variants:
+            case = (inverted(obj), init) if variant == "inverted" else zoomed(obj, init, variant)
+            result, _ = real.run_ours(*case)
+            rows.append((group, variant, result["iou"], bool(result["error"]), result["steps"] or np.nan))
     return rows
 
 
-def table(rows, scales) -> str:
+def table(rows, variants) -> str:
     groups = list(dict.fromkeys(r[0] for r in rows))
-    head = "| group | cases | " + " | ".join(f"IoU x{s:g}" for s in scales) + " | " + \
-        " | ".join(f"raised x{s:g}" for s in scales) + " | " + " | ".join(f"steps x{s:g}" for s in scales) + " |"
-    lines = [head, "|" + "---|" * (2 + 3 * len(scales))]
+    names = [v if isinstance(v, str) else f"x{v:g}" for v in variants]
+    head = "| group | cases | " + " | ".join(f"IoU {n}" for n in names) + " | " + \
+        " | ".join(f"raised {n}" for n in names) + " | " + " | ".join(f"steps {n}" for n in names) + " |"
+    lines = [head, "|" + "---|" * (2 + 3 * len(variants))]
     for g in groups + ["all"]:
         mine = [r for r in rows if g in ("all", r[0])]
-        at = {s: [r for r in mine if r[1] == s] for s in scales}
-        lines.append(f"| {g} | {len(at[scales[0]])} | "
-                     + " | ".join(f"{np.mean([r[2] for r in at[s]]):.3f}" for s in scales) + " | "
-                     + " | ".join(str(sum(r[3] for r in at[s])) for s in scales) + " | "
-                     + " | ".join(f"{np.nanmean([r[4] for r in at[s]]):.0f}" for s in scales) + " |")
+        at = [[r for r in mine if r[1] == v] for v in variants]
+        lines.append(f"| {g} | {len(at[0])} | "
+                     + " | ".join(f"{np.mean([r[2] for r in these]):.3f}" for these in at) + " | "
+                     + " | ".join(str(sum(r[3] for r in these)) for these in at) + " | "
+                     + " | ".join(f"{np.nanmean([r[4] for r in these]):.0f}" for these in at) + " |")
     return "\n".join(lines)
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scale", nargs="+", type=float, default=[0.5, 1.0, 2.0])
+    ap.add_argument("--invert", action="store_true", help="also the unzoomed images inverted")
     ap.add_argument("--every", type=int, default=4, help="every n-th case of each group")
     ap.add_argument("--groups", nargs="+", choices=list(real_data.GROUPS), default=list(real_data.GROUPS))
     args = ap.parse_args(argv)
-    scales = sorted(set(args.scale) | {1.0})
+    variants = sorted(set(args.scale) | {1.0}) + (["inverted"] if args.invert else [])
     with Pool(2) as pool:
-        rows = [r for part in pool.map(run_group, [(g, scales, args.every) for g in args.groups]) for r in part]
-    print(f"Command: `python benchmarks/scale.py --scale {' '.join(f'{s:g}' for s in args.scale)} "
-          f"--every {args.every}`\n")
-    print(table(rows, scales))
+        rows = [r for part in pool.map(run_group, [(g, variants, args.every) for g in args.groups]) for r in part]
+    print(f"Command: `python benchmarks/scale.py --scale {' '.join(f'{s:g}' for s in args.scale)}"
+          f"{' --invert' if args.invert else ''} --every {args.every}`\n")
+    print(table(rows, variants))
 
 
 if __name__ == "__main__":
