@@ -954,21 +954,8 @@ def _evolve(
             rest = _RestDetector(tol * HANDOVER, _phase_patience(phase, patience))
             body.cap_by_reach(features.fields[phase])
     nodes = body.nodes
-    if stop_reason != "cancelled" and body.collapsed and settled is not None:
-        # The refinement lost an object a few pixels across that the evolution
-        # had found (the region force's lines cross it): keep what succeeded.
-        nodes = settled - features.origin
-        stop_reason = _rest_reason(features.fields[0], nodes)
-    elif stop_reason != "cancelled" and body.collapsed:
-        # Nothing held it: the region force shrinks a contour drawn on a
-        # uniform background until it is a point. Say so rather than return it.
-        across = float(np.ptp(drawing, axis=0).max())
-        raise ValueError(
-            f"the contour collapsed to a point after {steps} steps: no object border was found within reach "
-            f"({max_line_length:g} px) of the initial contour; draw it around the object, closer to its border"
-            + (f", or, inside it, larger than this {across:.0f}-px click (a few pixels say too little about "
-               "the object's level)" if across < SMALL_DRAWING else "")
-        )
+    if stop_reason != "cancelled" and body.collapsed:
+        nodes, stop_reason = _before_collapse(features, settled, drawing, steps, max_line_length)
     if stop_reason == "converged" and features.with_refinement:
         # At rest every node is within a few tenths of a pixel of the border,
         # read on smoothed images and each on its own noise: measure the border
@@ -983,6 +970,26 @@ def _evolve(
         history=tuple(history), polarity=features.polarity,
         timings={"features": t_features - t_start, "model": body.model_time,
                  "evolution": t_end - t_features - body.model_time, "total": t_end - t_start},
+    )
+
+
+def _before_collapse(features: _FeatureWindow, settled, drawing, steps: int, max_line_length: float):
+    """The nodes (window frame) and stop reason a collapsed contour leaves:
+    where the evolution came to rest (``settled``, image frame) if it had;
+    else a ValueError saying why."""
+    if settled is not None:
+        # The refinement lost an object a few pixels across that the evolution
+        # had found (the region force's lines cross it): keep what succeeded.
+        nodes = settled - features.origin
+        return nodes, _rest_reason(features.fields[0], nodes)
+    # Nothing held it: the region force shrinks a contour drawn on a uniform
+    # background until it is a point. Say so rather than return it.
+    across = float(np.ptp(drawing, axis=0).max())
+    raise ValueError(
+        f"the contour collapsed to a point after {steps} steps: no object border was found within reach "
+        f"({max_line_length:g} px) of the initial contour; draw it around the object, closer to its border"
+        + (f", or, inside it, larger than this {across:.0f}-px click (a few pixels say too little about "
+           "the object's level)" if across < SMALL_DRAWING else "")
     )
 
 
