@@ -205,7 +205,7 @@ def pair_indices(n: int) -> tuple[np.ndarray, np.ndarray]:
     return i, j
 
 
-def _pairs_within(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+def pairs_within(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
     """The pairs ``i < j`` of ``points`` at most ``radius`` apart, sorted."""
     if len(points) <= DENSE_PAIRS_MAX_POINTS:
         i, j = pair_indices(len(points))
@@ -223,7 +223,7 @@ def _crossing_pairs(contour: np.ndarray) -> np.ndarray:
     p, q = contour, np.roll(contour, -1, axis=0)
     seg = np.linalg.norm(q - p, axis=1)
     # Two edges can only cross if their midpoints are closer than their lengths.
-    i, j = _pairs_within(0.5 * (p + q), seg.max() + 1e-9)
+    i, j = pairs_within(0.5 * (p + q), seg.max() + 1e-9)
     keep = (j - i > 1) & ~((i == 0) & (j == n - 1))
     i, j = i[keep], j[keep]
 
@@ -278,7 +278,7 @@ def cut_pinches(contour: np.ndarray, gap: float, max_cuts: int = 100, keep=None)
         n = len(contour)
         if n < 8:
             break
-        i, j = _pairs_within(contour, gap)
+        i, j = pairs_within(contour, gap)
         if not len(i):
             break
         apart = np.minimum(j - i, n - (j - i))
@@ -325,7 +325,7 @@ def closest_on_polyline(points: np.ndarray, curve: np.ndarray, near: np.ndarray,
     return candidates[best, every], dist[best, every]
 
 
-def _nearest_node(points: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+def nearest_node(points: np.ndarray, nodes: np.ndarray) -> np.ndarray:
     """The index of the node nearest to each point."""
     if len(points) * len(nodes) <= DENSE_PAIRS_MAX_POINTS**2:  # all pairs: faster than a k-d tree
         return cdist(points, nodes, "sqeuclidean").argmin(1)
@@ -341,7 +341,7 @@ def contour_gap(a: np.ndarray, b: np.ndarray) -> float:
     each other (the use: a contour and itself a few steps later).
     """
     def one_way(points, curve):
-        return float(closest_on_polyline(points, curve, _nearest_node(points, curve))[1].max())
+        return float(closest_on_polyline(points, curve, nearest_node(points, curve))[1].max())
 
     return max(one_way(a, b), one_way(b, a))
 

@@ -20,8 +20,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist
 
-from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, cut_pinches, nodes_for_spacing,
-                      outward_normals, pair_indices, _pairs_within, perimeter, remove_loops, resample, segment_lengths, signed_area)
+from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, cut_pinches, nearest_node,
+                      nodes_for_spacing, outward_normals, pair_indices, pairs_within, perimeter, remove_loops, resample,
+                      segment_lengths, signed_area)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
@@ -671,7 +672,7 @@ class _ElasticBody:
         nearest to it.
         """
         old, nodes = nodes, _repaired(nodes, bounds, self.spacing, keep)
-        nearest = cKDTree(old).query(nodes)[1]
+        nearest = nearest_node(nodes, old)
         cap, last_sign = self.cap[nearest], self.last_sign[nearest]
         self.nodes = self.rest = nodes
         self.remeshes += 1
@@ -702,7 +703,7 @@ def _repaired(nodes: np.ndarray, bounds: np.ndarray, spacing: float, keep=None) 
     # puts new nodes on top of each other: cut again until none pinch.
     for _ in range(3):
         fixed = resample(remove_loops(cut_pinches(fixed, gap, keep=keep)), spacing=spacing)
-        if len(fixed) < 4 or not len(_pairs_within(fixed, gap)[0]):
+        if len(fixed) < 4 or not len(pairs_within(fixed, gap)[0]):
             break
     distinct = np.linalg.norm(fixed - np.roll(fixed, 1, axis=0), axis=1) > 1e-3 * spacing
     return fixed[distinct] if distinct.sum() >= 3 else fixed
@@ -931,7 +932,8 @@ def _evolve(
     # pixels hold half a pixel off the true border; a geometric polish
     # (subpixel.polish) then ends them on the border of the raw image.
     phase = _first_phase(features, body.nodes, carried=start is not None)
-    rest = _RestDetector(tol * (HANDOVER if len(features.fields) > 1 else 1.0), _phase_patience(phase, patience))
+    rest_tol = tol * (HANDOVER if len(features.fields) > 1 else 1.0)  # the same in either phase
+    rest = _RestDetector(rest_tol, _phase_patience(phase, patience))
     settled = None  # where the evolution came to rest (image frame), once it has
     for steps in range(1, int(max_steps) + 1):
         body.shift(features.follow(body.nodes))
@@ -951,7 +953,7 @@ def _evolve(
                 break
             phase += 1
             settled = body.nodes + features.origin
-            rest = _RestDetector(tol * HANDOVER, _phase_patience(phase, patience))
+            rest = _RestDetector(rest_tol, _phase_patience(phase, patience))
             body.cap_by_reach(features.fields[phase])
     nodes = body.nodes
     if stop_reason != "cancelled" and body.collapsed:
