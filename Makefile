@@ -25,7 +25,7 @@ bench: setup
 	$(PY) benchmarks/matching.py
 	$(PY) benchmarks/real.py
 	$(PY) benchmarks/drawings.py
-	$(PY) benchmarks/scale.py --scale 0.5 2 3 --invert
+	$(PY) benchmarks/scale.py --scale 0.5 2 3 --invert --slope
 	$(PY) benchmarks/tracking.py
 	$(PY) benchmarks/batch.py
 	if [ -n "$$DISPLAY" ]; then $(PY) benchmarks/gui.py; else xvfb-run -a $(PY) benchmarks/gui.py; fi

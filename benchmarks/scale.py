@@ -6,9 +6,11 @@ and drawing together) by each ``--scale`` and runs our defaults on it, as a user
 per group and scale, the mean IoU, the cases that raised, and the steps; the 1.0 column is the
 same cases unzoomed. With ``--invert`` the unzoomed images are also inverted (dark objects on a
 bright background, as in bright-field or phase contrast), which a method without a polarity bias
-should score alike. Ours only: the probe asks whether the defaults hold, not who wins.
+should score alike. With ``--slope`` they are also lit unevenly: a background that rises across
+the field, corner to corner, by the image's whole range (as excitation or a lamp that falls off
+across the field makes it). Ours only: the probe asks whether the defaults hold, not who wins.
 
-    python benchmarks/scale.py --scale 0.5 2 3 --invert --every 4
+    python benchmarks/scale.py --scale 0.5 2 3 --invert --slope --every 4
 
 Zoom: ``cv2.resize`` of the image (area averaging to shrink, bilinear to enlarge), the truth
 resized bilinearly and cut at 0.5, the drawing's nodes mapped with the pixel grid
@@ -48,9 +50,19 @@ def inverted(obj):
     return replace(obj, image=obj.image.max() - obj.image)
 
 
+def sloped(obj):
+    """``obj`` on a background that rises from one corner to the other by the image's range."""
+    h, w = obj.image.shape
+    rows, cols = np.mgrid[0:h, 0:w]
+    return replace(obj, image=obj.image + np.ptp(obj.image) * (rows + cols) / max(h + w - 2, 1))
+
+
+VARIANTS = {"inverted": inverted, "sloped": sloped}
+
+
 def run_group(job):
     """Rows ``(group, variant, iou, raised, steps)`` of one group in every variant (a zoom
-    factor, or "inverted")."""
+    factor, "inverted" or "sloped")."""
     group, variants, every = job
     warnings.simplefilter("ignore")
     rows = []
@@ -58,7 +70,7 @@ def run_group(job):
         if i % every:
             continue
         for variant in variants:
-            case = (inverted(obj), init) if variant == "inverted" else zoomed(obj, init, variant)
+            case = (VARIANTS[variant](obj), init) if variant in VARIANTS else zoomed(obj, init, variant)
             result, _ = real.run_ours(*case)
             rows.append((group, variant, result["iou"], bool(result["error"]), result["steps"] or np.nan))
     return rows
@@ -84,14 +96,16 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scale", nargs="+", type=float, default=[0.5, 1.0, 2.0])
     ap.add_argument("--invert", action="store_true", help="also the unzoomed images inverted")
+    ap.add_argument("--slope", action="store_true", help="also the unzoomed images lit unevenly")
     ap.add_argument("--every", type=int, default=4, help="every n-th case of each group")
     ap.add_argument("--groups", nargs="+", choices=list(real_data.GROUPS), default=list(real_data.GROUPS))
     args = ap.parse_args(argv)
-    variants = sorted(set(args.scale) | {1.0}) + (["inverted"] if args.invert else [])
+    variants = sorted(set(args.scale) | {1.0}) + (["inverted"] if args.invert else []) + \
+        (["sloped"] if args.slope else [])
     with Pool(2) as pool:
         rows = [r for part in pool.map(run_group, [(g, variants, args.every) for g in args.groups]) for r in part]
     print(f"Command: `python benchmarks/scale.py --scale {' '.join(f'{s:g}' for s in args.scale)}"
-          f"{' --invert' if args.invert else ''} --every {args.every}`\n")
+          f"{' --invert' if args.invert else ''}{' --slope' if args.slope else ''} --every {args.every}`\n")
     print(table(rows, variants))
 
 

@@ -161,6 +161,26 @@ def test_nuclei_a_few_pixels_across_drawn_around(stack, z):
 
 
 
+@pytest.mark.parametrize("z, labels", [(26, (8, 3, 12)), (38, (6, 5, 17))], ids=["z26", "z38"])
+def test_nuclei_on_a_background_that_rises_across_the_field(stack, z, labels):
+    """The slice with a background that rises across the field by its whole
+    intensity range (uneven illumination) is outlined as the slice itself.
+    Before the background's plane was taken out, the far rings of a circle
+    around a nucleus read the bright side of the slope as the background:
+    the drawing was taken for one inside a dark object and these contours
+    ended around the image (IoU 0.02-0.07)."""
+    image = stack[0][z].astype(float)
+    rows, cols = np.mgrid[0:image.shape[0], 0:image.shape[1]]
+    lo, hi = np.percentile(image, [0.1, 99.9])
+    sloped = image + (hi - lo) * (rows + cols) / (rows.max() + cols.max())
+    for label in labels:
+        truth = ndi.binary_fill_holes(stack[1][z] == label)
+        init = circle(np.argwhere(truth).mean(axis=0), 1.2 * np.sqrt(truth.sum() / np.pi))
+        _, even = segmented(image, truth, init)
+        _, on_slope = segmented(sloped, truth, init)
+        assert on_slope > 0.9 and abs(on_slope - even) < 0.02, (label, even, on_slope)
+
+
 def test_box_around_a_nucleus_that_encloses_a_neighbour(stack):
     """A box twice the size of z26/n9's (a nucleus cut by the lower side) that
     encloses a brighter neighbour whole: the contour wraps both, pinches
@@ -298,11 +318,13 @@ def test_a_click_on_the_background_outlines_the_dark_gap_not_a_nucleus(stack):
 
 
 def test_a_click_on_shading_that_collapses_is_told_to_draw_larger():
-    """A 3-px circle on a shading ramp (no border anywhere) collapses: the
-    error says to draw around the object or, inside it, larger than a click."""
-    ramp = np.arange(96)[None, :] / 96.0 + np.random.default_rng(0).normal(0, 0.05, (96, 96))
+    """A 3-px circle on a steep, curved shading (no border anywhere) collapses:
+    the error says to draw around the object or, inside it, larger than a
+    click. (The shading is curved: a plane is taken out of the image first.)"""
+    x = np.arange(96)[None, :] / 96.0
+    shading = np.exp(3 * x) / 20 + np.random.default_rng(0).normal(0, 0.05, (96, 96))
     with pytest.raises(ValueError, match=r"draw it around the object.*larger than this 3-px click"):
-        segment(ramp, circle(np.array([48.0, 48.0]), 1.5))
+        segment(shading, circle(np.array([48.0, 76.0]), 1.5))
 
 
 @pytest.mark.parametrize("z, label, centre, radius", [(26, 9, (235, 138), 3.4), (26, 14, (148, 191), 4.3),

@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist
 
+from .background import background_plane, plane_values
 from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, cut_pinches, nearest_node,
                       nodes_for_spacing, outward_normals, pair_indices, pairs_within, perimeter, remove_loops, resample,
                       segment_lengths, signed_area)
@@ -426,13 +427,17 @@ class FrameFeatures:
     """
 
     edges: np.ndarray
-    intensity: np.ndarray  # normalised, lightly smoothed (sigma 1 px)
+    intensity: np.ndarray  # normalised, lightly smoothed (sigma 1 px), uneven illumination removed
     noise: float | None = None  # standard deviation of the noise in intensity (None: unknown)
+    plane: np.ndarray | None = None  # the background's plane in the image's units (see background_plane)
 
     @classmethod
     def of(cls, image, isef_b: float = 0.7) -> FrameFeatures:
-        image = _validate_image(image)
-        return cls(*_edges_and_intensity(normalized_intensity(image), isef_b))
+        image = _as_image(_validate_image(image))
+        plane = background_plane(image)
+        if plane is not None:
+            image = image - plane_values(plane, (slice(0, image.shape[0]), slice(0, image.shape[1])))
+        return cls(*_edges_and_intensity(normalized_intensity(image), isef_b), plane=plane)
 
 
 #: White noise's standard deviation is multiplied by 1 / (2 sqrt(pi) sigma)
@@ -487,12 +492,20 @@ class _FeatureWindow:
                  shared=None, avoid=None):
         self.image, self.drawing, self.polarity = image, drawing, polarity
         self.shared, self.avoid = shared, avoid
+        # The plane under the background, read on the whole image (its
+        # illumination), taken out of every window (see background.py).
+        self.plane = shared.plane if shared is not None else background_plane(image)
         self.weights, self.max_line_length, self.isef_b = weights, max_line_length, isef_b
         # A second phase with the region force alone (sub-pixel refinement).
         self.with_refinement = refine and weights.get("intensity", 0) > 0 and len(weights) > 1
         self.guard = float(max_line_length) + 8.0
         self._read_drawing(self._bounded(bounding_window(init, image.shape, CONTEXT_MARGIN * self.guard)))
         self._compute(self._bounded(bounding_window(init, image.shape, FORCE_MARGIN * self.guard)))
+
+    def evenly_lit(self, window) -> np.ndarray:
+        """The image on ``window`` (float64), the background's plane taken out."""
+        sub = _as_image(self.image[window])
+        return sub if self.plane is None else sub - plane_values(self.plane, window)
 
     @property
     def _whole_image(self):
@@ -512,7 +525,7 @@ class _FeatureWindow:
             self.levels, self.noise = None, None
             intensity, noise = self.shared.intensity[context], self.shared.noise
         else:
-            sub = _as_image(self.image[context])
+            sub = self.evenly_lit(context)
             self.levels = _intensity_range(sub)
             normalised = _normalize(sub, levels=self.levels)
             self.noise = _noise_sigma(normalised)
@@ -536,7 +549,7 @@ class _FeatureWindow:
         else:
             context, normalised, smoothed = self._context
             if window != context:
-                normalised, smoothed = _normalize(_as_image(sub), levels=self.levels), None
+                normalised, smoothed = _normalize(self.evenly_lit(window), levels=self.levels), None
             edges, intensity, noise = _edges_and_intensity(normalised, self.isef_b, self.noise, smoothed)
         if not edges.any() and np.ptp(intensity) <= 1e-12 and sub.shape != self.image.shape:
             return self._compute(self._whole_image)  # nothing here: look at the whole image
@@ -962,7 +975,8 @@ def _evolve(
         # At rest every node is within a few tenths of a pixel of the border,
         # read on smoothed images and each on its own noise: measure the border
         # on the raw image and fit the polygon to it (see subpixel.polish).
-        nodes = np.clip(polish(image[features.window], nodes, polarity=features.polarity), -0.5, features.bounds)
+        nodes = np.clip(polish(features.evenly_lit(features.window), nodes, polarity=features.polarity), -0.5,
+                        features.bounds)
     nodes = nodes + features.origin
     if not np.array_equal(history[-1], nodes):
         history.append(nodes.copy())
