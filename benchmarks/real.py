@@ -756,8 +756,9 @@ made: nuclei of a confocal stack with their shipped labels (`napari-bio-sample-d
 a fluorescence time-lapse, the 24 coins of `skimage.data.coins()` and `skimage.data.cell()`
 (truths of the last three from classical pipelines, described in `benchmarks/real_data.py`),
 and, held out since session 12, the hand-labelled nuclei of the 2018 Data Science Bowl image
-shipped in `stardist` (group dsb), and since session 20 slices of the labelled 3D volume of
-crowded nuclei shipped beside it (group stack3d),
+shipped in `stardist` (group dsb), since session 20 slices of the labelled 3D volume of
+crowded nuclei shipped beside it (group stack3d), and since session 22 a widefield image of
+U2OS nuclei shipped in `mahotas` (group u2os; its truth from a classical pipeline),
 each from the contours people draw: a rough circle around the object, a jittery freehand lasso,
 a small circle inside it, a box 1.1-1.5x the object's bounding box (napari's rectangle tool).
 The anchors run on a crop around the init and the truth; ours on the whole image. Per-case

@@ -49,6 +49,8 @@ if [ ! -f "$stamp" ]; then
   # The dsb group's image and labels ship in stardist's wheel; it is never imported (its
   # loader pulls TensorFlow), so no dependencies, and a wheel only (nothing to build).
   "$VENV/bin/python" -m pip install -q --no-deps --only-binary=:all: stardist==0.9.2
+  # The u2os group's image (nuclear.png) ships in mahotas' wheel, read as a file, never imported.
+  "$VENV/bin/python" -m pip install -q --no-deps --only-binary=:all: mahotas==1.4.19
   rm -f "$VENV"/.installed-*
   touch "$stamp"
 fi

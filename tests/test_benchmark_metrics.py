@@ -77,3 +77,23 @@ def test_an_outline_lies_at_its_height_on_a_linear_ramp(real, radius, height):
 
 def test_a_degenerate_outline_has_no_height(real):
     assert np.isnan(real._ramp_height(_ramp_disc(), _circle(20.0, n=4)))
+
+
+def test_u2os_truth_outlines_each_nucleus_at_its_own_edge(real):
+    """The u2os group's classical truth (``real_data.u2os_truth``): known answers
+    on a synthetic field. Two nuclei of very different brightness and two
+    touching ones, blurred: four labels, each at its own edge's middle."""
+    real_data = sys.modules["real_data"]
+    from scipy import ndimage as ndi
+
+    image = np.full((120, 160), 20.0)
+    truths = [_disc(12, (30, 30), image.shape), _disc(12, (30, 100), image.shape),
+              _disc(11, (85, 60), image.shape), _disc(11, (85, 81), image.shape)]
+    for mask, level in zip(truths, (40.0, 250.0, 60.0, 60.0)):
+        image[mask] = level
+    image = ndi.gaussian_filter(image, 1.5) + np.random.default_rng(0).normal(0, 0.5, image.shape)
+    labels = real_data.u2os_truth(image)
+    assert labels.max() == 4
+    for mask in truths:
+        found = labels == np.bincount(labels[mask]).argmax()
+        assert (found & mask).sum() / (found | mask).sum() > 0.85
