@@ -96,25 +96,29 @@ def test_both_integrators_segment(integrator):
     assert res.converged and iou(res.contour, obj.mask) >= 0.97
 
 
-@pytest.mark.parametrize("integrator", [
-    pytest.param("newmark", marks=pytest.mark.xfail(strict=True, reason=(
-        "known limit (issue 9): with the total reference, Newmark's trapezoidal rule ramps each step's image "
-        "force in from the previous one (the modal integrator holds it over the step): the soft contour lags, "
-        "then overshoots by 4-7 px a step past its 2-px caps and swings about the border (IoU 0.79-0.99) to "
-        "max_steps; numerical damping (delta up to 1.5) and a consistent initial acceleration do not stop it"))),
-    "modal",
-])
+@pytest.mark.parametrize("integrator", ["newmark", "modal"])
 def test_total_reference_keeps_elastic_memory(integrator):
     """With the initial shape as rest shape the elastic force grows with the
     distance travelled: a soft material still reaches the border, a stiff one
-    stops where its elastic force balances the image force."""
+    stops where its elastic force balances the image force.
+
+    A known limit (issue 9): with the total reference, Newmark's trapezoidal
+    rule ramps each step's image force in from the previous one (the modal
+    integrator holds it over the step): the soft contour lags, then overshoots
+    by 4-7 px a step past its 2-px caps and swings about the border (IoU
+    0.79-0.99); numerical damping (delta up to 1.5) and a consistent initial
+    acceleration do not stop it. It is reported as such: "oscillating"."""
     obj = data.ellipse()
     soft = segment(obj.image, obj.init_near, material="soft tissue", reference="total",
                    integrator=integrator, n_nodes=60)
     stiff = segment(obj.image, obj.init_near, material="copper", stiffness=2e5, reference="total",
                     integrator=integrator, n_nodes=60)
     free = segment(obj.image, obj.init_near, material="copper", stiffness=2e5, n_nodes=60)
-    assert iou(soft.contour, obj.mask) >= 0.95
+    if integrator == "newmark":
+        assert soft.stop_reason == "oscillating" and not soft.converged
+        assert iou(soft.contour, obj.mask) >= 0.75
+    else:
+        assert soft.converged and iou(soft.contour, obj.mask) >= 0.95
     assert iou(stiff.contour, obj.mask) < iou(free.contour, obj.mask) - 0.05
 
 
@@ -697,3 +701,52 @@ def test_a_circle_six_times_a_small_disk_in_strong_noise_finds_the_disk(seed):
     res = segment(image, init)
     assert res.converged
     assert iou(res.contour, disk) > 0.9
+
+
+def _swinging_forces(monkeypatch, period=6):
+    """Image forces that push every node outward for ``period`` steps, then
+    inward as long: a contour that swings about where it started forever."""
+    from napari_physeg.core.forces import ForceField
+
+    calls = iter(range(10**9))
+
+    def swing(self, nodes, normals=None):
+        sign = 1.0 if (next(calls) // period) % 2 == 0 else -1.0
+        return 0.5 * sign * normals
+
+    monkeypatch.setattr(ForceField, "__call__", swing)
+
+
+def test_a_contour_that_swings_without_progress_stops_as_oscillating(monkeypatch):
+    """Node motion that keeps reversing without net progress is its own stop
+    reason (design, "honest stopping"), not a run to max_steps."""
+    from napari_physeg.core import segmentation
+
+    _swinging_forces(monkeypatch)
+    obj = data.blob((96, 96))
+    res = segment(obj.image, obj.init_near, max_steps=1000)
+    assert res.stop_reason == "oscillating" and not res.converged
+    assert segmentation.OSCILLATION_STEPS <= res.steps < segmentation.OSCILLATION_STEPS + 20
+
+
+def test_a_refinement_that_swings_keeps_the_evolutions_rest(monkeypatch):
+    """The evolution came to rest on the border; a refinement that then swings
+    without progress gives way to that rest (keep whatever succeeded)."""
+    from napari_physeg.core.forces import ForceField
+
+    obj = data.blob((96, 96))
+    evolved = segment(obj.image, obj.init_near, refine=False)
+    real_call = ForceField.__call__
+    calls = iter(range(10**9))
+
+    def swing_when_alone(self, nodes, normals=None):
+        if self.weights.get("edges", 0) > 0:  # the evolution: the image's forces
+            return real_call(self, nodes, normals)
+        return (0.5 if (next(calls) // 6) % 2 == 0 else -0.5) * normals
+
+    monkeypatch.setattr(ForceField, "__call__", swing_when_alone)
+    res = segment(obj.image, obj.init_near)
+    assert res.stop_reason == "converged"
+    found = polygon2mask(obj.mask.shape, res.contour)
+    assert (found & obj.mask).sum() / (found | obj.mask).sum() > 0.97
+    assert abs(len(res.contour) - len(evolved.contour)) <= 2

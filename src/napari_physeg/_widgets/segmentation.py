@@ -457,6 +457,10 @@ def not_converged_messages(outcome: SegmentationOutcome, job: SegmentationJob) -
         shapes = [k for k, _ in by_reason["stalled"]]
         messages.append(f"shape(s) {shapes} came to rest away from any border (nothing in reach pulled them "
                         "further): draw them closer to the object's border, or raise the stiffness r")
+    if "oscillating" in by_reason:
+        shapes = [k for k, _ in by_reason["oscillating"]]
+        messages.append(f"shape(s) {shapes} kept swinging without getting anywhere (no border holds them: "
+                        "noise or shading only): draw them around the object, closer to its border")
     return messages
 
 
