@@ -301,6 +301,16 @@ def _lowest_modes_sparse(nodes, sigma, material, k):
     return lam, np.asarray(phi)
 
 
+def _canonical_signs(modes: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """:func:`_canonical_sign` of each mode of ``modes`` (nodes, modes, 2)."""
+    moment = weights @ (modes[..., 0] ** 3 + modes[..., 1] ** 3)
+    scale = weights @ (np.abs(modes[..., 0]) ** 3 + np.abs(modes[..., 1]) ** 3)
+    signs = np.where(moment > 0, 1.0, -1.0)
+    for j in np.flatnonzero(~(np.abs(moment) > 1e-6 * np.maximum(scale, 1e-300))):
+        signs[j] = _canonical_sign(modes[:, j], weights)  # no third moment to go by: the largest entry
+    return signs
+
+
 def _canonical_sign(mode: np.ndarray, weights: np.ndarray) -> float:
     """A sign that does not depend on node numbering: the weighted third moment
     of the modal displacements made positive (largest entry as a fallback)."""
@@ -379,15 +389,14 @@ def _canonical_modes(canon, n_compute, sigma, sigma_factor, mat, model_nodes):
     if model_nodes is not None:
         # Modal displacements at the contour's nodes: linear in arc length
         # between the model nodes (which are evenly spaced from node 0).
-        x = np.arange(mm + 1) / mm
-        t = _arc_positions(canon)
+        position = _arc_positions(canon) * mm
+        below = np.minimum(position.astype(int), mm - 1)
+        frac = (position - below)[:, None, None]
         closed = np.concatenate([modes, modes[:1]], axis=0)
-        modes = np.stack([np.stack([np.interp(t, x, closed[:, j, c]) for c in range(2)], axis=-1)
-                          for j in range(n)], axis=1)
+        modes = (1.0 - frac) * closed[below] + frac * closed[below + 1]
     norms = np.sqrt((modes**2).sum(axis=(0, 2)))
     modes = modes / np.maximum(norms, 1e-300)[None, :, None]
-    w = _node_weights(canon)
-    signs = np.array([_canonical_sign(modes[:, j], w) for j in range(n)])
+    signs = _canonical_signs(modes, _node_weights(canon))
     lam, modes = np.ascontiguousarray(lam), np.ascontiguousarray(modes * signs[None, :, None])
     lam.setflags(write=False)
     modes.setflags(write=False)

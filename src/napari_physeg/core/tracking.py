@@ -557,7 +557,10 @@ def _rigid_motion(source: np.ndarray, target: np.ndarray, iterations: int = 30):
         # Linearised in the angle: a node moves by angle * (-arm_y, arm_x).
         jacobian = np.column_stack([arm[:, 0] * n[:, 1] - arm[:, 1] * n[:, 0], n])
         residual = ((dense[nearest] - moved) * n).sum(1)
-        update = np.linalg.lstsq(jacobian, residual, rcond=None)[0]
+        try:  # the normal equations of a 3-parameter fit (lstsq's SVD costs more than the rest of the loop)
+            update = np.linalg.solve(jacobian.T @ jacobian, jacobian.T @ residual)
+        except np.linalg.LinAlgError:  # normals all parallel: the angle is not determined
+            update = np.linalg.lstsq(jacobian, residual, rcond=None)[0]
         angle, shift = angle + update[0], shift + update[1:]
         # A thousandth of a pixel over the contour's extent: far below its node spacing.
         if abs(update[0]) * extent < 1e-3 and np.abs(update[1:]).max() < 1e-3:
