@@ -34,8 +34,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._drain import drain
-from .contour import (area_centroid, as_contour, bounding_window, closest_on_polyline, outward_normals, perimeter,
-                      polygon_mask, positively_oriented, remove_loops, resample, signed_area)
+from .contour import (area_centroid, as_contour, bounding_window, closest_on_polyline, nearest_node, outward_normals,
+                      perimeter, polygon_mask, positively_oriented, remove_loops, resample, signed_area)
 from .dynamics import DivergenceError
 from .matching import match
 from .region import hasty_margin
@@ -528,7 +528,7 @@ def node_origins(contour: np.ndarray, previous: np.ndarray, **match_options) -> 
     partner[pairs[:, 0]] = pairs[:, 1]
     missing = partner < 0
     if missing.any():  # not expected with method="order": nearest node instead
-        partner[missing] = np.argmin(((back[missing, None] - previous[None]) ** 2).sum(-1), axis=1)
+        partner[missing] = nearest_node(back[missing], previous)
     return closest_on_polyline(back, previous, partner, steps=(-2, -1, 0, 1))[0]
 
 
