@@ -169,6 +169,32 @@ def test_an_object_that_vanishes_is_lost_not_returned_as_garbage():
     assert (table[table.frame >= 4].status == LOST).all() and table[table.frame >= 4].row.isna().all()
 
 
+@pytest.mark.parametrize("blank", [[4], [4, 5]], ids=["one blank frame", "two"])
+def test_an_object_missing_from_a_frame_or_two_is_found_again(movie, blank):
+    """A blank (dropped) frame loses every object on it, not for good: each is
+    looked for again from its last contour on the next MAX_GAP frames, and
+    its arc origin and maps carry on across the gap."""
+    frames = movie.frames.copy()
+    frames[blank] = np.median(frames[0])
+    tr = track(frames, movie.init)
+    assert tr.status[0] == [LOST if t in blank else TRACKED for t in range(12)]
+    after = blank[-1] + 1
+    assert iou(tr.contours[0][after], movie.masks[after]) > 0.95
+    assert np.isnan(tr.normal_velocity[0][after]).all() and np.isfinite(tr.normal_velocity[0][after + 1]).all()
+    assert np.isfinite(tr.membrane_map(0, "curvature")[after:]).all()
+    assert np.isfinite(tr.membrane_map(0)[after + 1:]).all()
+    assert len(tr.table()) > 0
+
+
+def test_an_object_missing_for_longer_than_the_gap_stays_lost(movie):
+    from napari_physeg.core.tracking import MAX_GAP
+
+    frames = movie.frames.copy()
+    frames[4:5 + MAX_GAP] = np.median(frames[0])
+    tr = track(frames, movie.init)
+    assert tr.status[0] == [TRACKED] * 4 + [LOST] * 8
+
+
 def test_an_object_that_fades_away_is_lost_one_that_bleaches_is_not():
     """A cell that leaves the focal plane fades to its out-of-focus glow: once
     its contrast is below FADED_CONTRAST of the start frame's it is lost,
