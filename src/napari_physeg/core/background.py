@@ -21,6 +21,8 @@ image's range), a plane by 0.02-0.18.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 __all__ = ["background_plane", "plane_values"]
@@ -52,7 +54,8 @@ def background_plane(image: np.ndarray) -> np.ndarray | None:
     Parameters
     ----------
     image : (H, W) ndarray
-        A real image; pixels that are not finite are left out.
+        A real image; pixels that are not finite are left out (and other
+        dtypes give None: their error is raised where the image is read).
 
     Returns
     -------
@@ -62,11 +65,21 @@ def background_plane(image: np.ndarray) -> np.ndarray | None:
         evenly enough (see UNEVEN_LIGHT) or has fewer than 3 rows or columns.
     """
     h, w = image.shape
-    if min(h, w) < 3:
+    if min(h, w) < 3 or image.dtype.kind not in "biuf":  # not an image: said where the windows are read
         return None
     step = max(1, int(np.ceil(np.sqrt(h * w / MAX_SAMPLES))))
+    # The same image's plane is kept: the widget, batch runs and tracking's
+    # objects segment many shapes of one image.
+    plane = _plane_of_samples(h, w, step, np.ascontiguousarray(image[::step, ::step], dtype=np.float64).tobytes())
+    return None if plane is None else np.array(plane)
+
+
+@lru_cache(maxsize=8)
+def _plane_of_samples(h: int, w: int, step: int, samples: bytes) -> tuple | None:
+    """:func:`background_plane` of an (h, w) image from its pixels every
+    ``step`` rows and columns (float64 bytes), as a tuple (or None)."""
     rows, cols = np.mgrid[0:h:step, 0:w:step]
-    values = np.asarray(image[::step, ::step], dtype=np.float64).ravel()
+    values = np.frombuffer(samples, dtype=np.float64)
     finite = np.isfinite(values)  # the windows read are validated where they are read
     if np.count_nonzero(finite) < 3:
         return None
@@ -79,7 +92,7 @@ def background_plane(image: np.ndarray) -> np.ndarray | None:
     lo, hi = _ranks(values, 0.01, 0.99)
     if abs(slope_row) * (h - 1) + abs(slope_col) * (w - 1) < UNEVEN_LIGHT * (hi - lo):
         return None
-    return np.array([level - slope_row * centre[0] - slope_col * centre[1], slope_row, slope_col])
+    return (float(level - slope_row * centre[0] - slope_col * centre[1]), float(slope_row), float(slope_col))
 
 
 def _biweight_fit(design: np.ndarray, values: np.ndarray) -> np.ndarray:
