@@ -25,7 +25,7 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["background_plane", "plane_values"]
+__all__ = ["background_plane", "plane_values", "plane_removed"]
 
 #: Pixels the plane is fitted on (a regular sub-grid of the image): three
 #: coefficients need few, and the fit's medians cost in proportion.
@@ -127,6 +127,12 @@ def _ranks(values: np.ndarray, *fractions: float) -> list[float]:
     kth = [min(int(f * values.size), values.size - 1) for f in fractions]
     part = np.partition(values, kth)
     return [float(part[k]) for k in kth]
+
+
+def plane_removed(image: np.ndarray, plane: np.ndarray | None, window: tuple[slice, slice]) -> np.ndarray:
+    """``image`` (float, the image on ``window``) with the plane taken out
+    (itself when there is no plane)."""
+    return image if plane is None else image - plane_values(plane, window)
 
 
 def plane_values(plane: np.ndarray, window: tuple[slice, slice]) -> np.ndarray:

@@ -20,7 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist
 
-from .background import background_plane, plane_values
+from .background import background_plane, plane_removed
 from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, cut_pinches, nearest_node,
                       nodes_for_spacing, outward_normals, pair_indices, pairs_within, perimeter, remove_loops, resample,
                       segment_lengths, signed_area)
@@ -457,8 +457,7 @@ class FrameFeatures:
     def of(cls, image, isef_b: float = 0.7) -> FrameFeatures:
         image = _as_image(_validate_image(image))
         plane = background_plane(image)
-        if plane is not None:
-            image = image - plane_values(plane, (slice(0, image.shape[0]), slice(0, image.shape[1])))
+        image = plane_removed(image, plane, (slice(0, image.shape[0]), slice(0, image.shape[1])))
         return cls(*_edges_and_intensity(normalized_intensity(image), isef_b), plane=plane)
 
 
@@ -526,8 +525,7 @@ class _FeatureWindow:
 
     def evenly_lit(self, window) -> np.ndarray:
         """The image on ``window`` (float64), the background's plane taken out."""
-        sub = _as_image(self.image[window])
-        return sub if self.plane is None else sub - plane_values(self.plane, window)
+        return plane_removed(_as_image(self.image[window]), self.plane, window)
 
     @property
     def _whole_image(self):

@@ -9,9 +9,9 @@ A contour that comes to rest against its drawing's limit is drawn around
 again (the object moved further than predicted); one that ends with no
 pixel where its object was predicted found another object: the object is
 lost, and looked for again from its last contour on the next MAX_GAP frames
-(a blank or defocused frame). The feature images of a frame are computed once and shared by all its
-objects, and each object counts the others' pixels as background: objects
-repel each other and never overlap.
+(a blank or defocused frame). The feature images of a frame are computed
+once and shared by all its objects, and each object counts the others'
+pixels as background: objects repel each other and never overlap.
 
 Once the contours are known, consecutive contours of an object are matched
 node to node by the order-preserving modal matching of :func:`.match`, as
@@ -628,7 +628,7 @@ def _carry_arc_origin(contours, origins, arcs, start) -> None:
         if contours[t] is None:
             continue
         if t - 1 in anchor and np.isfinite(origins[t]).all():
-            last = contours[t][np.argmin(((origins[t] - anchor[t - 1]) ** 2).sum(1))]
+            last = contours[t][nearest_node(anchor[t - 1][None], origins[t])[0]]
         else:  # after a gap: the node nearest where the anchor was last seen
             last = contours[t][nearest_node(last[None], contours[t])[0]]
         anchor[t] = last
@@ -637,7 +637,7 @@ def _carry_arc_origin(contours, origins, arcs, start) -> None:
         if contours[t] is None:
             continue
         if t + 1 in anchor and np.isfinite(origins[t + 1]).all():
-            last = origins[t + 1][np.argmin(((contours[t + 1] - anchor[t + 1]) ** 2).sum(1))]
+            last = origins[t + 1][nearest_node(anchor[t + 1][None], contours[t + 1])[0]]
         else:
             last = contours[t][nearest_node(last[None], contours[t])[0]]
         anchor[t] = last
