@@ -750,3 +750,16 @@ def test_a_refinement_that_swings_keeps_the_evolutions_rest(monkeypatch):
     found = polygon2mask(obj.mask.shape, res.contour)
     assert (found & obj.mask).sum() / (found | obj.mask).sum() > 0.97
     assert abs(len(res.contour) - len(evolved.contour)) <= 2
+
+
+@pytest.mark.parametrize("image, message", [
+    (np.full((40, 40), "a"), "real numeric dtype"),
+    (np.zeros((40, 40), complex), "complex dtype"),
+    (np.zeros((40, 40), object), "real numeric dtype"),
+])
+def test_an_image_that_is_not_real_numbers_gets_a_clear_error(image, message):
+    """Not numpy's own error from the background's plane (a string image raised
+    "could not convert string to float" there for a while)."""
+    t = np.linspace(0, 2 * np.pi, 20, endpoint=False)
+    with pytest.raises(ValueError, match=message):
+        segment(image, np.column_stack([20 + 5 * np.sin(t), 20 + 5 * np.cos(t)]))

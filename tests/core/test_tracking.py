@@ -250,6 +250,9 @@ def test_generator_and_lazy_frames(movie):
     (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"segment_options": {"material": "rubbr"}}, "rubbr"),
     (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"segment_options": {"stiffness": -1.0}}, "stiffness"),
     (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"segment_options": {"avoid": None}}, "avoid"),
+    (np.full((3, 32, 32), "a"), _circle((16, 16), 5), {}, "real numeric dtype"),
+    (np.zeros((3, 32, 32), complex), _circle((16, 16), 5), {}, "complex dtype"),
+    (np.zeros((3, 32, 32), object), _circle((16, 16), 5), {}, "real numeric dtype"),
 ])
 def test_bad_input_gets_a_clear_error(frames, inits, kwargs, message):
     with pytest.raises(ValueError, match=message):

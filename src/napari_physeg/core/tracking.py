@@ -228,6 +228,11 @@ def _check_frames(frames):
     if len(shape) != 3:
         raise ValueError(f"frames must be a (T, H, W) stack of 2D frames, got shape {tuple(shape)}; "
                          "for one image use segment()")
+    dtype = np.dtype(getattr(frames, "dtype", np.float64))
+    if dtype.kind == "c":
+        raise ValueError(f"frames have complex dtype {dtype}: pass real frames, e.g. np.abs(frames) or frames.real")
+    if dtype.kind not in "biuf":
+        raise ValueError(f"frames must have a real numeric dtype, got {dtype}")
     if shape[0] < 1 or min(shape[1:]) < 3:
         raise ValueError(f"frames of shape {tuple(shape)} hold no image to track in")
     return frames, int(shape[0]), tuple(int(s) for s in shape[1:])
