@@ -351,6 +351,28 @@ def test_circle_far_larger_than_the_object(make):
     assert _iou(res.contour, obj.mask) > 0.98
 
 
+@pytest.mark.parametrize("radius, sigma, height", [(12, 3, 0.4), (25, 3, 0.4), (12, 4, 0.4), (25, 4, 0.5)])
+def test_outline_traced_on_a_blurred_edge_stays_on_it(radius, sigma, height):
+    """A disk blurred over 10-15 px, its outline traced where the blur is at
+    ``height`` of the disk's level: a label's outline made by a threshold, or
+    a result refined. The line's level was read as the background's, so the
+    object ended three quarters up the ramp, 1.2-2.5 px inside the disk (r
+    10.4-10.9 of 12, 22.5-23.7 of 25); now it ends on the disk's border.
+    (Lines lower on the ramp, at its foot, still are the background's: see
+    region.ON_RAMP.)"""
+    from scipy import ndimage as ndi
+
+    rows, cols = np.mgrid[:128, :128]
+    blurred = ndi.gaussian_filter((np.hypot(rows - 64, cols - 60) < radius).astype(float), sigma)
+    image = blurred + np.random.default_rng(0).normal(0, 0.02, blurred.shape)
+    profile = blurred[64, 60:]
+    traced = np.interp(height, profile[::-1], np.arange(len(profile))[::-1])
+    res = segment(image, _circle((64, 60), traced, 80))
+    assert res.converged
+    found = np.hypot(res.contour[:, 0] - 64, res.contour[:, 1] - 60)
+    assert abs(np.median(found) - radius) < 0.5
+
+
 def test_drawing_around_the_whole_image():
     """The horse of skimage.data fills most of its image; a circle 2x its
     extent lies wholly beyond the image, so the line says nothing: its clipped

@@ -236,8 +236,15 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     # drawing is around it; texture, if inside it. (A classes' split is only
     # made when the pixels' spread leaves room for a rule below to use it.)
     span = max(abs(float(within.max()) - on_line), abs(float(within.min()) - on_line)) if within.size else 0.0
-    beyond = None
-    if around:
+    inner, outer = _either_side(intensity, drawn, line, size)
+    beyond = _beyond_the_border(inner, outer, centre, outside)
+    if around and beyond is not None and _on_the_ramp(on_line, outer, centre, beyond):
+        # Traced on the outer part of the object's edge (a label's outline,
+        # an earlier result on a blurred edge): the line's level is not yet
+        # the background's, which lies beyond it. (Read as the background,
+        # it put the object's border three quarters up the ramp.)
+        obj, background = centre, beyond
+    elif around:
         obj, background = centre, on_line
         # A drawing far larger than the object: its centre is mostly
         # background too (within a fifth of the way to the other class),
@@ -248,7 +255,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
             if abs(centre - on_line) < 0.2 * abs(other - on_line) and \
                     _centred(intensity, middle, drawn & ~middle, on_line, other):
                 obj = other
-    elif (beyond := _beyond_the_border(intensity, drawn, line, centre, outside, size)) is not None:
+    elif beyond is not None:
         # Traced on the object's edge (a label's outline, an earlier result):
         # the line lies on the edge's ramp, at neither level. The object is
         # within the drawing, as for a drawing around it; its background is
@@ -569,10 +576,19 @@ def _off_centre_level(within: np.ndarray, span: float, on_line: float, outside: 
     return other if share >= _OFF_CENTRE_SHARE and abs(other - on_line) > least else None
 
 
-def _beyond_the_border(intensity, drawn, line, centre, outside, size) -> float | None:
-    """The background's level if the drawn line (``line``, its band of pixels;
-    ``drawn``, the pixels it encloses) separates the object from its
-    background, else None.
+def _either_side(intensity, drawn, line, size) -> tuple[float, float]:
+    """The levels just inside and just outside the drawn line (``line``, its
+    band of pixels; ``drawn``, the pixels it encloses), within a tenth of the
+    drawing's ``size`` (1-3 px) of it."""
+    side = int(np.clip(round(_SIDE_FRACTION * size), 1, _SIDE_WIDTH))
+    near = cv2.dilate(line.view(np.uint8), _disk(side)).view(bool) & ~line
+    return _median(intensity[near & drawn]), _median(intensity[near & ~drawn])
+
+
+def _beyond_the_border(inner, outer, centre, outside) -> float | None:
+    """The background's level if the drawn line separates the object from
+    its background, else None (``inner``, ``outer``: the levels just inside
+    and just outside the line, see :func:`_either_side`).
 
     It does when, from just outside the line to just inside it, the intensity
     climbs at least :data:`_BORDER_STEP` of the way from the background's
@@ -583,12 +599,26 @@ def _beyond_the_border(intensity, drawn, line, centre, outside, size) -> float |
     from the centre's (a neighbour in the rings further out, or the ramp of
     a blurred edge just outside, brings either nearer).
     """
-    side = int(np.clip(round(_SIDE_FRACTION * size), 1, _SIDE_WIDTH))
-    near = cv2.dilate(line.view(np.uint8), _disk(side)).view(bool) & ~line
-    inner, outer = _median(intensity[near & drawn]), _median(intensity[near & ~drawn])
     if not (outer - inner) * np.sign(outside - centre) >= _BORDER_STEP * abs(centre - outside):
         return None
     return outer if abs(outer - centre) > abs(outside - centre) else outside
+
+
+#: A line whose level is at least this share of the way from the level just
+#: outside it up to the object's lies on the edge's ramp, not at its foot. A
+#: line traced on the middle of an edge is halfway up (less when the ramp is
+#: wider than the sides read); rough drawings lie at the foot, on the
+#: background or a halo (within a few tenths).
+ON_RAMP = 0.35
+
+
+def _on_the_ramp(on_line, outer, centre, beyond) -> bool:
+    """Whether a line read as lying on the background (level ``on_line``)
+    lies on the ramp of the object's edge instead: :data:`ON_RAMP` of the way
+    up from ``outer``, the level just outside it, to ``centre``, the
+    object's, with the background ``beyond`` the line on its side."""
+    rise = centre - outer
+    return (centre - beyond) * (centre - on_line) > 0 and (on_line - outer) * np.sign(rise) >= ON_RAMP * abs(rise)
 
 
 #: A level beyond the object's by at least this many times the object's
