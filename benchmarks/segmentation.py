@@ -146,11 +146,15 @@ def main(argv=None):
     res_win, t_win = timed(lambda: segment(canvas, shifted), 3)
     import napari_physeg.core.segmentation as seg_module
 
-    saved, seg_module.WINDOW_MAX_FRACTION = seg_module.WINDOW_MAX_FRACTION, 0.0
+    fractions = ("WINDOW_MAX_FRACTION", "FORCE_WINDOW_MAX_FRACTION")
+    saved = {name: getattr(seg_module, name) for name in fractions}
     try:
+        for name in fractions:
+            setattr(seg_module, name, 0.0)
         res_full, t_full = timed(lambda: segment(canvas, shifted), 3)
     finally:
-        seg_module.WINDOW_MAX_FRACTION = saved
+        for name, value in saved.items():
+            setattr(seg_module, name, value)
     win_shift = float(np.abs(res_win.contour - res_full.contour).max()) if (
         len(res_win.contour) == len(res_full.contour)) else float("nan")
     horse, horse_init = horse_case()

@@ -479,6 +479,24 @@ def test_small_object_in_a_large_image_gives_the_same_contour(monkeypatch):
     np.testing.assert_allclose(placed.history[0] - offset, alone.history[0], atol=1e-9)
 
 
+def test_a_large_object_s_features_are_computed_on_its_window(monkeypatch):
+    """An ellipse whose force window covers 57 % of a 512² image: the
+    features are computed on that window (on the whole image they took a
+    third more time), and the contour is the one found with the whole image
+    in view."""
+    import napari_physeg.core.segmentation as seg
+
+    obj = data.ellipse((512, 512))
+    shapes = _feature_shapes(monkeypatch)
+    windowed = segment(obj.image, obj.init_near, n_nodes=122)
+    assert len(shapes) == 1 and 0.5 * obj.image.size < shapes[0][0] * shapes[0][1] < 0.75 * obj.image.size
+    monkeypatch.setattr(seg, "FORCE_WINDOW_MAX_FRACTION", 0.0)
+    whole = segment(obj.image, obj.init_near, n_nodes=122)
+    assert shapes[-1] == obj.image.shape
+    assert windowed.converged and len(windowed.contour) == len(whole.contour)
+    np.testing.assert_allclose(windowed.contour, whole.contour, atol=0.05)
+
+
 def test_contour_grows_out_of_its_feature_window(monkeypatch):
     rows, cols = np.mgrid[:1000, :1100]
     disc = (((rows - 480) ** 2 + (cols - 560) ** 2) < 250**2).astype(float)
