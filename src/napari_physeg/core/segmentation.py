@@ -989,17 +989,18 @@ def _evolve(
         if stop:
             stop_reason = "cancelled"
             break
-        if rest.at_rest(body.nodes, body.shifts, body.remeshes):
+        at_rest = rest.at_rest(body.nodes, body.shifts, body.remeshes)
+        if at_rest or rest.plateau.swinging():
             if phase == len(features.fields) - 1:
-                stop_reason = _rest_reason(features.fields[phase], body.nodes)
+                stop_reason = _rest_reason(features.fields[phase], body.nodes) if at_rest else "oscillating"
                 break
+            # An evolution that swings without progress (edges either side of
+            # a blurred border pulling in turn) hands over too: the region
+            # force alone may settle it.
             phase += 1
-            settled = body.nodes + features.origin
+            settled = body.nodes + features.origin if at_rest else None
             rest = _RestDetector(rest_tol, _phase_patience(phase, patience))
             body.cap_by_reach(features.fields[phase])
-        elif rest.plateau.swinging():
-            stop_reason = "oscillating"
-            break
     nodes = body.nodes
     if stop_reason == "oscillating" and settled is not None:
         # The refinement swings about the border that the evolution found: keep that.
