@@ -813,7 +813,9 @@ def _area_held(like: np.ndarray, marks: np.ndarray, reach: np.ndarray) -> float:
     pieces, _ = _label(solid)
     held = np.unique(pieces[marks & solid])
     blob = np.isin(pieces, held[held > 0]) & reach
-    return float(np.pi * depth[blob].max() ** 2) if blob.any() else 0.0
+    # In float64: a blob that fills the window has no background to measure
+    # a depth from (cv2 gives it FLT_MAX), whose float32 square overflowed.
+    return np.pi * float(depth[blob].max()) ** 2 if blob.any() else 0.0
 
 
 def _side_distance(shape, image_sides) -> np.ndarray:
