@@ -581,6 +581,14 @@ def _either_side(intensity, drawn, line, size) -> tuple[float, float]:
     band of pixels; ``drawn``, the pixels it encloses), within a tenth of the
     drawing's ``size`` (1-3 px) of it."""
     side = int(np.clip(round(_SIDE_FRACTION * size), 1, _SIDE_WIDTH))
+    # On the line's bounding box (and the sides' width): the window it is
+    # read on may be the whole image.
+    rows, cols = np.nonzero(line)
+    if not rows.size:
+        return np.nan, np.nan
+    box = (slice(max(rows.min() - side, 0), rows.max() + side + 1),
+           slice(max(cols.min() - side, 0), cols.max() + side + 1))
+    line, drawn, intensity = line[box], drawn[box], intensity[box]
     near = cv2.dilate(line.view(np.uint8), _disk(side)).view(bool) & ~line
     return _median(intensity[near & drawn]), _median(intensity[near & ~drawn])
 
