@@ -527,8 +527,10 @@ class _FeatureWindow:
         # A second phase with the region force alone (sub-pixel refinement).
         self.with_refinement = refine and weights.get("intensity", 0) > 0 and len(weights) > 1
         self.guard = float(max_line_length) + 8.0
-        self._read_drawing(self._bounded(bounding_window(init, image.shape, CONTEXT_MARGIN * self.guard)))
-        self._compute(self._bounded(bounding_window(init, image.shape, FORCE_MARGIN * self.guard), FORCE_WINDOW_MAX_FRACTION))
+        self._read_drawing(self._bounded(bounding_window(init, image.shape, CONTEXT_MARGIN * self.guard),
+                                         WINDOW_MAX_FRACTION))
+        self._compute(self._bounded(bounding_window(init, image.shape, FORCE_MARGIN * self.guard),
+                                    FORCE_WINDOW_MAX_FRACTION))
 
     def evenly_lit(self, window) -> np.ndarray:
         """The image on ``window`` (float64), the background's plane taken out."""
@@ -538,11 +540,10 @@ class _FeatureWindow:
     def _whole_image(self):
         return slice(0, self.image.shape[0]), slice(0, self.image.shape[1])
 
-    def _bounded(self, window, fraction=None):
+    def _bounded(self, window, fraction: float):
         """``window``, or the whole image when ``window`` would cover more
-        than ``fraction`` of it (:data:`WINDOW_MAX_FRACTION` if None)."""
+        than ``fraction`` of it."""
         area = (window[0].stop - window[0].start) * (window[1].stop - window[1].start)
-        fraction = WINDOW_MAX_FRACTION if fraction is None else fraction
         return self._whole_image if area > fraction * self.image.size else window
 
     def _read_drawing(self, context) -> None:
