@@ -253,6 +253,29 @@ def test_click_on_a_dim_disk_beside_a_saturated_one_reads_the_background_around_
     assert model.background_level < 0.25 < model.object_level < 0.5  # not the neighbour's 0.8
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_click_half_beyond_the_image_on_a_dim_nucleus_with_a_bright_neighbour_cut_by_the_view(seed):
+    """A click on a dim, textured nucleus cut by the image's top side, half
+    beyond it; a saturated neighbour far below runs out of the view. Its near
+    rings go down the dim nucleus' edge, so the far rings are read through;
+    the neighbour is the far rings' class furthest from the click's level.
+    It lies beside the nucleus and its dark background, not around them:
+    cut by the view, it is in no hole of theirs, which once passed for
+    surrounding them (read as a dark object on a bright background, the
+    contour took the whole image, IoU 0.06; the real case: nuclei z24 n1)."""
+    shape = (106, 130)
+    rr, cc = np.mgrid[: shape[0], : shape[1]]
+    nucleus = ((rr - 5) / 22.0) ** 2 + ((cc - 25) / 17.0) ** 2 <= 1
+    neighbour = ((rr - 95) / 14.0) ** 2 + ((cc - 55) / 12.0) ** 2 <= 1
+    rng = np.random.default_rng(seed)
+    image = ndi.gaussian_filter(np.where(nucleus, 0.3, np.where(neighbour, 0.75, 0.07))
+                                + 0.03 * rng.standard_normal(shape), 1.0)
+    model, region = region_for(image, circle((0, 24), 8))
+    assert model.polarity == 1 and not model.drawn_around
+    assert model.background_level < 0.2 < model.object_level < 0.4  # not the neighbour's 0.75
+    assert overlap(region, nucleus) > 0.9 and not (region & neighbour).any()
+
+
 @pytest.mark.parametrize("gap", [20, 22])
 def test_saturated_neighbour_in_broad_contact_is_left_out(gap):
     """A circle 1.3 times the dim disk around it: the disk and the saturated

@@ -370,7 +370,18 @@ def _surrounded(intensity, drawing, level, other) -> bool:
     if body is None:
         return True
     held = ndi.binary_fill_holes(body) & ~side
-    return held.sum() < 0.5 * (~side).sum()
+    if held.sum() >= 0.5 * (~side).sum():
+        return False
+    # Nor if the body runs out of the view more than it meets the other level:
+    # what lies beyond is not seen to surround it (the dim nucleus and its
+    # dark background are one body beside a bright neighbour cut by the view).
+    rim = cv2.dilate(body.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool) & ~body
+    return _on_view_edge(body) < rim.sum()
+
+
+def _on_view_edge(mask: np.ndarray) -> int:
+    """How many of ``mask``'s pixels lie on the outermost rows and columns."""
+    return int(mask[0].sum() + mask[-1].sum() + mask[1:-1, 0].sum() + mask[1:-1, -1].sum())
 
 
 def _enclosed(body: np.ndarray, extent: np.ndarray) -> bool | None:
