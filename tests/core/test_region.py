@@ -276,6 +276,42 @@ def test_click_half_beyond_the_image_on_a_dim_nucleus_with_a_bright_neighbour_cu
     assert overlap(region, nucleus) > 0.9 and not (region & neighbour).any()
 
 
+def faint_nucleus_in_a_crowd(seed=0, radius=8, shape=(72, 72)):
+    """A faint nucleus (0.35) in the middle of bright ones (0.6) packed 3 px
+    apart on a dark ground (0.2), blurred (sigma 1 px) and noisy, as in a
+    crowded confocal slice (the stack3d group's faint nucleus 131)."""
+    rng = np.random.default_rng(seed)
+    centre, step = np.array(shape) / 2, 2 * radius + 3
+    faint, bright = disk(shape, centre, radius), np.zeros(shape, bool)
+    for i in range(-3, 4):
+        for j in range(-3, 4):
+            if i or j:
+                at = centre + np.array([i * step * 0.866, (j + (i % 2) / 2) * step])
+                bright |= disk(shape, at, radius * rng.uniform(0.9, 1.1))
+    image = np.where(faint, 0.35, np.where(bright, 0.6, 0.2))
+    image = ndi.gaussian_filter(image + 0.03 * rng.standard_normal(shape), 1.0)
+    return image, faint, bright, centre
+
+
+@pytest.mark.parametrize("seed", range(2))
+@pytest.mark.parametrize("factor", [1.15, 1.3])
+def test_faint_nucleus_drawn_around_among_bright_ones_is_bright(seed, factor):
+    """A circle around the faint nucleus lies on the dark gaps between the
+    nuclei. The far rings' class furthest from its centre is the bright
+    neighbours'; the faint nucleus is brighter than the gaps all the same.
+    At 1.15 times its radius the line reads darker than the centre, toward
+    no ring: it lies on the gaps' network, which runs across the view (the
+    ground, not an object's body). At 1.3 it lies in the trough between the
+    nucleus and the neighbours just beyond it, darker than both sides: not
+    on the ramp of an edge whose background lies beyond. Both were read as a
+    dark object on the neighbours' bright background."""
+    image, faint, bright, centre = faint_nucleus_in_a_crowd(seed)
+    model, region = region_for(image, circle(centre, factor * 8))
+    assert model.polarity == 1 and model.drawn_around
+    assert model.background_level < 0.3 < model.object_level < 0.45
+    assert overlap(region, faint) > 0.8 and (region & bright).sum() < 0.05 * faint.sum()
+
+
 @pytest.mark.parametrize("gap", [20, 22])
 def test_saturated_neighbour_in_broad_contact_is_left_out(gap):
     """A circle 1.3 times the dim disk around it: the disk and the saturated

@@ -237,7 +237,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     # made when the pixels' spread leaves room for a rule below to use it.)
     span = max(abs(float(within.max()) - on_line), abs(float(within.min()) - on_line)) if within.size else 0.0
     inner, outer = _either_side(intensity, drawn, line, size)
-    beyond = _beyond_the_border(inner, outer, centre, outside)
+    beyond = _beyond_the_border(inner, outer, centre, outside, on_line, floor)
     if around and beyond is not None and _on_the_ramp(on_line, outer, centre, beyond):
         # Traced on the outer part of the object's edge (a label's outline,
         # an earlier result on a blurred edge): the line's level is not yet
@@ -268,6 +268,8 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     elif (off_centre := _off_centre_level(within, span, on_line, outside, floor)) is not None:
         around, obj, background = True, off_centre, on_line
     elif _held_within(intensity, middle, drawn, line, centre, on_line, outside, floor):
+        around, obj, background = True, centre, on_line
+    elif _line_on_open_ground(intensity, line, centre, on_line, outside, floor):
         around, obj, background = True, centre, on_line
     else:
         obj, background = on_line, outside
@@ -450,6 +452,26 @@ def _held_within(intensity, middle, drawn, line, centre, on_line, outside, floor
     return blob is not None and not (blob & (line | ~drawn)).any() and blob.sum() >= 0.25 * drawn.sum()
 
 
+def _line_on_open_ground(intensity, line, centre, on_line, outside, floor) -> bool:
+    """Whether a line that differs from the centre away from the outside's
+    level lies on the ground the objects lie on: the pixels on its side of
+    its and the outside's levels, in the piece it lies on, run across the
+    view, to at least three of its four sides (a faint nucleus drawn around
+    among bright ones: the dark gaps between them are one network, and the
+    bright level the far rings read is the neighbours'). Inside an object
+    whose texture makes the centre differ, that piece is the object, which
+    reaches one side of the view at most."""
+    if not (on_line - centre) * (centre - outside) > 0 or abs(on_line - centre) <= floor:
+        return False
+    body, _ = _marked_piece(intensity, on_line, outside, line)
+    return body is not None and _sides_reached(body) >= 3
+
+
+def _sides_reached(mask: np.ndarray) -> int:
+    """How many of the four sides of the view ``mask`` reaches."""
+    return int(mask[0].any()) + int(mask[-1].any()) + int(mask[:, 0].any()) + int(mask[:, -1].any())
+
+
 def _on_side(intensity, level, other) -> np.ndarray:
     """The pixels on ``level``'s side of the midpoint between ``level`` and ``other``."""
     return (intensity - 0.5 * (level + other)) * np.sign(level - other) > 0
@@ -604,10 +626,11 @@ def _either_side(intensity, drawn, line, size) -> tuple[float, float]:
     return _median(intensity[near & drawn]), _median(intensity[near & ~drawn])
 
 
-def _beyond_the_border(inner, outer, centre, outside) -> float | None:
+def _beyond_the_border(inner, outer, centre, outside, on_line, floor) -> float | None:
     """The background's level if the drawn line separates the object from
     its background, else None (``inner``, ``outer``: the levels just inside
-    and just outside the line, see :func:`_either_side`).
+    and just outside the line, see :func:`_either_side`; ``on_line``, the
+    line's own; ``floor``, the least contrast).
 
     It does when, from just outside the line to just inside it, the intensity
     climbs at least :data:`_BORDER_STEP` of the way from the background's
@@ -619,6 +642,13 @@ def _beyond_the_border(inner, outer, centre, outside) -> float | None:
     a blurred edge just outside, brings either nearer).
     """
     if not (outer - inner) * np.sign(outside - centre) >= _BORDER_STEP * abs(centre - outside):
+        return None
+    # A line on the edge's ramp lies between the levels either side of it. One
+    # beyond both by more than the least contrast lies in a trough: on the
+    # ground between the object and neighbours just beyond it, which are not
+    # its background.
+    to_inner, to_outer = inner - on_line, outer - on_line
+    if to_inner * to_outer > 0 and min(abs(to_inner), abs(to_outer)) > floor:
         return None
     return outer if abs(outer - centre) > abs(outside - centre) else outside
 
