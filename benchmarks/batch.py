@@ -101,7 +101,7 @@ def _rss_peak():
 
 def run(paths, inits, out: Path, workers: int) -> dict:
     """Track ``paths`` on a fresh local cluster of ``workers`` processes."""
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \
             Client(cluster, set_as_default=False) as client:
         client.run(_warm)
         warm = client.run(_rss_now)

@@ -48,7 +48,7 @@ def movies(tmp_path, movie):
 def client():
     """A local cluster of 2 single-threaded worker processes, shared by the module's tests."""
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster, \
+                                  dashboard_address=":0") as cluster, \
             distributed.Client(cluster, set_as_default=False) as c:
         yield c
 
@@ -144,7 +144,7 @@ def test_a_killed_worker_loses_no_result_and_duplicates_none(tmp_path):
     init = [movie.outlines[0][::6]]
     out = tmp_path / "out"
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster, \
+                                  dashboard_address=":0") as cluster, \
             distributed.Client(cluster, set_as_default=False) as c:
         done = {}
         run = threading.Thread(target=lambda: done.update(

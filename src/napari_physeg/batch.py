@@ -527,7 +527,9 @@ def _client(workers, scheduler, client):
     # GIL in places; dask's nannies pin BLAS to one thread in each. Not the
     # default client (set_as_default=False): dask computations elsewhere in
     # this process must not be sent to it, nor find it gone once it closes.
-    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+    # The scheduler serves HTTP whatever its dashboard setting (None still
+    # binds 8787): on a free port, two batches at once do not clash.
+    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \
             Client(cluster, set_as_default=False) as local:
         yield local
 
