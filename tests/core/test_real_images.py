@@ -580,3 +580,17 @@ def test_a_faint_nucleus_boxed_at_the_corner_among_bright_ones_is_read_bright(vo
     found = polygon2mask(image.shape, res.contour)
     assert res.polarity == 1
     assert (found & labels).sum() / (found | labels).sum() > 0.5
+
+
+def test_a_contour_that_spreads_over_the_whole_image_has_leaked(volume):
+    """A circle 1.4 times a faint nucleus (slice 25, nucleus 108) whose
+    drawing reads as lying inside a dark object at the haze's level, the
+    neighbours' level its background: the contour spreads over the whole
+    61 x 57 slice and rests on the image's four sides. No border of the
+    object holds it there: it leaked, not converged (it was reported
+    converged, IoU 0.04)."""
+    image, labels = volume[0][25], volume[1][25] == 108
+    res, iou = segmented(image, labels, circle((15.85, 19.47), 9.74))
+    spread = polygon2mask(image.shape, res.contour).mean() > 0.9
+    assert spread == (res.stop_reason == "leaked")
+    assert iou > 0.5 or not res.converged

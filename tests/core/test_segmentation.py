@@ -566,6 +566,34 @@ def test_contour_on_a_uniform_background_stalls_honestly():
     assert not res.converged and res.stop_reason in ("stalled", "max_steps")
 
 
+@pytest.mark.parametrize("centre, radius", [((30, 30), 4), ((40, 45), 6), ((20, 20), 3)])
+def test_a_contour_that_spreads_over_the_whole_image_has_leaked(centre, radius):
+    """A click on a bright field holding one dark spot: the field is the
+    object, and it reaches every side of the image. The contour rests on the
+    image's four sides, which the drawing did not reach: they hold it, no
+    border of an object does, so it leaked and did not converge."""
+    rr, cc = np.mgrid[:80, :90]
+    spot = (rr - 60) ** 2 + (cc - 70) ** 2 <= 8 ** 2
+    image = np.where(spot, 0.2, 0.8) + 0.03 * np.random.default_rng(0).standard_normal(spot.shape)
+    t = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    res = segment(image, np.column_stack([centre[0] + radius * np.sin(t), centre[1] + radius * np.cos(t)]))
+    assert res.stop_reason == "leaked" and not res.converged
+    assert np.allclose(res.contour.min(axis=0), -0.5) and np.allclose(res.contour.max(axis=0), [79.5, 89.5])
+
+
+def test_a_contour_along_the_image_s_sides_leaked_only_if_the_drawing_did_not_reach_them():
+    """Drawn around the whole image, a contour on its four sides is where the
+    user put it (an object cut by every side), not a leak."""
+    from napari_physeg.core.segmentation import _took_the_whole_image
+
+    frame = np.array([[-0.5, -0.5], [-0.5, 89.5], [79.5, 89.5], [79.5, -0.5]])
+    t = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    click = np.column_stack([30 + 4 * np.sin(t), 30 + 4 * np.cos(t)])
+    assert _took_the_whole_image(frame, click, (80, 90))
+    assert not _took_the_whole_image(frame, frame, (80, 90))
+    assert not _took_the_whole_image(np.array([[-0.5, -0.5], [-0.5, 89.5], [40, 89.5], [40, -0.5]]), click, (80, 90))
+
+
 def test_object_cut_by_the_image_border_among_bright_neighbours():
     """A circle drawn around a nucleus that the image's lower side cuts, half
     of it beyond the image, with bright neighbours all around: the nodes

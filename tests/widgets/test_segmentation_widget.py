@@ -644,12 +644,13 @@ def test_advice_fits_why_a_contour_did_not_reach_a_border():
                                   converged=reason == "converged", stop_reason=reason, history=(), polarity=1)
 
     outcome = seg.SegmentationOutcome([result("converged"), result("max_steps"), result("stalled"),
-                                       result("oscillating")])
-    messages = seg.not_converged_messages(outcome, SimpleNamespace(shape_indices=[3, 5, 7, 9]))
-    assert len(messages) == 3
+                                       result("leaked"), result("oscillating")])
+    messages = seg.not_converged_messages(outcome, SimpleNamespace(shape_indices=[3, 5, 7, 8, 9]))
+    assert len(messages) == 4
     assert "[5]" in messages[0] and "max steps" in messages[0] and "1000" in messages[0]
     assert "[7]" in messages[1] and "max steps" not in messages[1] and "closer" in messages[1]
-    assert "[9]" in messages[2] and "max steps" not in messages[2] and "around the object" in messages[2]
+    assert "[8]" in messages[2] and "whole image" in messages[2] and "object is" in messages[2]
+    assert "[9]" in messages[3] and "max steps" not in messages[3] and "around the object" in messages[3]
 
 
 def test_a_points_layer_is_a_contour(viewer_widget, wait_done, errors, hand):

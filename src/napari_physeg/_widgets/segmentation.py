@@ -457,6 +457,11 @@ def not_converged_messages(outcome: SegmentationOutcome, job: SegmentationJob) -
         shapes = [k for k, _ in by_reason["stalled"]]
         messages.append(f"shape(s) {shapes} came to rest away from any border (nothing in reach pulled them "
                         "further): draw them closer to the object's border, or raise the stiffness r")
+    if "leaked" in by_reason:
+        shapes = [k for k, _ in by_reason["leaked"]]
+        messages.append(f"shape(s) {shapes} spread over the whole image (nothing told the object from its "
+                        "surroundings): draw them around the object, closer to its border, or set 'object is' "
+                        "to bright or dark")
     if "oscillating" in by_reason:
         shapes = [k for k, _ in by_reason["oscillating"]]
         messages.append(f"shape(s) {shapes} kept swinging without getting anywhere (no border holds them: "

@@ -67,7 +67,9 @@ class SegmentationResult:
     stop_reason : str
         ``"converged"`` (at rest, at least 70 % of the nodes on an edge or an
         object/background switch), ``"stalled"`` (at rest elsewhere: nothing
-        in reach pulls it), ``"oscillating"`` (it kept moving without progress
+        in reach pulls it), ``"leaked"`` (at rest along all four sides of the
+        image, which the drawing did not reach: nothing told the object from
+        its surroundings), ``"oscillating"`` (it kept moving without progress
         over 200 steps: nothing holds it, e.g. noise or shading without a
         border), ``"max_steps"`` (it kept moving: still travelling, or swinging
         about the border) or ``"cancelled"``. At rest means no node
@@ -407,6 +409,20 @@ def _drift(window: np.ndarray) -> float:
     """How far the means of the first and second halves of ``window`` lie apart."""
     half = len(window) // 2
     return float(np.abs(window[half:].mean(0) - window[:half].mean(0)).max())
+
+
+def _took_the_whole_image(contour: np.ndarray, drawing: np.ndarray, shape) -> bool:
+    """Whether ``contour`` runs along all four of the image's sides while
+    ``drawing`` (clipped to the image) did not: it spread over the whole
+    image, the image's sides holding it where no border of the object did."""
+    return _sides_met(contour, shape) == 4 and _sides_met(drawing, shape) < 4
+
+
+def _sides_met(contour: np.ndarray, shape, within: float = 1.0) -> int:
+    """How many of the image's four sides ``contour`` comes within ``within`` px of."""
+    low, high = contour.min(axis=0), contour.max(axis=0)
+    last = np.array(shape, dtype=float) - 1.0
+    return int(np.sum(low <= within)) + int(np.sum(high >= last - within))
 
 
 def _rest_reason(field: ForceField, nodes: np.ndarray) -> str:
@@ -1016,6 +1032,8 @@ def _evolve(
         nodes = np.clip(polish(features.evenly_lit(features.window), nodes, polarity=features.polarity), -0.5,
                         features.bounds)
     nodes = nodes + features.origin
+    if stop_reason == "converged" and _took_the_whole_image(nodes, init, image.shape):
+        stop_reason = "leaked"
     if not np.array_equal(history[-1], nodes):
         history.append(nodes.copy())
     t_end = time.perf_counter()
