@@ -303,8 +303,8 @@ def bad_frames(frames, truth, ids, inits, starts, out, frame=10):
     bad = {"blank": lambda f: np.full_like(f, level),
            "blurred (sigma 4 px)": lambda f: cv2.GaussianBlur(f, (0, 0), 4.0),
            "dimmed to a third": lambda f: level + (f - level) / 3.0}
-    out(f"One bad frame (frame {frame} of the CTC movie; one run each; the MCV chain, at 0.5 s an "
-        "object-frame, is left out):")
+    out(f"One bad frame (frame {frame} of the CTC movie; one run each; the MCV chain, at over ten times "
+        "our time per object-frame, is left out):")
     out()
     out("| frame | ours: followed / frames lost / median (px) | threshold + laptrack |")
     out("|---|---|---|")
