@@ -160,6 +160,20 @@ def test_an_object_that_moves_further_than_predicted_is_followed_whole(jump):
         assert np.hypot(*(tr.centroids(0)[t] - centres[t][0])) < 1.0
 
 
+@pytest.mark.parametrize("back", [0, 2, 4])
+def test_an_object_that_stops_after_a_dart_is_followed(back):
+    """A cell that darts its own radius, then stops (or steps back): the
+    motion predicted from the dart puts the next frame's drawing 9-13 px off,
+    mostly on the background. The cell is looked for where it was last seen
+    too (it was lost on that frame, then found again on the next)."""
+    centres = [[(32, 22)], [(41, 22)], [(41 - back, 22)], [(41 - back, 22)]]
+    frames = _disk_movie(centres, radius=9, shape=(64, 80))
+    tr = track(frames, _circle((32, 22), 13.5))
+    assert tr.status[0] == [TRACKED] * 4
+    for t in (2, 3):
+        assert np.hypot(*(tr.centroids(0)[t] - centres[t][0])) < 1.0
+
+
 def test_an_object_that_vanishes_is_lost_not_returned_as_garbage():
     centres = [[(48, 48)]] * 4 + [[(None, None)]] * 3
     tr = track(_disk_movie(centres), _circle((48, 48), 16))

@@ -4,8 +4,9 @@ Whatever the motion and the drawings, track() either returns a result that
 keeps its promises or raises a documented error (ValueError): every object
 and frame has a status; a tracked contour is finite, positively oriented, in
 the image and holds its object, with finite node data; a lost or departed
-object has no contour and stays so; a vanished object is not tracked; objects tracked together do
-not overlap.
+object has no contour, and stays so once it has been missing for more than
+MAX_GAP frames (within them it may be found again); a vanished object is not
+tracked; objects tracked together do not overlap.
 """
 
 import warnings
@@ -15,6 +16,7 @@ from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 from napari_physeg.core import LEFT, LOST, TRACKED, track
 from napari_physeg.core.contour import polygon_mask, signed_area
+from napari_physeg.core.tracking import MAX_GAP
 
 SHAPE = (64, 80)
 RADIUS = 9.0
@@ -73,6 +75,11 @@ def _circle(centre, radius, n=40):
 @example(movie=([[np.array([32.0, 22.0]), None, None],
                  [np.array([32.0, 58.0]), np.array([24.0, 58.0]), np.array([24.0, 58.0])]], 3),
          dtype=np.uint8, bright=False, noise=0.0625, seed=0, scale=1.25, start_at=0.0)
+# Found by this test (session 24): a disk that darts 9 px, then steps 2 px back,
+# was lost on that frame: the motion predicted from the dart put its drawing
+# 11 px off, mostly on the background, and nothing looked where it had been.
+@example(movie=([[np.array([32.0, 22.0]), np.array([41.0, 22.0]), np.array([39.0, 22.0]), np.array([39.0, 22.0])]],
+                4), dtype=np.uint8, bright=False, noise=0.0, seed=0, scale=1.5, start_at=0.0)
 def test_track_keeps_its_promises_or_raises_a_documented_error(movie, dtype, bright, noise, seed, scale, start_at):
     paths, n_frames = movie
     frames, masks = _render(paths, n_frames, dtype, bright, noise, seed)
@@ -91,13 +98,19 @@ def test_track_keeps_its_promises_or_raises_a_documented_error(movie, dtype, bri
     for k, path in enumerate(paths):
         statuses = tr.status[k]
         assert len(statuses) == n_frames and set(statuses) <= {TRACKED, LOST, LEFT}
+        # Away from the start frame, an object missing for more than MAX_GAP
+        # frames stays gone (within them it is looked for again, from its last contour).
+        for order in (range(start, n_frames), range(start, -1, -1)):
+            last_seen = start
+            for t in order:
+                if statuses[t] == TRACKED:
+                    assert abs(t - last_seen) <= MAX_GAP + 1
+                    last_seen = t
         for t, (status, contour) in enumerate(zip(statuses, tr.contours[k])):
             if path[t] is None:  # vanished: nothing there to return
                 assert status != TRACKED
             if status != TRACKED:
                 assert contour is None
-                # No re-detection: gone stays gone, away from the start frame.
-                assert all(s != TRACKED for s in (statuses[t:] if t > start else statuses[:t + 1]))
                 continue
             assert contour.ndim == 2 and contour.shape[1] == 2 and len(contour) >= 3
             assert np.all(np.isfinite(contour)) and signed_area(contour) > 0

@@ -439,6 +439,12 @@ def _one_object(image, shared, owner, t, k, start, step, inits, contours, status
     before = contours[k][last - step] if last == t - step and 0 <= last - step < len(contours[k]) else None
     init, predicted = _next_init([c for c in (before, contours[k][last]) if c is not None])
     contour, verdict = _found(image, shared, owner, k, init, predicted, contours[k][last], seen, options)
+    if verdict == LOST and before is not None:
+        # The motion predicted from the last two frames may overshoot one
+        # that stopped or turned back (its drawing then lies mostly on the
+        # background): look for it where it was last seen too.
+        init, predicted = _next_init([contours[k][last]])
+        contour, verdict = _found(image, shared, owner, k, init, predicted, contours[k][last], seen, options)
     if verdict != TRACKED and last != t - step:
         verdict = status[k][last + step]  # not found again: as it went missing
     return contour, verdict
