@@ -439,7 +439,7 @@ def _one_object(image, shared, owner, t, k, start, step, inits, contours, status
     before = contours[k][last - step] if last == t - step and 0 <= last - step < len(contours[k]) else None
     init, predicted = _next_init([c for c in (before, contours[k][last]) if c is not None])
     contour, verdict = _found(image, shared, owner, k, init, predicted, contours[k][last], seen, options)
-    if verdict == LOST and before is not None:
+    if verdict == LOST and not np.allclose(predicted, contours[k][last], atol=0.5):
         # The motion predicted from the last two frames may overshoot one
         # that stopped or turned back (its drawing then lies mostly on the
         # background): look for it where it was last seen too.
