@@ -442,31 +442,27 @@ def _failure_message(index, err, job) -> str:
             "(e.g. the defaults: rubber, r = 2000) and report this if it persists")
 
 
+#: Why contours did not reach a border, and what to do, in the order the
+#: warnings are given ("{steps}": the steps the first of them took).
+_NOT_CONVERGED_ADVICE = {
+    "max_steps": "were still moving after {steps} steps: raise 'max steps' (or draw closer to the object)",
+    "stalled": "came to rest away from any border (nothing in reach pulled them further): draw them closer "
+               "to the object's border, or raise the stiffness r",
+    "leaked": "spread over the whole image (nothing told the object from its surroundings): draw them around "
+              "the object, closer to its border, or set 'object is' to bright or dark",
+    "oscillating": "kept swinging without getting anywhere (no border holds them: noise or shading only): "
+                   "draw them around the object, closer to its border",
+}
+
+
 def not_converged_messages(outcome: SegmentationOutcome, job: SegmentationJob) -> list[str]:
     """One warning per way the contours did not reach a border, with the advice that fits it."""
     by_reason: dict = {}
     for i, r in zip(outcome.indices, outcome.results):
         if not r.converged:
             by_reason.setdefault(r.stop_reason, []).append((job.shape_indices[i], r.steps))
-    messages = []
-    if "max_steps" in by_reason:
-        shapes = [k for k, _ in by_reason["max_steps"]]
-        messages.append(f"shape(s) {shapes} were still moving after {by_reason['max_steps'][0][1]} steps: raise "
-                        "'max steps' (or draw closer to the object)")
-    if "stalled" in by_reason:
-        shapes = [k for k, _ in by_reason["stalled"]]
-        messages.append(f"shape(s) {shapes} came to rest away from any border (nothing in reach pulled them "
-                        "further): draw them closer to the object's border, or raise the stiffness r")
-    if "leaked" in by_reason:
-        shapes = [k for k, _ in by_reason["leaked"]]
-        messages.append(f"shape(s) {shapes} spread over the whole image (nothing told the object from its "
-                        "surroundings): draw them around the object, closer to its border, or set 'object is' "
-                        "to bright or dark")
-    if "oscillating" in by_reason:
-        shapes = [k for k, _ in by_reason["oscillating"]]
-        messages.append(f"shape(s) {shapes} kept swinging without getting anywhere (no border holds them: "
-                        "noise or shading only): draw them around the object, closer to its border")
-    return messages
+    return [f"shape(s) {[k for k, _ in runs]} " + advice.format(steps=runs[0][1])
+            for reason, advice in _NOT_CONVERGED_ADVICE.items() if (runs := by_reason.get(reason))]
 
 
 def result_layer_data(outcome: SegmentationOutcome, job: SegmentationJob, *, labels: bool = False,
