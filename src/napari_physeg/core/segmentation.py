@@ -630,6 +630,21 @@ class _FeatureWindow:
         return old - self.origin
 
 
+def _polished(features: _FeatureWindow, nodes: np.ndarray) -> np.ndarray:
+    """``nodes`` (window frame), at rest, polished onto the border measured
+    on the raw image (subpixel.polish), but for those the polish would take
+    next to or into pixels of ``avoid``: between touching objects with no
+    edge between them the raw image's border lies in the other's pixels,
+    and the region force's balance, half-way between the two, stands."""
+    polished = np.clip(polish(features.evenly_lit(features.window), nodes, polarity=features.polarity), -0.5,
+                       features.bounds)
+    if features.avoid is None:
+        return polished
+    near_others = cv2.dilate(features.avoid[features.window].view(np.uint8), np.ones((3, 3), np.uint8))
+    pixel = np.clip(np.rint(polished).astype(int), 0, np.array(near_others.shape) - 1)
+    return np.where(near_others[pixel[:, 0], pixel[:, 1]][:, None] > 0, nodes, polished)
+
+
 class _ElasticBody:
     """Sclaroff's element for the current nodes, its time integrator, and
     the per-node trust region that keeps each step within ``max_step_length``.
@@ -1029,8 +1044,7 @@ def _evolve(
         # At rest every node is within a few tenths of a pixel of the border,
         # read on smoothed images and each on its own noise: measure the border
         # on the raw image and fit the polygon to it (see subpixel.polish).
-        nodes = np.clip(polish(features.evenly_lit(features.window), nodes, polarity=features.polarity), -0.5,
-                        features.bounds)
+        nodes = _polished(features, nodes)
     nodes = nodes + features.origin
     if stop_reason == "converged" and _took_the_whole_image(nodes, init, image.shape):
         stop_reason = "leaked"
