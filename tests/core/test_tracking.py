@@ -174,17 +174,18 @@ def test_an_object_that_stops_after_a_dart_is_followed(back):
         assert np.hypot(*(tr.centroids(0)[t] - centres[t][0])) < 1.0
 
 
-@pytest.mark.xfail(strict=True, reason="known (session 24): objects are segmented one after the other; "
-                   "a vanished object's drawing takes the part of a neighbour that moved toward its place, "
-                   "and the neighbour, whose pixels are then another object's, is lost")
 def test_a_vanished_object_does_not_take_a_neighbour_that_moved_toward_it():
     """Three dark disks; the first vanishes on frame 2 while the third moves
     9 px toward where it was. Found by the tracking fuzz test with three
-    objects (session 24)."""
+    objects (session 24): segmented first, the vanished object's drawing took
+    the part of the third that had come into it, and the third was lost."""
     centres = [[(32, 22), (32, 58), (14, 40)], [(32, 22), (32, 58), (14, 40)], [(None, None), (32, 58), (19, 33)]]
     frames = 1.0 - _disk_movie(centres, radius=9, shape=(64, 80), noise=0.0)
     tr = track(frames, [_circle(c, 13.5) for c in centres[0]])
-    assert tr.status[0][2] == LOST and tr.status[2][2] == TRACKED
+    assert tr.status[0] == [TRACKED, TRACKED, LOST] and tr.contours[0][2] is None
+    assert tr.status[1] == tr.status[2] == [TRACKED] * 3
+    rr, cc = np.mgrid[:64, :80]
+    assert iou(tr.contours[2][2], (rr - 19) ** 2 + (cc - 33) ** 2 <= 81) > 0.9
 
 
 def test_an_object_that_vanishes_is_lost_not_returned_as_garbage():

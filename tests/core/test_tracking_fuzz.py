@@ -1,4 +1,4 @@
-"""Fuzzing track() on small movies of disks that drift, dart, vanish or leave.
+"""Fuzzing track() on small movies of 1-3 disks that drift, dart, vanish or leave.
 
 Whatever the motion and the drawings, track() either returns a result that
 keeps its promises or raises a documented error (ValueError): every object
@@ -12,7 +12,7 @@ tracked; objects tracked together do not overlap.
 import warnings
 
 import numpy as np
-from hypothesis import HealthCheck, example, given, settings, strategies as st
+from hypothesis import HealthCheck, assume, example, given, settings, strategies as st
 
 from napari_physeg.core import LEFT, LOST, TRACKED, track
 from napari_physeg.core.contour import polygon_mask, signed_area
@@ -24,11 +24,11 @@ RADIUS = 9.0
 
 @st.composite
 def movies(draw):
-    """1-2 disks, 3-6 frames: per frame each drifts (up to 4 px), darts (up to
-    12 px) or vanishes; some start near or leave by a side."""
-    n_obj = draw(st.integers(1, 2))
+    """1-3 disks, 3-6 frames: per frame each drifts (up to 4 px), darts (up to
+    12 px) or vanishes; some start near or leave by a side, or run into another."""
+    n_obj = draw(st.integers(1, 3))
     n_frames = draw(st.integers(3, 6))
-    starts = [np.array([32.0, 22.0]), np.array([32.0, 58.0])][:n_obj]
+    starts = [np.array([32.0, 22.0]), np.array([32.0, 58.0]), np.array([14.0, 40.0])][:n_obj]
     paths = []
     for k in range(n_obj):
         centre, path = starts[k] + [draw(st.floats(-6, 6)), draw(st.floats(-6, 6))], []
@@ -80,8 +80,16 @@ def _circle(centre, radius, n=40):
 # 11 px off, mostly on the background, and nothing looked where it had been.
 @example(movie=([[np.array([32.0, 22.0]), np.array([41.0, 22.0]), np.array([39.0, 22.0]), np.array([39.0, 22.0])]],
                 4), dtype=np.uint8, bright=False, noise=0.0, seed=0, scale=1.5, start_at=0.0)
+# Found by this test with three objects (session 25): a disk that ran into
+# another (their disks merged) shared 4 px with it: the polish took both
+# contours onto the blob's border, into each other's pixels.
+@example(movie=([[np.array([32.0, 23.625]), np.array([26.0, 32.625]), None],
+                 [np.array([32.0, 58.0])] * 3, [np.array([14.0, 40.0])] * 3], 3),
+         dtype=np.uint8, bright=False, noise=0.0, seed=0, scale=1.5, start_at=0.0)
 def test_track_keeps_its_promises_or_raises_a_documented_error(movie, dtype, bright, noise, seed, scale, start_at):
     paths, n_frames = movie
+    firsts = [p[0] for p in paths]  # apart on the first frame (later they may meet)
+    assume(all(np.hypot(*(a - b)) > 2 * RADIUS + 2 for i, a in enumerate(firsts) for b in firsts[:i]))
     frames, masks = _render(paths, n_frames, dtype, bright, noise, seed)
     # Drawn on a frame where every object is seen: tracked forward, then backward.
     seen = [t for t in range(n_frames) if all(p[t] is not None for p in paths)]
@@ -123,5 +131,5 @@ def test_track_keeps_its_promises_or_raises_a_documented_error(movie, dtype, bri
             assert (region & masks[t][k]).sum() >= 0.5 * region.sum()
     for t in range(n_frames):
         regions = [polygon_mask(c[t], SHAPE) for c in tr.contours if c[t] is not None]
-        if len(regions) == 2:
-            assert (regions[0] & regions[1]).sum() <= 3
+        for i, region in enumerate(regions):
+            assert all((region & other).sum() <= 2 for other in regions[:i])

@@ -11,7 +11,9 @@ pixel where its object was predicted found another object: the object is
 lost, and looked for again from its last contour on the next MAX_GAP frames
 (a blank or defocused frame). The feature images of a frame are computed
 once and shared by all its objects, and each object counts the others'
-pixels as background: objects repel each other and never overlap.
+pixels as background: objects repel each other and never overlap. An
+object not found where one segmented before it took pixels has the two
+segmented again in the other order (see _give_back).
 
 Once the contours are known, consecutive contours of an object are matched
 node to node by the order-preserving modal matching of :func:`.match`, as
@@ -27,7 +29,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 
 import cv2
@@ -86,6 +88,16 @@ LEFT_FRACTION = 0.3
 #: blank, dropped or defocused frame): one blank frame of the Cell Tracking
 #: Challenge movie lost 10 of its 13 tracks for good.
 MAX_GAP = 2
+
+#: An object not found on a frame where another, done before it, took at
+#: least this share of its area within the drawing it was looked for in
+#: has the two segmented again in the other order (see _give_back).
+SUSPECT_SHARE = 0.05
+
+#: What an object not found on a frame weighs against one found there, in
+#: _give_back's comparison: as much as a contour one radius off its
+#: predicted place (see _misfit).
+LOST_MISFIT = 1.0
 
 
 @dataclass(frozen=True)
@@ -312,12 +324,18 @@ def _inside(contour: np.ndarray, box) -> np.ndarray | None:
     return polygon_mask(contour - [box[0].start, box[1].start], shape)
 
 
-def _paint(owner: np.ndarray, contour: np.ndarray, value: int) -> None:
-    """Set the pixels of ``owner`` inside ``contour`` to ``value``."""
+def _paint(owner: np.ndarray, contour: np.ndarray | None, value: int, only_free: bool = False) -> None:
+    """Set the pixels of ``owner`` inside ``contour`` (if any) to ``value``
+    (``only_free``: those no object owns, -1)."""
+    if contour is None:
+        return
     box = bounding_window(contour, owner.shape, 0.0)
     inside = _inside(contour, box)
-    if inside is not None:
-        owner[box][inside] = value
+    if inside is None:
+        return
+    if only_free:
+        inside &= owner[box] < 0
+    owner[box][inside] = value
 
 
 def _touches_side(contour: np.ndarray, shape) -> bool:
@@ -343,9 +361,14 @@ def _judge(contour, previous, predicted, whole_area, shape) -> str:
 
 def _overlap(a: np.ndarray, b: np.ndarray, shape) -> bool:
     """Whether the regions of contours ``a`` and ``b`` share a pixel of an image of ``shape``."""
+    return _shared_area(a, b, shape) > 0
+
+
+def _shared_area(a: np.ndarray, b: np.ndarray, shape) -> int:
+    """The pixels of an image of ``shape`` inside both contours ``a`` and ``b``."""
     box = bounding_window(np.vstack([a, b]), shape, 0.0)
     in_a, in_b = _inside(a, box), _inside(b, box)
-    return in_a is not None and bool((in_a & in_b).any())
+    return 0 if in_a is None else int((in_a & in_b).sum())
 
 
 def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_options: dict | None = None,
@@ -370,10 +393,10 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
     # Checked once here: a bad option must not pass, frame after frame, for a lost object.
     check_segment_options(**options)
     polarity = options.pop("polarity", "auto")  # then each object's, from its first frame
-    seen = [_Seen(polarity, abs(signed_area(c))) for c in inits]
     n_obj = len(inits)
-    contours = [[None] * n_frames for _ in range(n_obj)]
-    status = [[None] * n_frames for _ in range(n_obj)]
+    run = _Run(inits=inits, start=start, options=options,
+               contours=[[None] * n_frames for _ in range(n_obj)], status=[[None] * n_frames for _ in range(n_obj)],
+               seen=[_Seen(polarity, abs(signed_area(c))) for c in inits])
     total, done, stop_reason = n_obj * n_frames, 0, "completed"
     # Forward from the start frame, then backward from it.
     for frame_order in (range(start, n_frames), range(start - 1, -1, -1)):
@@ -388,18 +411,13 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
             # contours on this frame once done, else on the frame before.
             owner = np.full(image.shape, -1, dtype=np.int32)
             for j in range(n_obj):
-                last = inits[j] if t == start else contours[j][t - step]
-                if last is not None:
-                    _paint(owner, last, j)
+                _paint(owner, _claim_before(run, j, t, step), j)
             for k in range(n_obj):
-                contour, status[k][t] = _one_object(image, shared, owner, t, k, start, step, inits, contours,
-                                                    status, seen[k], options)
-                contours[k][t] = contour
-                owner[owner == k] = -1
-                if contour is not None:
-                    _paint(owner, contour, k)
+                _settle(run, image, shared, owner, t, k, step)
+                if run.status[k][t] != TRACKED and t != start:
+                    _give_back(run, image, shared, owner, t, k, step)
                 done += 1
-                stop = yield TrackingProgress(t, k, contour, status[k][t], done, total)
+                stop = yield TrackingProgress(t, k, run.contours[k][t], run.status[k][t], done, total)
                 if stop:
                     stop_reason = "cancelled"
                     break
@@ -407,6 +425,8 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                 break
         if stop_reason == "cancelled":
             break
+    contours = run.contours
+    status = run.status
     t_segmented = time.perf_counter()
     analysis = _correspondences(contours, start, match_options or {})
     t_end = time.perf_counter()
@@ -427,27 +447,112 @@ class _Seen:
     contrast: float = np.nan
 
 
-def _one_object(image, shared, owner, t, k, start, step, inits, contours, status, seen: _Seen, options):
+@dataclass
+class _Run:
+    """What one track() run knows so far: the drawings on the start frame,
+    and per object and frame the contours and statuses found."""
+
+    inits: list
+    start: int
+    options: dict
+    contours: list
+    status: list
+    seen: list
+
+
+def _claim_before(run: _Run, k: int, t: int, step: int) -> np.ndarray | None:
+    """Object ``k``'s pixels on frame ``t`` as far as known before it is done:
+    its drawing on the start frame, else its contour on the frame before."""
+    return run.inits[k] if t == run.start else run.contours[k][t - step]
+
+
+def _settle(run: _Run, image, shared, owner, t: int, k: int, step: int) -> None:
+    """Segment object ``k`` on frame ``t`` and make its pixels its own in ``owner``."""
+    run.contours[k][t], run.status[k][t] = _one_object(run, image, shared, owner, t, k, step)
+    owner[owner == k] = -1
+    _paint(owner, run.contours[k][t], k)
+
+
+def _history(run: _Run, k: int, t: int, step: int):
+    """The frame where object ``k`` was last seen before ``t`` (None if not
+    within MAX_GAP frames) and its contours there and on the frame before in
+    the direction of travel (after a gap, the last one only: where it went
+    meanwhile is not known)."""
+    last = _last_seen(run.status[k], t, step)
+    if last is None:
+        return None, []
+    contours = run.contours[k]
+    before = contours[last - step] if last == t - step and 0 <= last - step < len(contours) else None
+    return last, [c for c in (before, contours[last]) if c is not None]
+
+
+def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int):
     """Segment object ``k`` on frame ``t``; its contour (or None) and status."""
-    if t == start:
-        return _found(image, shared, owner, k, inits[k], None, None, seen, options)
-    last = _last_seen(status[k], t, step)
+    seen, options = run.seen[k], run.options
+    if t == run.start:
+        return _found(image, shared, owner, k, run.inits[k], None, None, seen, options)
+    last, history = _history(run, k, t, step)
     if last is None:  # lost or out of view for more than MAX_GAP frames: stays so
-        return None, status[k][t - step]
-    # The two frames before this one, in the direction of travel (after a
-    # gap, the last one seen: where it went meanwhile is not known).
-    before = contours[k][last - step] if last == t - step and 0 <= last - step < len(contours[k]) else None
-    init, predicted = _next_init([c for c in (before, contours[k][last]) if c is not None])
-    contour, verdict = _found(image, shared, owner, k, init, predicted, contours[k][last], seen, options)
-    if verdict == LOST and not np.allclose(predicted, contours[k][last], atol=0.5):
+        return None, run.status[k][t - step]
+    init, predicted = _next_init(history)
+    contour, verdict = _found(image, shared, owner, k, init, predicted, history[-1], seen, options)
+    if verdict == LOST and not np.allclose(predicted, history[-1], atol=0.5):
         # The motion predicted from the last two frames may overshoot one
         # that stopped or turned back (its drawing then lies mostly on the
         # background): look for it where it was last seen too.
-        init, predicted = _next_init([contours[k][last]])
-        contour, verdict = _found(image, shared, owner, k, init, predicted, contours[k][last], seen, options)
+        init, predicted = _next_init(history[-1:])
+        contour, verdict = _found(image, shared, owner, k, init, predicted, history[-1], seen, options)
     if verdict != TRACKED and last != t - step:
-        verdict = status[k][last + step]  # not found again: as it went missing
+        verdict = run.status[k][last + step]  # not found again: as it went missing
     return contour, verdict
+
+
+def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int) -> None:
+    """Object ``j``, not found on frame ``t``: if an object done before it
+    took pixels where ``j`` was looked for, segment the two again in the
+    other order, and keep whichever outcome fits their motion better.
+
+    Objects are segmented one after the other, each counting the others'
+    pixels as background: a vanished object's drawing takes the part of a
+    neighbour that moved toward its place, and the neighbour, whose pixels
+    are then another's, is lost.
+    """
+    last, history = _history(run, j, t, step)
+    if last is None:
+        return
+    looked_at = _drawing_around(history[-1])
+    least = SUSPECT_SHARE * abs(signed_area(history[-1]))
+    for i in range(j):
+        if run.status[i][t] != TRACKED or _shared_area(run.contours[i][t], looked_at, image.shape) < least:
+            continue
+        kept = [(run.contours[o][t], run.status[o][t], replace(run.seen[o])) for o in (i, j)]
+        misfit = _misfit(run, i, t, step) + _misfit(run, j, t, step)
+        trial = owner.copy()
+        trial[trial == i] = -1
+        _paint(trial, _claim_before(run, i, t, step), i, only_free=True)  # i not done yet
+        _settle(run, image, shared, trial, t, j, step)
+        _settle(run, image, shared, trial, t, i, step)
+        if _misfit(run, i, t, step) + _misfit(run, j, t, step) < misfit:
+            owner[...] = trial
+            return
+        for o, (contour, status, seen) in zip((i, j), kept):
+            run.contours[o][t], run.status[o][t], run.seen[o] = contour, status, seen
+
+
+def _misfit(run: _Run, k: int, t: int, step: int) -> float:
+    """How badly object ``k``'s outcome on frame ``t`` fits what was known of
+    it: LOST_MISFIT if it is not tracked, else its centroid's distance from
+    where it was predicted or last seen, in radii of the last contour, plus
+    the log of its change of area."""
+    if run.status[k][t] != TRACKED:
+        return LOST_MISFIT
+    _, history = _history(run, k, t, step)
+    contour, last = run.contours[k][t], history[-1]
+    centre = area_centroid(contour)
+    where = [area_centroid(_next_init(history)[1]), area_centroid(last)]
+    radius = np.sqrt(abs(signed_area(last)) / np.pi)
+    distance = min(np.hypot(*(centre - w)) for w in where) / radius
+    return float(distance + abs(np.log(abs(signed_area(contour)) / abs(signed_area(last)))))
 
 
 def _found(image, shared, owner, k, init, predicted, previous, seen: _Seen, options):
@@ -515,7 +620,8 @@ def _contrast(image: np.ndarray, contour: np.ndarray, polarity: int, avoid: np.n
 def _correspondences(contours, start, match_options) -> dict:
     """Origins, normal velocities, curvature and carried arc positions."""
     n_obj, n_frames = len(contours), len(contours[0])
-    out = {name: [[None] * n_frames for _ in range(n_obj)] for name in ("origin", "normal_velocity", "curvature", "arc")}
+    names = ("origin", "normal_velocity", "curvature", "arc")
+    out = {name: [[None] * n_frames for _ in range(n_obj)] for name in names}
     for k in range(n_obj):
         for t in range(n_frames):
             c = contours[k][t]
