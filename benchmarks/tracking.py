@@ -295,22 +295,27 @@ def faster_motion(frames, truth, ids, inits, starts, out, steps=(2, 3, 4)):
 def bad_frames(frames, truth, ids, inits, starts, out, frame=10):
     """The CTC movie with one bad frame, as acquisitions have them: ``frame`` blank (the
     background's level: a dropped frame), blurred (sigma 4 px: out of focus) or dimmed to a
-    third (a flicker). The frames after it are scored too: a method that loses an object on
-    the bad frame for good loses its track."""
+    third (a flicker); and the whole movie photobleached (the signal above half the
+    background's level decays geometrically to 0.15 of its own by the last frame). The frames
+    after the bad one are scored too: a method that loses an object on it for good loses its track."""
     import cv2
 
     level = float(np.median(frames[0]))
+    bleach = np.geomspace(1.0, 0.15, len(frames))[:, None, None]
     bad = {"blank": lambda f: np.full_like(f, level),
            "blurred (sigma 4 px)": lambda f: cv2.GaussianBlur(f, (0, 0), 4.0),
            "dimmed to a third": lambda f: level + (f - level) / 3.0}
-    out(f"One bad frame (frame {frame} of the CTC movie; one run each; the MCV chain, at over ten times "
-        "our time per object-frame, is left out):")
+    out(f"Bad frames (frame {frame} of the CTC movie, or all of them bleached; one run each; the MCV chain, "
+        "at over ten times our time per object-frame, is left out):")
     out()
     out("| frame | ours: followed / frames lost / median (px) | threshold + laptrack |")
     out("|---|---|---|")
-    for name, spoil in bad.items():
+    for name in (*bad, "every frame photobleached, to 0.15 by the last"):
         movie = frames.astype(np.float32)
-        movie[frame] = spoil(movie[frame])
+        if name in bad:
+            movie[frame] = bad[name](movie[frame])
+        else:
+            movie = (0.5 * level + (movie - 0.5 * level) * bleach).astype(np.float32)
         cells = []
         for centroids in (run_ours(movie, inits)[0], run_threshold_laptrack(movie, starts)[0]):
             c = ctc_scores(centroids, truth, ids, frames.shape[1:])

@@ -225,8 +225,10 @@ def test_an_object_missing_for_longer_than_the_gap_stays_lost(movie):
 
 def test_an_object_that_fades_away_is_lost_one_that_bleaches_is_not():
     """A cell that leaves the focal plane fades to its out-of-focus glow: once
-    its contrast is below FADED_CONTRAST of the start frame's it is lost,
-    not followed as a dim blob. Bleaching to a third is still the cell."""
+    its contrast is below FADED_CONTRAST of its best within FADE_WINDOW
+    frames it is lost, not followed as a dim blob. Photobleaching dims a movie
+    slowly: a cell bleached to a tenth over 24 frames is still the cell
+    (session 25: lost from frame 17 on, below a fifth of the start frame's)."""
     rr, cc = np.mgrid[:96, :96]
     disk = (rr - 48) ** 2 + (cc - 48) ** 2 <= 12**2
     rng = np.random.default_rng(0)
@@ -238,6 +240,8 @@ def test_an_object_that_fades_away_is_lost_one_that_bleaches_is_not():
     assert faded.status[0] == [TRACKED] * 4 + [LOST] * 2
     bleached = track(movie([0.6, 0.5, 0.4, 0.3, 0.25, 0.2]), _circle((48, 48), 16))
     assert bleached.status[0] == [TRACKED] * 6
+    bleached = track(movie(0.6 * np.geomspace(1.0, 0.1, 24)), _circle((48, 48), 16))
+    assert bleached.status[0] == [TRACKED] * 24
 
 
 def test_an_object_that_moves_out_of_the_image_has_left_the_field_of_view():

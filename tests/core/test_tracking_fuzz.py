@@ -60,6 +60,11 @@ def _render(paths, n_frames, dtype, bright, noise, seed):
     return np.stack(frames), masks
 
 
+def _met(masks, k) -> bool:
+    """Whether disk ``k`` shares pixels with another on some frame."""
+    return any((frame[k] & other).any() for frame in masks for j, other in enumerate(frame) if j != k)
+
+
 def _circle(centre, radius, n=40):
     t = np.linspace(0, 2 * np.pi, n, endpoint=False)
     return np.column_stack([centre[0] + radius * np.sin(t), centre[1] + radius * np.cos(t)])
@@ -86,6 +91,13 @@ def _circle(centre, radius, n=40):
 @example(movie=([[np.array([32.0, 23.625]), np.array([26.0, 32.625]), None],
                  [np.array([32.0, 58.0])] * 3, [np.array([14.0, 40.0])] * 3], 3),
          dtype=np.uint8, bright=False, noise=0.0, seed=0, scale=1.5, start_at=0.0)
+# Found by this test with three objects (session 25): a disk darted beside
+# another (and was lost), which then vanished: the vanished one's drawing took
+# the disk that had darted there. The two are now segmented again in the other
+# order, the lost one from what the other found, and the better fit is kept.
+@example(movie=([[np.array([32.0, 22.0])] * 3 + [None, None], [np.array([32.0, 58.0])] * 5,
+                 [np.array([14.0, 34.9]), np.array([14.0, 34.9]), np.array([14.0, 23.13]), np.array([16.0, 23.13]),
+                  None]], 5), dtype=np.uint8, bright=False, noise=0.125, seed=0, scale=1.5, start_at=0.0)
 def test_track_keeps_its_promises_or_raises_a_documented_error(movie, dtype, bright, noise, seed, scale, start_at):
     paths, n_frames = movie
     firsts = [p[0] for p in paths]  # apart on the first frame (later they may meet)
@@ -114,8 +126,11 @@ def test_track_keeps_its_promises_or_raises_a_documented_error(movie, dtype, bri
                 if statuses[t] == TRACKED:
                     assert abs(t - last_seen) <= MAX_GAP + 1
                     last_seen = t
+        # Identical disks that have merged cannot be told apart after: one
+        # that met another may come out of the merger as the other.
+        own = [masks[t][k] if not _met(masks, k) else np.any(masks[t], axis=0) for t in range(n_frames)]
         for t, (status, contour) in enumerate(zip(statuses, tr.contours[k])):
-            if path[t] is None:  # vanished: nothing there to return
+            if path[t] is None and not _met(masks, k):  # vanished: nothing there to return
                 assert status != TRACKED
             if status != TRACKED:
                 assert contour is None
@@ -128,7 +143,7 @@ def test_track_keeps_its_promises_or_raises_a_documented_error(movie, dtype, bri
                 assert np.all(np.isfinite(tr.normal_velocity[k][t])) and np.all(np.isfinite(tr.origin[k][t]))
             # Held on its object: most of the contour's pixels are the disk's.
             region = polygon_mask(contour, SHAPE)
-            assert (region & masks[t][k]).sum() >= 0.5 * region.sum()
+            assert (region & own[t]).sum() >= 0.5 * region.sum()
     for t in range(n_frames):
         regions = [polygon_mask(c[t], SHAPE) for c in tr.contours if c[t] is not None]
         for i, region in enumerate(regions):

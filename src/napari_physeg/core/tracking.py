@@ -71,13 +71,21 @@ MAX_REDRAWS = 3
 AT_LIMIT_SHARE = 0.1
 
 #: An object whose contrast (see _contrast) falls below this fraction of
-#: its contrast on the start frame has faded: it is lost. Tracked through
+#: its best within FADE_WINDOW frames has faded: it is lost. Tracked through
 #: the confocal nuclei stack of the real-image benchmark as through time,
 #: the contours beyond the labels' ends in z (the nuclei's out-of-focus
-#: glow) had 0.05-0.27 of it, 133 of 141 below 0.2; those within them 0.18
-#: or more, 10 of 555 below 0.2 (the nuclei's caps). On the Cell Tracking
-#: Challenge movie no track fell below 0.65.
+#: glow) had 0.05-0.27 of their start slice's contrast, 133 of 141 below 0.2;
+#: those within them 0.18 or more, 10 of 555 below 0.2 (the nuclei's caps).
+#: On the Cell Tracking Challenge movie no track fell below 0.65.
 FADED_CONTRAST = 0.2
+
+#: ... within this many frames: an object that leaves the focal plane fades
+#: within a few frames, while photobleaching dims a whole movie slowly (the
+#: Cell Tracking Challenge movie bleached to 0.15 of its contrast over its 30
+#: frames lost 8 of its 13 tracks against the start frame's contrast, none
+#: against the best of the last 10 frames; through z, windows of 8-15 slices
+#: lost the glow as the start slice did, 5 slices followed it on 60-70 slices).
+FADE_WINDOW = 10
 
 #: An object cut by the image's side with less than this fraction of its
 #: area when last seen whole has left the field of view.
@@ -440,11 +448,20 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
 @dataclass
 class _Seen:
     """What is known of an object from the frames done: its polarity, its
-    area when last seen whole, and its contrast on the start frame."""
+    area when last seen whole, and its contrast on the frames where it was tracked."""
 
     polarity: str
     whole_area: float
-    contrast: float = np.nan
+    contrasts: dict = field(default_factory=dict)  # frame -> contrast where tracked
+
+    def copy(self) -> _Seen:
+        return replace(self, contrasts=dict(self.contrasts))
+
+    def faded(self, contrast: float, t: int) -> bool:
+        """Whether ``contrast`` on frame ``t`` is below FADED_CONTRAST times
+        the object's best within FADE_WINDOW frames of it."""
+        near = [c for frame, c in self.contrasts.items() if abs(frame - t) <= FADE_WINDOW and c > 0]
+        return bool(near) and contrast < FADED_CONTRAST * max(near)
 
 
 @dataclass
@@ -466,9 +483,9 @@ def _claim_before(run: _Run, k: int, t: int, step: int) -> np.ndarray | None:
     return run.inits[k] if t == run.start else run.contours[k][t - step]
 
 
-def _settle(run: _Run, image, shared, owner, t: int, k: int, step: int) -> None:
-    """Segment object ``k`` on frame ``t`` and make its pixels its own in ``owner``."""
-    run.contours[k][t], run.status[k][t] = _one_object(run, image, shared, owner, t, k, step)
+def _settle(run: _Run, image, shared, owner, t: int, k: int, step: int, handed=None) -> None:
+    """Segment object ``k`` on frame ``t`` (see _one_object) and make its pixels its own in ``owner``."""
+    run.contours[k][t], run.status[k][t] = _one_object(run, image, shared, owner, t, k, step, handed)
     owner[owner == k] = -1
     _paint(owner, run.contours[k][t], k)
 
@@ -486,36 +503,39 @@ def _history(run: _Run, k: int, t: int, step: int):
     return last, [c for c in (before, contours[last]) if c is not None]
 
 
-def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int):
-    """Segment object ``k`` on frame ``t``; its contour (or None) and status."""
+def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, handed=None):
+    """Segment object ``k`` on frame ``t`` from where its motion predicts it
+    (or from ``handed``, a contour another object found); its contour (or
+    None) and status."""
     seen, options = run.seen[k], run.options
     if t == run.start:
-        return _found(image, shared, owner, k, run.inits[k], None, None, seen, options)
+        return _found(image, shared, owner, t, k, run.inits[k], None, None, seen, options)
     last, history = _history(run, k, t, step)
     if last is None:  # lost or out of view for more than MAX_GAP frames: stays so
         return None, run.status[k][t - step]
-    init, predicted = _next_init(history)
-    contour, verdict = _found(image, shared, owner, k, init, predicted, history[-1], seen, options)
-    if verdict == LOST and not np.allclose(predicted, history[-1], atol=0.5):
+    init, predicted = _next_init(history) if handed is None else (_drawing_around(handed), handed)
+    contour, verdict = _found(image, shared, owner, t, k, init, predicted, history[-1], seen, options)
+    if verdict == LOST and handed is None and not np.allclose(predicted, history[-1], atol=0.5):
         # The motion predicted from the last two frames may overshoot one
         # that stopped or turned back (its drawing then lies mostly on the
         # background): look for it where it was last seen too.
         init, predicted = _next_init(history[-1:])
-        contour, verdict = _found(image, shared, owner, k, init, predicted, history[-1], seen, options)
+        contour, verdict = _found(image, shared, owner, t, k, init, predicted, history[-1], seen, options)
     if verdict != TRACKED and last != t - step:
         verdict = run.status[k][last + step]  # not found again: as it went missing
     return contour, verdict
 
 
 def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int) -> None:
-    """Object ``j``, not found on frame ``t``: if an object done before it
-    took pixels where ``j`` was looked for, segment the two again in the
-    other order, and keep whichever outcome fits their motion better.
+    """Object ``j``, not found on frame ``t``: if an object ``i`` done before
+    it took pixels where ``j`` was looked for, segment the two again, ``j``
+    first (from its prediction, else from what ``i`` found), and keep
+    whichever outcome fits their motion better (see _misfit).
 
     Objects are segmented one after the other, each counting the others'
     pixels as background: a vanished object's drawing takes the part of a
-    neighbour that moved toward its place, and the neighbour, whose pixels
-    are then another's, is lost.
+    neighbour that moved toward its place, or the whole of one that darted
+    there, and the neighbour, whose pixels are then another's, is lost.
     """
     last, history = _history(run, j, t, step)
     if last is None:
@@ -525,18 +545,20 @@ def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int) -> No
     for i in range(j):
         if run.status[i][t] != TRACKED or _shared_area(run.contours[i][t], looked_at, image.shape) < least:
             continue
-        kept = [(run.contours[o][t], run.status[o][t], replace(run.seen[o])) for o in (i, j)]
+        kept = [(run.contours[o][t], run.status[o][t], run.seen[o].copy()) for o in (i, j)]
         misfit = _misfit(run, i, t, step) + _misfit(run, j, t, step)
-        trial = owner.copy()
-        trial[trial == i] = -1
-        _paint(trial, _claim_before(run, i, t, step), i, only_free=True)  # i not done yet
-        _settle(run, image, shared, trial, t, j, step)
-        _settle(run, image, shared, trial, t, i, step)
-        if _misfit(run, i, t, step) + _misfit(run, j, t, step) < misfit:
-            owner[...] = trial
-            return
-        for o, (contour, status, seen) in zip((i, j), kept):
-            run.contours[o][t], run.status[o][t], run.seen[o] = contour, status, seen
+        for handed in (None, kept[0][0]):
+            trial = owner.copy()
+            trial[trial == i] = -1
+            if handed is None:  # as if i came after j: its pixels those of the frame before
+                _paint(trial, _claim_before(run, i, t, step), i, only_free=True)
+            _settle(run, image, shared, trial, t, j, step, handed)
+            _settle(run, image, shared, trial, t, i, step)
+            if _misfit(run, i, t, step) + _misfit(run, j, t, step) < misfit:
+                owner[...] = trial
+                return
+            for o, (contour, status, seen) in zip((i, j), kept):
+                run.contours[o][t], run.status[o][t], run.seen[o] = contour, status, seen.copy()
 
 
 def _misfit(run: _Run, k: int, t: int, step: int) -> float:
@@ -555,8 +577,8 @@ def _misfit(run: _Run, k: int, t: int, step: int) -> float:
     return float(distance + abs(np.log(abs(signed_area(contour)) / abs(signed_area(last)))))
 
 
-def _found(image, shared, owner, k, init, predicted, previous, seen: _Seen, options):
-    """Object ``k`` segmented from ``init`` (``previous``: its last contour,
+def _found(image, shared, owner, t, k, init, predicted, previous, seen: _Seen, options):
+    """Object ``k`` segmented on frame ``t`` from ``init`` (``previous``: its last contour,
     None on the start frame, where ``seen`` is filled in); its contour (or
     None) and status."""
     avoid = (owner >= 0) & (owner != k)
@@ -575,14 +597,16 @@ def _found(image, shared, owner, k, init, predicted, previous, seen: _Seen, opti
     if previous is None:
         seen.polarity = "bright" if res.polarity > 0 else "dark"
         seen.whole_area = abs(signed_area(contour))
-        seen.contrast = _contrast(image, contour, res.polarity, avoid)
+        seen.contrasts[t] = _contrast(image, contour, res.polarity, avoid)
         return contour, TRACKED
     verdict = _judge(contour, previous, predicted, seen.whole_area, image.shape)
     # Faded: what is left is the out-of-focus glow of an object that left
     # the focal plane, or the halo of a neighbour.
-    if verdict == TRACKED and seen.contrast > 0 and \
-            _contrast(image, contour, res.polarity, avoid) < FADED_CONTRAST * seen.contrast:
-        verdict = LOST
+    if verdict == TRACKED:
+        contrast = _contrast(image, contour, res.polarity, avoid)
+        verdict = LOST if seen.faded(contrast, t) else TRACKED
+        if verdict == TRACKED and np.isfinite(contrast):
+            seen.contrasts[t] = contrast
     if verdict == TRACKED and not _touches_side(contour, image.shape):
         seen.whole_area = abs(signed_area(contour))
     return (contour if verdict == TRACKED else None), verdict
