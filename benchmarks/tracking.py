@@ -323,6 +323,31 @@ def bad_frames(frames, truth, ids, inits, starts, out, frame=10):
         out(f"| {name} | {cells[0]} | {cells[1]} |")
 
 
+def stage_jitter(frames, truth, ids, inits, out, amplitudes=(3, 6, 10)):
+    """The CTC movie on a jittering stage: each frame a crop of the movie's frame, 2 x 10 px
+    smaller, at a random offset of up to +-a px (real content comes in at the sides) from the
+    middle; the truth moves with it. One run each."""
+    margin = max(amplitudes)
+    h, w = frames.shape[1] - 2 * margin, frames.shape[2] - 2 * margin
+    out(f"Stage jitter: each frame of the CTC movie cropped to {h} x {w} px at a random offset of up to "
+        "+-a px a frame (one run each; the drawings on frame 0 as in the main table, cropped):")
+    out()
+    out("| a (px) | ours: followed / frames lost / median (px) | threshold + laptrack |")
+    out("|---|---|---|")
+    for a in amplitudes:
+        rng = np.random.default_rng(a)
+        offsets = margin + np.vstack([[0, 0], rng.integers(-a, a + 1, (len(frames) - 1, 2))])
+        movie = np.stack([f[r:r + h, c:c + w] for f, (r, c) in zip(frames, offsets)])
+        moved = {k: {t: p - offsets[t] for t, p in truth[k].items()} for k in truth}
+        drawn = [i - offsets[0] for i in inits]
+        starts = [moved[k][0] for k in ids]
+        cells = []
+        for centroids in (run_ours(movie, drawn)[0], run_threshold_laptrack(movie, starts)[0]):
+            c = ctc_scores(centroids, moved, ids, movie.shape[1:])
+            cells.append(f"{c['followed']} / {len(ids)}, {c['lost']}, {c['median']:.2f}")
+        out(f"| {a} | {cells[0]} | {cells[1]} |")
+
+
 def other_drawings(frames, truth, ids, inits, out):
     """Ours from other frame-0 drawings of the CTC nuclei, as people draw them: a circle of
     25 px about each annotated centre (the user guide's recipe), a circle 1.3 times the
@@ -476,6 +501,8 @@ def main(argv=None):
     faster_motion(frames, truth, ids, inits, starts, out)
     out()
     bad_frames(frames, truth, ids, inits, starts, out)
+    out()
+    stage_jitter(frames, truth, ids, inits, out)
     out()
     through_z(out)
     kymo = (ROOT / "docs" / "images" if args.write else OUT) / "tracking_membrane_maps.png"
