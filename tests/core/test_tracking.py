@@ -387,11 +387,13 @@ def test_a_carried_contour_on_the_border_skips_the_evolution(movie):
     assert iou(from_inside, movie.masks[3]) > 0.98
 
 
+@pytest.mark.xfail(strict=True, reason="known (session 25): predictions ignore the frame's own motion; taking a "
+                   "phase-correlation shift into them followed these, but in sparse scenes where an object vanishes "
+                   "the shift maps one object onto another (found by the tracking fuzz test)")
 def test_objects_on_a_jittering_stage_are_followed():
     """Three cells 28 px apart on a stage that jumps 13-16 px between frames,
-    each way in turn: each frame's common shift (phase correlation) is taken
-    into every prediction. Without it (session 24) 6 of 21 object-frames
-    were lost and one contour took a neighbour, 28 px off."""
+    each way in turn: 6 of 24 object-frames are lost and one contour takes a
+    neighbour, 28 px off."""
     jumps = [(0, 0), (12, -10), (-13, 9), (10, 12), (-12, -11), (13, -8), (-10, 13), (12, 9)]
     offsets = np.cumsum(jumps, axis=0) + 10
     cells = [(34, 34), (34, 62), (62, 48)]

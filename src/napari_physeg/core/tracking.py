@@ -2,11 +2,9 @@
 
 :func:`track` segments every object of a movie frame by frame, each frame
 starting from the previous result moved by the motion predicted from the
-frames before (the object's own, and the whole frame's, measured by phase
-correlation: a drifting or jittering stage) with the object's levels read
-from that contour grown by a margin, a drawing around it, so the physical
-contour needs only a few steps, and none of the evolution's when it starts
-on the object's border.
+frames before (the object's levels read from that contour grown by a
+margin, a drawing around it), so the physical contour needs only a few
+steps, and none of the evolution's when it starts on the object's border.
 A contour that comes to rest against its drawing's limit is drawn around
 again (the object moved further than predicted); one that ends with no
 pixel where its object was predicted found another object: the object is
@@ -108,18 +106,6 @@ SUSPECT_SHARE = 0.05
 #: _give_back's comparison: as much as a contour one radius off its
 #: predicted place (see _misfit).
 LOST_MISFIT = 1.0
-
-#: Frames are compared for their common shift (see _shift_between)
-#: reduced to at most this many pixels a side (at 256 the CTC movie's 511-px
-#: frames gave shifts off by a pixel or two) ...
-SHIFT_VIEW = 512
-
-#: ... and the shift is taken when the phase correlation's peak reaches
-#: this: 0.36-0.87 between consecutive frames of the Cell Tracking Challenge
-#: movie (the same with the stage jittering by up to 6 px), 0.15-0.29 between
-#: every 4th (the nuclei changed: no common shift to take), 0.0 against a
-#: blank frame, whose "shift" is noise.
-SHIFT_RESPONSE = 0.3
 
 
 @dataclass(frozen=True)
@@ -293,19 +279,14 @@ def _grown(contour: np.ndarray, by: float) -> np.ndarray:
     return remove_loops(nodes + by * outward_normals(nodes))
 
 
-def _predictions(run: _Run, history: list[np.ndarray], last: int, t: int, step: int) -> list[np.ndarray]:
-    """Where an object last seen on frame ``last`` as ``history[-1]`` (and
-    ``history[-2]`` on the frame before that) may be on frame ``t``, most
-    likely first: moved by the frame's shift (see _frame_shift) and by its
-    own last motion (its centroid's, less the frame's then); by its
-    centroid's last motion; by the frame's shift; where it was (its own
-    motion may overshoot one that stopped or turned back: its drawing then
-    lies mostly on the background). Duplicates are for the caller to skip."""
+def _next_init(history: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The next frame's drawing and start: the previous contour moved by the
+    centroid's last displacement (the start), and that grown by a margin (the
+    drawing around the object, whose line reads the background)."""
     prev = history[-1]
-    shift = _frame_shift(run, last, t)
-    motion = area_centroid(prev) - area_centroid(history[-2]) if len(history) > 1 else np.zeros(2)
-    own = motion - _frame_shift(run, last - step, last) if len(history) > 1 else motion
-    return [prev + shift + own, prev + motion, prev + shift, prev]
+    shift = area_centroid(prev) - area_centroid(history[-2]) if len(history) > 1 else 0.0
+    start = prev + shift
+    return _drawing_around(start), start
 
 
 def _drawing_around(contour: np.ndarray) -> np.ndarray:
@@ -428,22 +409,12 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
     # Forward from the start frame, then backward from it.
     for frame_order in (range(start, n_frames), range(start - 1, -1, -1)):
         step = 1 if frame_order.step > 0 else -1
-        if step < 0:
-            previous_coarse = start_coarse
         for t in frame_order:
             image = np.asarray(frames[t], dtype=np.float64)  # one frame at a time (dask, zarr)
             if not np.isfinite(image).all():
                 raise ValueError(f"frame {t} has NaN or infinite pixels; fill or mask them before tracking "
                                  "(e.g. np.nan_to_num)")
             shared = FrameFeatures.of(image, options.get("isef_b", 0.7))
-            coarse = _coarse(image)
-            if t == start:
-                start_coarse = coarse
-            else:  # stored forward: from frame t - 1 to t
-                shift = _shift_between(previous_coarse if step > 0 else coarse,
-                                       coarse if step > 0 else previous_coarse)
-                run.shifts[t if step > 0 else t + 1] = shift
-            previous_coarse = coarse
             # Which object each pixel belongs to, as far as known: the others'
             # contours on this frame once done, else on the frame before.
             owner = np.full(image.shape, -1, dtype=np.int32)
@@ -504,7 +475,6 @@ class _Run:
     contours: list
     status: list
     seen: list
-    shifts: dict = field(default_factory=dict)  # frame t -> the shift from frame t - 1 to t (see _frame_shift)
 
 
 def _claim_before(run: _Run, k: int, t: int, step: int) -> np.ndarray | None:
@@ -533,36 +503,6 @@ def _history(run: _Run, k: int, t: int, step: int):
     return last, [c for c in (before, contours[last]) if c is not None]
 
 
-def _frame_shift(run: _Run, a: int, b: int) -> np.ndarray:
-    """How far the content of frame ``b`` moved since frame ``a`` as a whole
-    (row, col): the sum of the shifts between the consecutive frames (see
-    _shift_between) from ``a`` to ``b``."""
-    if b >= a:
-        return sum((run.shifts[u] for u in range(a + 1, b + 1)), np.zeros(2))
-    return -_frame_shift(run, b, a)
-
-
-def _shift_between(before: np.ndarray, after: np.ndarray) -> np.ndarray:
-    """How far the content of the coarse frame ``after`` moved since
-    ``before`` (see _coarse), by phase correlation: the stage's drift or
-    jitter, or the cells' common motion; none when the two frames share too
-    little (a blank frame) for the measure to hold."""
-    (a, factor), (b, _) = before, after
-    window = cv2.createHanningWindow(a.shape[::-1], cv2.CV_32F)
-    (dx, dy), response = cv2.phaseCorrelate(a, b, window)
-    return factor * np.array([dy, dx]) if response >= SHIFT_RESPONSE else np.zeros(2)
-
-
-def _coarse(image: np.ndarray) -> tuple[np.ndarray, int]:
-    """``image`` reduced by an integer factor to at most SHIFT_VIEW px a side
-    (mean-free float32), and that factor."""
-    factor = max(1, int(np.ceil(max(image.shape) / SHIFT_VIEW)))
-    image = image.astype(np.float32)
-    if factor > 1:
-        image = cv2.resize(image, (image.shape[1] // factor, image.shape[0] // factor), interpolation=cv2.INTER_AREA)
-    return image - image.mean(), factor
-
-
 def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, handed=None):
     """Segment object ``k`` on frame ``t`` from where its motion predicts it
     (or from ``handed``, a contour another object found); its contour (or
@@ -573,15 +513,14 @@ def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, hand
     last, history = _history(run, k, t, step)
     if last is None:  # lost or out of view for more than MAX_GAP frames: stays so
         return None, run.status[k][t - step]
-    tried = []
-    for start in [handed] if handed is not None else _predictions(run, history, last, t, step):
-        if any(np.allclose(start, other, atol=0.5) for other in tried):
-            continue
-        tried.append(start)
-        contour, verdict = _found(image, shared, owner, t, k, _drawing_around(start), start, history[-1], seen,
-                                  options)
-        if verdict != LOST:
-            break
+    init, predicted = _next_init(history) if handed is None else (_drawing_around(handed), handed)
+    contour, verdict = _found(image, shared, owner, t, k, init, predicted, history[-1], seen, options)
+    if verdict == LOST and handed is None and not np.allclose(predicted, history[-1], atol=0.5):
+        # The motion predicted from the last two frames may overshoot one
+        # that stopped or turned back (its drawing then lies mostly on the
+        # background): look for it where it was last seen too.
+        init, predicted = _next_init(history[-1:])
+        contour, verdict = _found(image, shared, owner, t, k, init, predicted, history[-1], seen, options)
     if verdict != TRACKED and last != t - step:
         verdict = run.status[k][last + step]  # not found again: as it went missing
     return contour, verdict
@@ -625,14 +564,14 @@ def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int) -> No
 def _misfit(run: _Run, k: int, t: int, step: int) -> float:
     """How badly object ``k``'s outcome on frame ``t`` fits what was known of
     it: LOST_MISFIT if it is not tracked, else its centroid's distance from
-    the nearest of the places predicted (see _predictions), in radii of its
-    last contour, plus the log of its change of area."""
+    where it was predicted or last seen, in radii of the last contour, plus
+    the log of its change of area."""
     if run.status[k][t] != TRACKED:
         return LOST_MISFIT
-    seen_on, history = _history(run, k, t, step)
+    _, history = _history(run, k, t, step)
     contour, last = run.contours[k][t], history[-1]
     centre = area_centroid(contour)
-    where = [area_centroid(c) for c in _predictions(run, history, seen_on, t, step)]
+    where = [area_centroid(_next_init(history)[1]), area_centroid(last)]
     radius = np.sqrt(abs(signed_area(last)) / np.pi)
     distance = min(np.hypot(*(centre - w)) for w in where) / radius
     return float(distance + abs(np.log(abs(signed_area(contour)) / abs(signed_area(last)))))
