@@ -2,9 +2,11 @@
 
 :func:`track` segments every object of a movie frame by frame, each frame
 starting from the previous result moved by the motion predicted from the
-frames before (the object's levels read from that contour grown by a
-margin, a drawing around it), so the physical contour needs only a few
-steps, and none of the evolution's when it starts on the object's border.
+frames before (and by the motion the objects found first on the frame
+shared beyond theirs: a jittering stage), with the object's levels read
+from that contour grown by a margin, a drawing around it, so the physical
+contour needs only a few steps, and none of the evolution's when it starts
+on the object's border.
 A contour that comes to rest against its drawing's limit is drawn around
 again (the object moved further than predicted); one that ends with no
 pixel where its object was predicted found another object: the object is
@@ -420,6 +422,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
             owner = np.full(image.shape, -1, dtype=np.int32)
             for j in range(n_obj):
                 _paint(owner, _claim_before(run, j, t, step), j)
+            run.moved = []
             for k in range(n_obj):
                 _settle(run, image, shared, owner, t, k, step)
                 if run.status[k][t] != TRACKED and t != start:
@@ -475,6 +478,7 @@ class _Run:
     contours: list
     status: list
     seen: list
+    moved: list = field(default_factory=list)  # see _common_motion: of the objects done on the current frame
 
 
 def _claim_before(run: _Run, k: int, t: int, step: int) -> np.ndarray | None:
@@ -513,17 +517,45 @@ def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, hand
     last, history = _history(run, k, t, step)
     if last is None:  # lost or out of view for more than MAX_GAP frames: stays so
         return None, run.status[k][t - step]
-    init, predicted = _next_init(history) if handed is None else (_drawing_around(handed), handed)
-    contour, verdict = _found(image, shared, owner, t, k, init, predicted, history[-1], seen, options)
-    if verdict == LOST and handed is None and not np.allclose(predicted, history[-1], atol=0.5):
-        # The motion predicted from the last two frames may overshoot one
-        # that stopped or turned back (its drawing then lies mostly on the
-        # background): look for it where it was last seen too.
-        init, predicted = _next_init(history[-1:])
-        contour, verdict = _found(image, shared, owner, t, k, init, predicted, history[-1], seen, options)
+    if handed is not None:
+        starts = [handed]
+    else:
+        # Where its last motion predicts it, moved as the objects done on
+        # this frame moved together from theirs (a jittering stage), if they
+        # did; there; where it was last seen (the motion may overshoot one
+        # that stopped or turned back: its drawing then lies mostly on the
+        # background).
+        predicted = _next_init(history)[1]
+        together = _common_motion(run.moved)
+        starts = [predicted + together, predicted, history[-1]]
+    tried = []
+    for start in starts:
+        if any(np.allclose(start, other, atol=0.5) for other in tried):
+            continue
+        tried.append(start)
+        contour, verdict = _found(image, shared, owner, t, k, _drawing_around(start), start, history[-1], seen,
+                                  options)
+        if verdict != LOST:
+            break
+    if verdict == TRACKED and handed is None:
+        run.moved.append(area_centroid(contour) - area_centroid(predicted))
     if verdict != TRACKED and last != t - step:
         verdict = run.status[k][last + step]  # not found again: as it went missing
     return contour, verdict
+
+
+def _common_motion(moved: list) -> np.ndarray:
+    """The motion the objects done on a frame share beyond their predictions
+    (``moved``: each one's centroid less its predicted centroid), or none
+    when fewer than two were found or they did not move together by at
+    least a pixel (their median beyond twice their spread about it)."""
+    if len(moved) < 2:
+        return np.zeros(2)
+    moved = np.asarray(moved)
+    median = np.median(moved, axis=0)
+    spread = np.median(np.hypot(*(moved - median).T))
+    size = float(np.hypot(*median))
+    return median if size >= 1.0 and size > 2.0 * spread else np.zeros(2)
 
 
 def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int) -> None:
