@@ -574,6 +574,7 @@ def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int) -> No
         return
     looked_at = _drawing_around(history[-1])
     least = SUSPECT_SHARE * abs(signed_area(history[-1]))
+    moved = list(run.moved)  # the frame's common motion is read off first looks only
     for i in range(j):
         if run.status[i][t] != TRACKED or _shared_area(run.contours[i][t], looked_at, image.shape) < least:
             continue
@@ -586,6 +587,7 @@ def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int) -> No
                 _paint(trial, _claim_before(run, i, t, step), i, only_free=True)
             _settle(run, image, shared, trial, t, j, step, handed)
             _settle(run, image, shared, trial, t, i, step)
+            run.moved = list(moved)
             if _misfit(run, i, t, step) + _misfit(run, j, t, step) < misfit:
                 owner[...] = trial
                 return
