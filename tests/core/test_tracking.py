@@ -278,6 +278,10 @@ def test_generator_and_lazy_frames(movie):
     (np.zeros((10, 10)), _circle((5, 5), 3), {}, "(T, H, W)"),
     (np.zeros((3, 32, 32)), [], {}, "inits is empty"),
     (np.zeros((3, 32, 32)), _circle((100, 100), 3), {}, "wholly outside"),
+    # A drawing segment() refuses is refused up front, not reported as an object lost on frame 0.
+    (np.zeros((3, 32, 32)), [_circle((16, 16), 5), np.array([[8, 8], [8, 20], [20, 20], [8, 20], [20, 8.0]])], {},
+     r"inits\[1\] has 1 identical node"),
+    (np.zeros((3, 32, 32)), np.array([[4, 4], [8, 8], [12, 12.0]]), {}, "one line"),
     (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"start": 3}, "start"),
     (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"segment_options": {"material": "rubbr"}}, "rubbr"),
     (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"segment_options": {"stiffness": -1.0}}, "stiffness"),

@@ -39,6 +39,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._drain import drain
+from ._validation import check_contour
 from .contour import (area_centroid, as_contour, bounding_window, closest_on_polyline, nearest_node, outward_normals,
                       perimeter, polygon_mask, positively_oriented, remove_loops, resample, signed_area)
 from .dynamics import DivergenceError
@@ -264,7 +265,9 @@ def _check_inits(inits, frame_shape):
     arr = inits if isinstance(inits, np.ndarray) else None
     if arr is not None and arr.ndim == 2:
         inits = [arr]
-    out = [as_contour(c, name=f"inits[{k}]") for k, c in enumerate(inits)]
+    # As segment() checks its drawing (its error, before any frame is read,
+    # rather than the object reported lost on the start frame).
+    out = [check_contour(as_contour(c, name=f"inits[{k}]"), f"inits[{k}]") for k, c in enumerate(inits)]
     if not out:
         raise ValueError("inits is empty: give one (N, 2) contour per object to track")
     for k, c in enumerate(out):
