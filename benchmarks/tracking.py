@@ -212,6 +212,12 @@ def ctc_scores(centroids, truth, ids, shape):
     return dict(followed=followed, lost=lost_frames, median=np.median(errors), p95=np.percentile(errors, 95))
 
 
+def score_cell(centroids, truth, ids, shape) -> str:
+    """A method's CTC scores as a table cell: tracks followed / frames lost / median error (px)."""
+    c = ctc_scores(centroids, truth, ids, shape)
+    return f"{c['followed']} / {len(ids)}, {c['lost']}, {c['median']:.2f}"
+
+
 def _at_edge(point, shape, within=2.0):
     """The CTC points of nuclei cut by the image's side lie on the side, not at their centre."""
     return bool(np.any(point < within) or np.any(point > np.array(shape) - 1 - within))
@@ -285,10 +291,8 @@ def faster_motion(frames, truth, ids, inits, starts, out, steps=(2, 3, 4)):
         sub = frames[keep]
         sub_truth = {tid: {i: points[t] for i, t in enumerate(keep) if t in points} for tid, points in truth.items()}
         ours, t_ours, _ = run_ours(sub, inits)
-        cells = []
-        for centroids in (ours, run_threshold_laptrack(sub, starts, cutoff=15.0 * k)[0], run_mcv_chain(sub, inits)[0]):
-            c = ctc_scores(centroids, sub_truth, ids, frames.shape[1:])
-            cells.append(f"{c['followed']} / {len(ids)}, {c['lost']}, {c['median']:.2f}")
+        cells = [score_cell(centroids, sub_truth, ids, frames.shape[1:]) for centroids in
+                 (ours, run_threshold_laptrack(sub, starts, cutoff=15.0 * k)[0], run_mcv_chain(sub, inits)[0])]
         out(f"| {k} | {cells[0]} | {1e3 * t_ours / (len(ids) * len(keep)):.1f} | {cells[1]} | {cells[2]} |")
 
 
@@ -316,10 +320,8 @@ def bad_frames(frames, truth, ids, inits, starts, out, frame=10):
             movie[frame] = bad[name](movie[frame])
         else:
             movie = (0.5 * level + (movie - 0.5 * level) * bleach).astype(np.float32)
-        cells = []
-        for centroids in (run_ours(movie, inits)[0], run_threshold_laptrack(movie, starts)[0]):
-            c = ctc_scores(centroids, truth, ids, frames.shape[1:])
-            cells.append(f"{c['followed']} / {len(ids)}, {c['lost']}, {c['median']:.2f}")
+        cells = [score_cell(centroids, truth, ids, frames.shape[1:])
+                 for centroids in (run_ours(movie, inits)[0], run_threshold_laptrack(movie, starts)[0])]
         out(f"| {name} | {cells[0]} | {cells[1]} |")
 
 
@@ -341,10 +343,8 @@ def stage_jitter(frames, truth, ids, inits, out, amplitudes=(3, 6, 10)):
         moved = {k: {t: p - offsets[t] for t, p in truth[k].items()} for k in truth}
         drawn = [i - offsets[0] for i in inits]
         starts = [moved[k][0] for k in ids]
-        cells = []
-        for centroids in (run_ours(movie, drawn)[0], run_threshold_laptrack(movie, starts)[0]):
-            c = ctc_scores(centroids, moved, ids, movie.shape[1:])
-            cells.append(f"{c['followed']} / {len(ids)}, {c['lost']}, {c['median']:.2f}")
+        cells = [score_cell(centroids, moved, ids, movie.shape[1:])
+                 for centroids in (run_ours(movie, drawn)[0], run_threshold_laptrack(movie, starts)[0])]
         out(f"| {a} | {cells[0]} | {cells[1]} |")
 
 

@@ -284,14 +284,14 @@ def _grown(contour: np.ndarray, by: float) -> np.ndarray:
     return remove_loops(nodes + by * outward_normals(nodes))
 
 
-def _next_init(history: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """The next frame's drawing and start: the previous contour moved by the
-    centroid's last displacement (the start), and that grown by a margin (the
-    drawing around the object, whose line reads the background)."""
+def _predicted(history: list[np.ndarray]) -> np.ndarray:
+    """Where the object's motion predicts it on the next frame: its last
+    contour moved by its centroid's last displacement (the segmentation's
+    start there; the drawing around it, see _drawing_around, reads the
+    background)."""
     prev = history[-1]
     shift = area_centroid(prev) - area_centroid(history[-2]) if len(history) > 1 else 0.0
-    start = prev + shift
-    return _drawing_around(start), start
+    return prev + shift
 
 
 def _drawing_around(contour: np.ndarray) -> np.ndarray:
@@ -528,7 +528,7 @@ def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, hand
         # did; there; where it was last seen (the motion may overshoot one
         # that stopped or turned back: its drawing then lies mostly on the
         # background).
-        predicted = _next_init(history)[1]
+        predicted = _predicted(history)
         together = _common_motion(run.moved)
         starts = [predicted + together, predicted, history[-1]]
     tried = []
@@ -608,7 +608,7 @@ def _misfit(run: _Run, k: int, t: int, step: int) -> float:
     _, history = _history(run, k, t, step)
     contour, last = run.contours[k][t], history[-1]
     centre = area_centroid(contour)
-    where = [area_centroid(_next_init(history)[1]), area_centroid(last)]
+    where = [area_centroid(_predicted(history)), area_centroid(last)]
     radius = np.sqrt(abs(signed_area(last)) / np.pi)
     distance = min(np.hypot(*(centre - w)) for w in where) / radius
     return float(distance + abs(np.log(abs(signed_area(contour)) / abs(signed_area(last)))))
