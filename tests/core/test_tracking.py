@@ -253,6 +253,30 @@ def test_an_object_that_moves_out_of_the_image_has_left_the_field_of_view():
     assert all(c is None for c in tr.contours[0][first_left:])
 
 
+@pytest.mark.parametrize("side", ["left", "right", "top", "bottom"])
+def test_an_object_that_moves_in_fast_through_a_side_is_followed(side):
+    """A disk that shows a sixth of itself, then half of itself, then the
+    whole, as it comes in through a side at 8 px a frame: what the side hid
+    is no other object (its visible area more than doubles)."""
+    centres = [(48, -8 + 8 * t) for t in range(6)]
+    flip = {"left": lambda r, c: (r, c), "right": lambda r, c: (r, 95 - c),
+            "top": lambda r, c: (c, r), "bottom": lambda r, c: (95 - c, r)}[side]
+    frames = _disk_movie([[flip(*c)] for c in centres], radius=14)
+    init = np.clip(_circle(flip(48, 2), 14), 0, 95)
+    tr = track(frames, init)
+    assert tr.status[0] == [TRACKED] * 6
+    whole = polygon_mask(_circle(flip(*centres[-1]), 14, n=200), frames.shape[1:])
+    assert iou(tr.contours[0][-1], whole) > 0.9
+
+
+def test_an_object_that_moves_out_fast_is_followed_until_it_has_left():
+    """9 px a frame out by the right side: the disk's visible part halves
+    from one frame to the next before it is too little to be followed."""
+    centres = [[(48, 71 + 9 * t)] for t in range(6)]
+    tr = track(_disk_movie(centres, radius=14), _circle((48, 71), 18))
+    assert tr.status[0] == [TRACKED] * 4 + [LEFT] * 2
+
+
 def test_cancel_keeps_what_was_done(movie):
     seen = []
     tr = track(movie.frames, movie.init, callback=lambda p: seen.append(p.frame) or p.frame < 3)

@@ -360,9 +360,15 @@ def _judge(contour, previous, predicted, whole_area, shape) -> str:
     """Is ``contour`` the object seen on ``previous`` (and ``predicted`` on
     this frame), or has it gone?"""
     area, prev_area = abs(signed_area(contour)), abs(signed_area(previous))
-    if _touches_side(contour, shape) and area < LEFT_FRACTION * whole_area:
+    at_side, was_at_side = _touches_side(contour, shape), _touches_side(previous, shape)
+    if at_side and area < LEFT_FRACTION * whole_area:
         return LEFT
-    if not (prev_area / MAX_AREA_CHANGE <= area <= MAX_AREA_CHANGE * prev_area):
+    # The image's side hides part of an object it cuts: one that moves in
+    # shows more of itself (a sliver may become the whole), one that moves
+    # out less; neither is a sign of another object.
+    least = 0.0 if at_side else prev_area / MAX_AREA_CHANGE
+    most = np.inf if was_at_side else MAX_AREA_CHANGE * prev_area
+    if not least <= area <= most:
         return LOST
     # A contour that holds no pixel of where the object was predicted has
     # found another object (a vanished one's contour is drawn to the next
