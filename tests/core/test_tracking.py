@@ -415,13 +415,10 @@ def test_a_carried_contour_on_the_border_skips_the_evolution(movie):
     assert iou(from_inside, movie.masks[3]) > 0.98
 
 
-@pytest.mark.xfail(strict=True, reason="known (session 25): the frame's common motion is read off the objects found "
-                   "first on it (see _common_motion), so the first ones face the stage's jump alone; a whole-frame "
-                   "phase-correlation shift followed these, but where an object vanishes it maps one onto another")
 def test_objects_on_a_jittering_stage_are_followed():
     """Three cells 28 px apart on a stage that jumps 13-16 px between frames,
-    each way in turn: 6 of 24 object-frames are lost and one contour takes a
-    neighbour, 28 px off."""
+    each way in turn (session 25's code lost 6 of the 24 object-frames, and
+    one contour took a neighbour 28 px off)."""
     jumps = [(0, 0), (12, -10), (-13, 9), (10, 12), (-12, -11), (13, -8), (-10, 13), (12, 9)]
     offsets = np.cumsum(jumps, axis=0) + 10
     cells = [(34, 34), (34, 62), (62, 48)]

@@ -105,6 +105,14 @@ MAX_GAP = 2
 #: has the two segmented again in the other order (see _give_back).
 SUSPECT_SHARE = 0.05
 
+#: How far, in the median radius of the objects, the frame's common shift
+#: (a jittering stage) is looked for by their appearance (see _stage_shift).
+STAGE_SEARCH = 2.0
+
+#: The normalised correlation at which an object's patch on the frame
+#: before counts as found again on this one (see _stage_shift).
+STAGE_MATCH = 0.5
+
 #: What an object not found on a frame weighs against one found there, in
 #: _give_back's comparison: as much as a contour one radius off its
 #: predicted place (see _misfit).
@@ -418,14 +426,20 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                seen=[_Seen(polarity, abs(signed_area(c))) for c in inits])
     total, done, stop_reason = n_obj * n_frames, 0, "completed"
     # Forward from the start frame, then backward from it.
+    start_image = None
     for frame_order in (range(start, n_frames), range(start - 1, -1, -1)):
         step = 1 if frame_order.step > 0 else -1
+        before = start_image
         for t in frame_order:
             image = np.asarray(frames[t], dtype=np.float64)  # one frame at a time (dask, zarr)
             if not np.isfinite(image).all():
                 raise ValueError(f"frame {t} has NaN or infinite pixels; fill or mask them before tracking "
                                  "(e.g. np.nan_to_num)")
             shared = FrameFeatures.of(image, options.get("isef_b", 0.7))
+            run.stage = np.zeros(2) if before is None else _stage_shift(run, before, image, t, step)
+            before = image
+            if t == start:
+                start_image = image
             # Which object each pixel belongs to, as far as known: the others'
             # contours on this frame once done, else on the frame before.
             owner = np.full(image.shape, -1, dtype=np.int32)
@@ -488,6 +502,7 @@ class _Run:
     status: list
     seen: list
     moved: list = field(default_factory=list)  # see _common_motion: of the objects done on the current frame
+    stage: np.ndarray = field(default_factory=lambda: np.zeros(2))  # see _stage_shift: of the current frame
 
 
 def _claim_before(run: _Run, k: int, t: int, step: int) -> np.ndarray | None:
@@ -529,14 +544,16 @@ def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, hand
     if handed is not None:
         starts = [handed]
     else:
-        # Where its last motion predicts it, moved as the objects done on
-        # this frame moved together from theirs (a jittering stage), if they
-        # did; there; where it was last seen (the motion may overshoot one
-        # that stopped or turned back: its drawing then lies mostly on the
-        # background).
+        # Where it was last seen, moved as the looks of the objects moved
+        # together (a jittering stage, see _stage_shift), if they did; where
+        # its last motion predicts it, moved as the objects done on this
+        # frame moved together from theirs, if they did; there; where it was
+        # last seen (the motion may overshoot one that stopped or turned
+        # back: its drawing then lies mostly on the background).
         predicted = _predicted(history)
         together = _common_motion(run.moved)
-        starts = [predicted + together, predicted, history[-1]]
+        staged = [history[-1] + run.stage] if run.stage.any() else []
+        starts = staged + [predicted + together, predicted, history[-1]]
     tried = []
     for start in starts:
         if any(np.allclose(start, other, atol=0.5) for other in tried):
@@ -565,6 +582,46 @@ def _common_motion(moved: list) -> np.ndarray:
     spread = np.median(np.hypot(*(moved - median).T))
     size = float(np.hypot(*median))
     return median if size >= 1.0 and size > 2.0 * spread else np.zeros(2)
+
+
+def _stage_shift(run: _Run, before: np.ndarray, image: np.ndarray, t: int, step: int) -> np.ndarray:
+    """The shift of the objects tracked on the frame ``before`` to ``image``
+    (frame ``t``), by their looks alone, if they agree on one (see
+    _common_motion); else none.
+
+    Each object's patch on the frame before is correlated (normalised) with
+    the frame within STAGE_SEARCH median radii of where it was; the sum of
+    these maps peaks where the objects' looks moved together (a jittering
+    stage), which a neighbour looking alike, or an object that vanished, did
+    not. Each object then moves by its own peak near there, if it matches
+    well. The motion predicted from the frames before is left out: on a
+    jittering stage it adds the last jump to the next.
+    """
+    tracked = [k for k in range(len(run.inits)) if run.status[k][t - step] == TRACKED]
+    if len(tracked) < 2:
+        return np.zeros(2)
+    last = [run.contours[k][t - step] for k in tracked]
+    radius = np.median([np.sqrt(abs(signed_area(c)) / np.pi) for c in last])
+    reach = int(np.clip(STAGE_SEARCH * radius, 4, 60))
+    maps = []
+    for contour in last:
+        rows, cols = bounding_window(contour, before.shape, 3.0)
+        lo, hi = np.array([rows.start, cols.start]) - reach, np.array([rows.stop, cols.stop]) + reach
+        patch = before[rows, cols].astype(np.float32)
+        if np.any(lo < 0) or np.any(hi > image.shape) or patch.std() < 1e-6 * (1 + abs(patch).max()):
+            continue  # at the image's side, or flat: nothing to match
+        region = image[lo[0]:hi[0], lo[1]:hi[1]].astype(np.float32)
+        maps.append(np.nan_to_num(cv2.matchTemplate(region, patch, cv2.TM_CCOEFF_NORMED)))
+    if len(maps) < 2:
+        return np.zeros(2)
+    peak = np.array(np.unravel_index(np.argmax(np.sum(maps, axis=0)), maps[0].shape))
+    moved = []
+    for score in maps:  # each object's own best match within 2 px of the common peak
+        near = score[max(peak[0] - 2, 0):peak[0] + 3, max(peak[1] - 2, 0):peak[1] + 3]
+        best = np.array(np.unravel_index(np.argmax(near), near.shape)) + np.maximum(peak - 2, 0)
+        if score[tuple(best)] >= STAGE_MATCH:
+            moved.append(best - reach)
+    return _common_motion(moved) if 2 * len(moved) > len(maps) else np.zeros(2)
 
 
 def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int) -> None:
