@@ -98,6 +98,19 @@ def _circle(centre, radius, n=40):
 @example(movie=([[np.array([32.0, 22.0])] * 3 + [None, None], [np.array([32.0, 58.0])] * 5,
                  [np.array([14.0, 34.9]), np.array([14.0, 34.9]), np.array([14.0, 23.13]), np.array([16.0, 23.13]),
                   None]], 5), dtype=np.uint8, bright=False, noise=0.125, seed=0, scale=1.5, start_at=0.0)
+# Found by fuzzing disks that start anywhere, some cut by the image's sides
+# (session 26): a disk merged with one cut by the side took 100 px of it (the
+# region of an object drawn there filled in the other's pixels as its lobe)...
+@example(movie=([[np.array([30.125, 0.0])] * 3 + [np.array([31.125, 0.0])] * 3,
+                 [np.array([17.25, 16.75])] * 2 + [np.array([19.25, 14.75]), np.array([26.75, 14.75]), None, None],
+                 [np.array([0.0, 0.0]), np.array([0.0, 1.5]), np.array([1.3, 1.37]), np.array([9.26, -3.25]),
+                  np.array([9.26, -3.25]), None]], 6),
+         dtype=np.uint16, bright=False, noise=0.0, seed=73, scale=1.44, start_at=0.7)
+# ... and a disk that vanished at the side was found again two frames later
+# on part of a neighbour that had moved next to where it was.
+@example(movie=([[np.array([27.125, 0.0])] + [None] * 5, [np.array([0.0, 1.0])] * 3 + [None] * 3,
+                 [np.array([15.25, 16.75])] * 2 + [np.array([16.25, 14.75]), np.array([23.75, 14.75]), None, None]], 6),
+         dtype=np.uint8, bright=False, noise=0.0, seed=0, scale=1.5, start_at=0.0)
 def test_track_keeps_its_promises_or_raises_a_documented_error(movie, dtype, bright, noise, seed, scale, start_at):
     paths, n_frames = movie
     firsts = [p[0] for p in paths]  # apart on the first frame (later they may meet)

@@ -213,6 +213,8 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
     region = object_region(signed, drawing, model, image_sides, level_beyond_object(intensity, model))
     if region is None:
         return signed, edges, model.polarity
+    if avoid is not None:  # (filled in as a hole of the region, or as its lobe)
+        region &= ~avoid
     signed = np.where(region, np.where(signed > 0, signed, 1.0), np.where(signed > 0, -1.0, signed))
     # Texture inside the object's own region is the object: no edge holds
     # the contour there, and only a rim keeps graded object-ness values (for
