@@ -446,10 +446,11 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
             for j in range(n_obj):
                 _paint(owner, _claim_before(run, j, t, step), j)
             run.moved = []
-            for k in range(n_obj):
+            order = _segmenting_order(run, t, step)
+            for n, k in enumerate(order):
                 _settle(run, image, shared, owner, t, k, step)
                 if run.status[k][t] != TRACKED and t != start:
-                    _give_back(run, image, shared, owner, t, k, step)
+                    _give_back(run, image, shared, owner, t, k, step, order[:n])
                 done += 1
                 stop = yield TrackingProgress(t, k, run.contours[k][t], run.status[k][t], done, total)
                 if stop:
@@ -624,9 +625,21 @@ def _stage_shift(run: _Run, before: np.ndarray, image: np.ndarray, t: int, step:
     return _common_motion(moved) if 2 * len(moved) > len(maps) else np.zeros(2)
 
 
-def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int) -> None:
+def _segmenting_order(run: _Run, t: int, step: int) -> list[int]:
+    """The order in which the objects are segmented on frame ``t``: those
+    tracked on the frame before first, then those looked for again after a
+    gap (see MAX_GAP). Where one of the latter went while it was not seen is
+    not known: it must not take part of a neighbour that moved next to where
+    it was before that neighbour is done."""
+    n_obj = len(run.inits)
+    if t == run.start:
+        return list(range(n_obj))
+    return sorted(range(n_obj), key=lambda k: run.status[k][t - step] != TRACKED)
+
+
+def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int, done_before) -> None:
     """Object ``j``, not found on frame ``t``: if an object ``i`` done before
-    it took pixels where ``j`` was looked for, segment the two again, ``j``
+    it (``done_before``) took pixels where ``j`` was looked for, segment the two again, ``j``
     first (from its prediction, else from what ``i`` found), and keep
     whichever outcome fits their motion better (see _misfit).
 
@@ -641,7 +654,7 @@ def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int) -> No
     looked_at = _drawing_around(history[-1])
     least = SUSPECT_SHARE * abs(signed_area(history[-1]))
     moved = list(run.moved)  # the frame's common motion is read off first looks only
-    for i in range(j):
+    for i in done_before:
         if run.status[i][t] != TRACKED or _shared_area(run.contours[i][t], looked_at, image.shape) < least:
             continue
         kept = [(run.contours[o][t], run.status[o][t], run.seen[o].copy()) for o in (i, j)]
