@@ -2,8 +2,9 @@
 
 :func:`track` segments every object of a movie frame by frame, each frame
 starting from the previous result moved by the motion predicted from the
-frames before (and by the motion the objects found first on the frame
-shared beyond theirs: a jittering stage), with the object's levels read
+frames before (or by the shift that the objects' looks, or the objects
+found first on the frame, show together: a jittering stage), with the
+object's levels read
 from that contour grown by a margin, a drawing around it, so the physical
 contour needs only a few steps, and none of the evolution's when it starts
 on the object's border.
