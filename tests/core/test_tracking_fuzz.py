@@ -111,6 +111,10 @@ def _circle(centre, radius, n=40):
 @example(movie=([[np.array([27.125, 0.0])] + [None] * 5, [np.array([0.0, 1.0])] * 3 + [None] * 3,
                  [np.array([15.25, 16.75])] * 2 + [np.array([16.25, 14.75]), np.array([23.75, 14.75]), None, None]], 6),
          dtype=np.uint8, bright=False, noise=0.0, seed=0, scale=1.5, start_at=0.0)
+# ... and a disk that jumped beside one that had vanished at the side was
+# lost, then taken by the vanished one, segmented after it.
+@example(movie=([[np.array([16.0, 12.0])] * 3 + [np.array([5.0, 12.0])] * 2, [np.array([-2.0, 21.0])] + [None] * 4], 5),
+         dtype=np.uint8, bright=False, noise=0.0, seed=0, scale=1.5, start_at=0.0)
 def test_track_keeps_its_promises_or_raises_a_documented_error(movie, dtype, bright, noise, seed, scale, start_at):
     paths, n_frames = movie
     firsts = [p[0] for p in paths]  # apart on the first frame (later they may meet)

@@ -459,6 +459,10 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                     break
             if stop_reason == "cancelled":
                 break
+            # An object lost before the one that took its place was done.
+            for n, k in enumerate(order if t != start else []):
+                if run.status[k][t] != TRACKED:
+                    _give_back(run, image, shared, owner, t, k, step, order[n + 1:])
         if stop_reason == "cancelled":
             break
     contours = run.contours
