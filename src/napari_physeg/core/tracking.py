@@ -642,16 +642,18 @@ def _segmenting_order(run: _Run, t: int, step: int) -> list[int]:
     return sorted(range(n_obj), key=lambda k: run.status[k][t - step] != TRACKED)
 
 
-def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int, done_before) -> None:
-    """Object ``j``, not found on frame ``t``: if an object ``i`` done before
-    it (``done_before``) took pixels where ``j`` was looked for, segment the two again, ``j``
-    first (from its prediction, else from what ``i`` found), and keep
+def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int, others) -> None:
+    """Object ``j``, not found on frame ``t``: if an object ``i`` of
+    ``others`` took pixels where ``j`` was looked for, segment the two again,
+    ``j`` first (from its prediction, else from what ``i`` found), and keep
     whichever outcome fits their motion better (see _misfit).
 
     Objects are segmented one after the other, each counting the others'
     pixels as background: a vanished object's drawing takes the part of a
     neighbour that moved toward its place, or the whole of one that darted
-    there, and the neighbour, whose pixels are then another's, is lost.
+    there, and the neighbour, whose pixels are then another's, is lost; or
+    an object that jumped further than it can be followed is lost first,
+    and one done after it takes its place.
     """
     last, history = _history(run, j, t, step)
     if last is None:
@@ -659,7 +661,7 @@ def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int, done_
     looked_at = _drawing_around(history[-1])
     least = SUSPECT_SHARE * abs(signed_area(history[-1]))
     moved = list(run.moved)  # the frame's common motion is read off first looks only
-    for i in done_before:
+    for i in others:
         if run.status[i][t] != TRACKED or _shared_area(run.contours[i][t], looked_at, image.shape) < least:
             continue
         kept = [(run.contours[o][t], run.status[o][t], run.seen[o].copy()) for o in (i, j)]
