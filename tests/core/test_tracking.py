@@ -188,6 +188,22 @@ def test_a_vanished_object_does_not_take_a_neighbour_that_moved_toward_it():
     assert iou(tr.contours[2][2], (rr - 19) ** 2 + (cc - 33) ** 2 <= 81) > 0.9
 
 
+def test_a_vanished_object_does_not_share_a_neighbour_that_moved_next_to_it():
+    """A small disk vanishes as a large one moves next to where it was. Found
+    by fuzzing disks of other sizes (session 26): the vanished disk's contour
+    took the part of the large one that no one owned yet, 13 px (two of its
+    radii) from where it was, and the large one was "tracked" on the rest.
+    Both were found, so no one was lost to give the pixels back."""
+    rr, cc = np.mgrid[:64, :80]
+    small, other = ((rr - 32) ** 2 + (cc - c) ** 2 <= 36 for c in (22, 58))
+    large = [(rr - r) ** 2 + (cc - c) ** 2 <= 121 for r, c in ((19, 39), (25, 37), (25, 37))]
+    frames = np.stack([np.where(small & (t == 0) | other | large[t], 0.5, 0.8) for t in range(3)])
+    tr = track(frames, [_circle((32, 22), 7.5), _circle((32, 58), 7.5), _circle((19, 39), 13.75)])
+    assert tr.status[0] == [TRACKED, LOST, LOST]
+    assert tr.status[2] == [TRACKED] * 3
+    assert all(iou(tr.contours[2][t], large[t]) > 0.95 for t in range(3))
+
+
 def test_an_object_that_vanishes_is_lost_not_returned_as_garbage():
     centres = [[(48, 48)]] * 4 + [[(None, None)]] * 3
     tr = track(_disk_movie(centres), _circle((48, 48), 16))

@@ -459,10 +459,13 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                     break
             if stop_reason == "cancelled":
                 break
-            # An object lost before the one that took its place was done.
+            # An object lost before the one that took its place was done; one
+            # found where another that fits worse than lost took its pixels.
             for n, k in enumerate(order if t != start else []):
                 if run.status[k][t] != TRACKED:
                     _give_back(run, image, shared, owner, t, k, step, order[n + 1:])
+                else:
+                    _give_back(run, image, shared, owner, t, k, step, _astray(run, t, step, order, k))
         if stop_reason == "cancelled":
             break
     contours = run.contours
@@ -643,7 +646,7 @@ def _segmenting_order(run: _Run, t: int, step: int) -> list[int]:
 
 
 def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int, others) -> None:
-    """Object ``j``, not found on frame ``t``: if an object ``i`` of
+    """Object ``j`` on frame ``t`` (not found there, or see _astray): if an object ``i`` of
     ``others`` took pixels where ``j`` was looked for, segment the two again,
     ``j`` first (from its prediction, else from what ``i`` found), and keep
     whichever outcome fits their motion better (see _misfit).
@@ -681,17 +684,26 @@ def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int, other
                 run.contours[o][t], run.status[o][t], run.seen[o] = contour, status, seen.copy()
 
 
+def _astray(run: _Run, t: int, step: int, order, k: int) -> list[int]:
+    """The objects other than ``k`` whose outcome on frame ``t`` fits what
+    was known of them worse than losing them would (see _misfit): a
+    vanished object's contour drawn onto part of a neighbour that moved
+    next to where it was, the neighbour keeping the rest."""
+    return [i for i in order if i != k and run.status[i][t] == TRACKED and _misfit(run, i, t, step) > LOST_MISFIT]
+
+
 def _misfit(run: _Run, k: int, t: int, step: int) -> float:
     """How badly object ``k``'s outcome on frame ``t`` fits what was known of
     it: LOST_MISFIT if it is not tracked, else its centroid's distance from
-    where it was predicted or last seen, in radii of the last contour, plus
-    the log of its change of area."""
+    where it was predicted or last seen (moved by the stage's shift, if
+    any: see _stage_shift), in radii of the last contour, plus the log of
+    its change of area."""
     if run.status[k][t] != TRACKED:
         return LOST_MISFIT
     _, history = _history(run, k, t, step)
     contour, last = run.contours[k][t], history[-1]
     centre = area_centroid(contour)
-    where = [area_centroid(_predicted(history)), area_centroid(last)]
+    where = [area_centroid(_predicted(history)), area_centroid(last), area_centroid(last) + run.stage]
     radius = np.sqrt(abs(signed_area(last)) / np.pi)
     distance = min(np.hypot(*(centre - w)) for w in where) / radius
     return float(distance + abs(np.log(abs(signed_area(contour)) / abs(signed_area(last)))))
