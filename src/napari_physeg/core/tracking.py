@@ -677,7 +677,9 @@ def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int, other
             _settle(run, image, shared, trial, t, j, step, handed)
             _settle(run, image, shared, trial, t, i, step)
             run.moved = list(moved)
-            if _misfit(run, i, t, step) + _misfit(run, j, t, step) < misfit:
+            # (j found before must stay found: an astray i is no reason to lose it)
+            kept_j = run.status[j][t] == TRACKED or kept[1][1] != TRACKED
+            if kept_j and _misfit(run, i, t, step) + _misfit(run, j, t, step) < misfit:
                 owner[...] = trial
                 return
             for o, (contour, status, seen) in zip((i, j), kept):
