@@ -461,11 +461,10 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                 break
             # An object lost before the one that took its place was done; one
             # found where another that fits worse than lost took its pixels.
+            astray = _astray(run, t, step) if t != start else []
             for n, k in enumerate(order if t != start else []):
-                if run.status[k][t] != TRACKED:
-                    _give_back(run, image, shared, owner, t, k, step, order[n + 1:])
-                else:
-                    _give_back(run, image, shared, owner, t, k, step, _astray(run, t, step, order, k))
+                others = order[n + 1:] if run.status[k][t] != TRACKED else [i for i in astray if i != k]
+                _give_back(run, image, shared, owner, t, k, step, others)
         if stop_reason == "cancelled":
             break
     contours = run.contours
@@ -658,7 +657,7 @@ def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int, other
     an object that jumped further than it can be followed is lost first,
     and one done after it takes its place.
     """
-    last, history = _history(run, j, t, step)
+    last, history = _history(run, j, t, step) if others else (None, [])
     if last is None:
         return
     looked_at = _drawing_around(history[-1])
@@ -686,12 +685,12 @@ def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int, other
                 run.contours[o][t], run.status[o][t], run.seen[o] = contour, status, seen.copy()
 
 
-def _astray(run: _Run, t: int, step: int, order, k: int) -> list[int]:
-    """The objects other than ``k`` whose outcome on frame ``t`` fits what
-    was known of them worse than losing them would (see _misfit): a
-    vanished object's contour drawn onto part of a neighbour that moved
-    next to where it was, the neighbour keeping the rest."""
-    return [i for i in order if i != k and run.status[i][t] == TRACKED and _misfit(run, i, t, step) > LOST_MISFIT]
+def _astray(run: _Run, t: int, step: int) -> list[int]:
+    """The objects whose outcome on frame ``t`` fits what was known of them
+    worse than losing them would (see _misfit): a vanished object's contour
+    drawn onto part of a neighbour that moved next to where it was, the
+    neighbour keeping the rest."""
+    return [i for i in range(len(run.inits)) if run.status[i][t] == TRACKED and _misfit(run, i, t, step) > LOST_MISFIT]
 
 
 def _misfit(run: _Run, k: int, t: int, step: int) -> float:
