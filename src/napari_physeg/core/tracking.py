@@ -441,17 +441,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
             before = image
             if t == start:
                 start_image = image
-            # Which object each pixel belongs to, as far as known: the others'
-            # contours on this frame once done, else on the frame before.
-            owner = np.full(image.shape, -1, dtype=np.int32)
-            for j in range(n_obj):
-                _paint(owner, _claim_before(run, j, t, step), j)
-            run.moved = []
-            order = _segmenting_order(run, t, step)
-            for n, k in enumerate(order):
-                _settle(run, image, shared, owner, t, k, step)
-                if run.status[k][t] != TRACKED and t != start:
-                    _give_back(run, image, shared, owner, t, k, step, order[:n])
+            for k in _segment_frame(run, image, shared, t, step):
                 done += 1
                 stop = yield TrackingProgress(t, k, run.contours[k][t], run.status[k][t], done, total)
                 if stop:
@@ -459,12 +449,6 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                     break
             if stop_reason == "cancelled":
                 break
-            # An object lost before the one that took its place was done; one
-            # found where another that fits worse than lost took its pixels.
-            astray = _astray(run, t, step) if t != start else []
-            for n, k in enumerate(order if t != start else []):
-                others = order[n + 1:] if run.status[k][t] != TRACKED else [i for i in astray if i != k]
-                _give_back(run, image, shared, owner, t, k, step, others)
         if stop_reason == "cancelled":
             break
     contours = run.contours
@@ -477,6 +461,33 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
         contours=contours, status=status, **analysis, start=start, stop_reason=stop_reason,
         timings={"segmentation": t_segmented - t_start, "correspondence": t_end - t_segmented,
                  "total": t_end - t_start})
+
+
+def _segment_frame(run: _Run, image, shared, t: int, step: int):
+    """Segment every object on frame ``t``, one after the other (see
+    _segmenting_order), each counting the others' pixels as background; a
+    generator of each object as it is done. The second looks (see
+    _give_back) are taken after the last one is yielded."""
+    # Which object each pixel belongs to, as far as known: the others'
+    # contours on this frame once done, else on the frame before.
+    owner = np.full(image.shape, -1, dtype=np.int32)
+    for j in range(len(run.inits)):
+        _paint(owner, _claim_before(run, j, t, step), j)
+    run.moved = []
+    order = _segmenting_order(run, t, step)
+    for n, k in enumerate(order):
+        _settle(run, image, shared, owner, t, k, step)
+        if run.status[k][t] != TRACKED and t != run.start:
+            _give_back(run, image, shared, owner, t, k, step, order[:n])
+        yield k
+    if t == run.start:
+        return
+    # An object lost before the one that took its place was done; one found
+    # where another that fits worse than lost took its pixels.
+    astray = _astray(run, t, step)
+    for n, k in enumerate(order):
+        others = order[n + 1:] if run.status[k][t] != TRACKED else [i for i in astray if i != k]
+        _give_back(run, image, shared, owner, t, k, step, others)
 
 
 @dataclass
