@@ -446,6 +446,28 @@ def test_objects_on_a_jittering_stage_are_followed():
 
 
 
+@pytest.mark.parametrize("case", ["stage", "one vanished", "two of three vanished", "each its own way", "still"])
+def test_the_stage_shift_is_read_off_the_objects_that_move_together(case):
+    """_stage_shift: the shift of a jittering stage, read off the looks of
+    the objects tracked on the frame before; none when most of them did not
+    move together (an object that vanished, or whose look-alike neighbour
+    sits where the shift would take it, does not carry it; cells that move
+    each their own way show none)."""
+    from napari_physeg.core.tracking import _Run, _stage_shift
+
+    cells = [(30, 30), (30, 70), (70, 50)]
+    moves = {"stage": [(7, -5)] * 3, "one vanished": [(7, -5), (7, -5), None],
+             "two of three vanished": [(0, 0), None, (40, -20)], "each its own way": [(6, 0), (-3, 5), (0, -6)],
+             "still": [(0, 0)] * 3}[case]
+    after = [(None, None) if m is None else (r + m[0], c + m[1]) for (r, c), m in zip(cells, moves)]
+    frames = _disk_movie([cells, after], radius=9, shape=(110, 110), noise=0.05)
+    run = _Run(inits=[None] * 3, start=0, options={}, contours=[[_circle(c, 9), None] for c in cells],
+               status=[[TRACKED, None]] * 3, seen=[None] * 3)
+    shift = _stage_shift(run, frames[0], frames[1], 1, 1)
+    expected = {"stage": (7, -5), "one vanished": (7, -5)}.get(case, (0, 0))
+    assert np.allclose(shift, expected, atol=1.0)
+
+
 def test_objects_that_moved_together_beyond_their_predictions_show_a_common_motion():
     """The shift of a jittering stage, read off the objects found first on a
     frame: their common displacement beyond their predictions, when they
