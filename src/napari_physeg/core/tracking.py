@@ -303,11 +303,15 @@ def _predicted(history: list[np.ndarray]) -> np.ndarray:
     return prev + shift
 
 
+def _radius(contour: np.ndarray) -> float:
+    """The radius of the disk with ``contour``'s area."""
+    return float(np.sqrt(abs(signed_area(contour)) / np.pi))
+
+
 def _drawing_around(contour: np.ndarray) -> np.ndarray:
     """A drawing around the object whose outline is about ``contour``: that
     grown by a fifth of its radius (3 to 8 px), so its line reads the background."""
-    radius = np.sqrt(abs(signed_area(contour)) / np.pi)
-    return _grown(contour, float(np.clip(0.2 * radius, 3.0, 8.0)))
+    return _grown(contour, float(np.clip(0.2 * _radius(contour), 3.0, 8.0)))
 
 
 def _against_the_limit(contour: np.ndarray, drawing: np.ndarray) -> bool:
@@ -620,7 +624,7 @@ def _stage_shift(run: _Run, before: np.ndarray, image: np.ndarray, t: int, step:
     if len(tracked) < 2:
         return np.zeros(2)
     last = [run.contours[k][t - step] for k in tracked]
-    radius = np.median([np.sqrt(abs(signed_area(c)) / np.pi) for c in last])
+    radius = np.median([_radius(c) for c in last])
     reach = int(np.clip(STAGE_SEARCH * radius, 4, 60))
     maps = []
     for contour in last:
@@ -668,7 +672,9 @@ def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int, other
     an object that jumped further than it can be followed is lost first,
     and one done after it takes its place.
     """
-    last, history = _history(run, j, t, step) if others else (None, [])
+    if not others:
+        return
+    last, history = _history(run, j, t, step)
     if last is None:
         return
     looked_at = _drawing_around(history[-1])
@@ -687,9 +693,9 @@ def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int, other
             _settle(run, image, shared, trial, t, j, step, handed)
             _settle(run, image, shared, trial, t, i, step)
             run.moved = list(moved)
-            # (j found before must stay found: an astray i is no reason to lose it)
-            kept_j = run.status[j][t] == TRACKED or kept[1][1] != TRACKED
-            if kept_j and _misfit(run, i, t, step) + _misfit(run, j, t, step) < misfit:
+            # A j found before stays found: an astray i is no reason to lose it.
+            j_kept = run.status[j][t] == TRACKED or kept[1][1] != TRACKED
+            if j_kept and _misfit(run, i, t, step) + _misfit(run, j, t, step) < misfit:
                 owner[...] = trial
                 return
             for o, (contour, status, seen) in zip((i, j), kept):
@@ -716,8 +722,7 @@ def _misfit(run: _Run, k: int, t: int, step: int) -> float:
     contour, last = run.contours[k][t], history[-1]
     centre = area_centroid(contour)
     where = [area_centroid(_predicted(history)), area_centroid(last), area_centroid(last) + run.stage]
-    radius = np.sqrt(abs(signed_area(last)) / np.pi)
-    distance = min(np.hypot(*(centre - w)) for w in where) / radius
+    distance = min(np.hypot(*(centre - w)) for w in where) / _radius(last)
     return float(distance + abs(np.log(abs(signed_area(contour)) / abs(signed_area(last)))))
 
 
