@@ -206,14 +206,16 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
     # No object here that the eye could tell from its background: no region
     # force (edges may still guide the contour) but out of other objects.
     signed = objectness(intensity, model) if model.is_visible else np.zeros(intensity.shape, np.float32)
+    # The region is split from its neighbours with their pixels as they look:
+    # a neighbour's part that moved beyond its claim is still its own (as
+    # background, that part would be a shallow blob the object could take).
+    region = object_region(signed, drawing, model, image_sides, level_beyond_object(intensity, model)) \
+        if model.is_visible else None
     if avoid is not None:
         signed[avoid] = -1.0
-    if not model.is_visible:
-        return signed, edges, model.polarity
-    region = object_region(signed, drawing, model, image_sides, level_beyond_object(intensity, model))
     if region is None:
         return signed, edges, model.polarity
-    if avoid is not None:  # (filled in as a hole of the region, or as its lobe)
+    if avoid is not None:
         region &= ~avoid
     signed = np.where(region, np.where(signed > 0, signed, 1.0), np.where(signed > 0, -1.0, signed))
     # Texture inside the object's own region is the object: no edge holds
