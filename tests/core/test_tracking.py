@@ -227,6 +227,27 @@ def test_two_cells_that_brush_past_each_other_keep_their_identities():
     assert all(iou(tr.contours[k][t], disks[t][k]) > 0.9 for k in range(2) for t in range(5))
 
 
+@pytest.mark.parametrize("second", ["same drawing", "click inside"])
+def test_two_drawings_of_one_object_are_one_contour_and_a_warning(second):
+    """Drawings that mark the same object (drawn twice, or a click inside a
+    drawing around it): one contour, never two overlapping ones, and the
+    object not found says why, instead of being reported lost in silence."""
+    frames = _disk_movie([[(48, 48)]] * 3)
+    around = _circle((48, 48), 16)
+    other = around if second == "same drawing" else _circle((48, 48), 3)
+    with pytest.warns(UserWarning, match="not found on the start frame 0.*mark the same object"):
+        tr = track(frames, [around, other])
+    found = [k for k in range(2) if tr.status[k] == [TRACKED] * 3]
+    assert len(found) == 1 and tr.status[1 - found[0]] == [LOST] * 3
+
+
+def test_an_object_not_found_on_the_start_frame_gets_a_warning():
+    frames = _disk_movie([[(48, 48)]] * 2)
+    with pytest.warns(UserWarning, match="object 0 was not found on the start frame 0.*max_steps"):
+        tr = track(frames, _circle((48, 48), 16), max_steps=1)
+    assert tr.status[0] == [LOST] * 2
+
+
 def test_an_object_that_vanishes_is_lost_not_returned_as_garbage():
     centres = [[(48, 48)]] * 4 + [[(None, None)]] * 3
     tr = track(_disk_movie(centres), _circle((48, 48), 16))
@@ -346,6 +367,8 @@ def test_generator_and_lazy_frames(movie):
      r"inits\[1\] has 1 identical node"),
     (np.zeros((3, 32, 32)), np.array([[4, 4], [8, 8], [12, 12.0]]), {}, "one line"),
     (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"start": 3}, "start"),
+    (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"start": 1.5}, "an integer"),
+    (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"start": True}, "an integer"),
     (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"segment_options": {"material": "rubbr"}}, "rubbr"),
     (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"segment_options": {"stiffness": -1.0}}, "stiffness"),
     (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"segment_options": {"avoid": None}}, "avoid"),

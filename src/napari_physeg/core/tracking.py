@@ -414,8 +414,8 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
     t_start = time.perf_counter()
     frames, n_frames, frame_shape = _check_frames(frames)
     inits = _check_inits(inits, frame_shape)
-    if not 0 <= int(start) < n_frames:
-        raise ValueError(f"start must be a frame index in [0, {n_frames - 1}], got {start!r}")
+    if isinstance(start, (bool, np.bool_)) or not isinstance(start, (int, np.integer)) or not 0 <= start < n_frames:
+        raise ValueError(f"start must be a frame index (an integer) in [0, {n_frames - 1}], got {start!r}")
     start = int(start)
     options = dict(segment_options or {})
     options.setdefault("max_steps", int(max_steps))
@@ -451,6 +451,8 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                 if stop:
                     stop_reason = "cancelled"
                     break
+            if t == start and stop_reason != "cancelled":
+                _warn_not_found(run, frame_shape)
             if stop_reason == "cancelled":
                 break
         if stop_reason == "cancelled":
@@ -465,6 +467,28 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
         contours=contours, status=status, **analysis, start=start, stop_reason=stop_reason,
         timings={"segmentation": t_segmented - t_start, "correspondence": t_end - t_segmented,
                  "total": t_end - t_start})
+
+
+#: A drawing that shares at least this share of its area with another's
+#: marks the same object (see _warn_not_found).
+SAME_DRAWING_SHARE = 0.5
+
+
+def _warn_not_found(run: _Run, shape) -> None:
+    """Warn, naming the likely cause, of each object not found on the start
+    frame: it is reported lost on every frame, which is seldom what was meant."""
+    for k, init in enumerate(run.inits):
+        if run.status[k][run.start] == TRACKED:
+            continue
+        area = max(abs(signed_area(init)), 1.0)
+        within = [j for j in range(len(run.inits))
+                  if j != k and _shared_area(init, run.inits[j], shape) >= SAME_DRAWING_SHARE * area]
+        why = (f"its drawing lies mostly within that of object {within[0]}: both mark the same object, which "
+               f"contours that never overlap cannot share; draw each object once" if within else
+               "no object came to rest under its drawing; check that it is drawn around (or inside) one object, "
+               "or the segment_options (e.g. max_steps, material and stiffness)")
+        warnings.warn(f"object {k} was not found on the start frame {run.start} and is reported lost: {why}",
+                      UserWarning, stacklevel=4)
 
 
 def _segment_frame(run: _Run, image, shared, t: int, step: int):
