@@ -335,6 +335,8 @@ def test_every_option_of_every_command_is_explained():
     (["--frames", "7"], "frames 0 to 5"),
     (["--start", "1", "--frames", "3:6"], "not among --frames 3:6"),
     (["--steps-per-frame", "0"], "--steps-per-frame"),
+    (["--frames", "2,2,3"], "names frame 2 more than once"),
+    (["--frames", "4,2,0"], "in the movie's order"),
 ])
 def test_track_refuses_bad_frames_before_any_work(movie_files, capsys, no_work, extra, message):
     movie, stack, init, tmp = movie_files
@@ -342,6 +344,26 @@ def test_track_refuses_bad_frames_before_any_work(movie_files, capsys, no_work, 
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
     assert not (tmp / "tracked").exists()
+
+
+def test_track_refuses_contours_drawn_beyond_the_last_frame(movie_files, capsys, no_work):
+    movie, stack, _, tmp = movie_files
+    late = write_shapes_csv(tmp / "late.csv", [movie.outlines[0][::6]], leading=[(20,)])
+    assert main(["track", str(stack), "--init", str(late), "--out", str(tmp / "tracked")]) == 2
+    assert "drawn on frame 20, not in the stack (frames 0 to 5)" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("text, message", [
+    ("index;shape-type;vertex-index;axis-0;axis-1\n0;polygon;0;1;2\n", "comma-separated"),
+    ("index,shape-type,vertex-index,axis-0,axis-1\n0,polygon,0,1,2\n0,polygon,1,3\n", "fewer columns"),
+    ("index,shape-type,vertex-index,axis-0,axis-1,axis-2\n" +
+     "".join(f"0,polygon,{i},nan,{r},{c}\n" for i, (r, c) in enumerate([(1, 2), (9, 3), (5, 8)])), "NaN"),
+])
+def test_a_malformed_shapes_csv_is_named_and_explained(tmp_path, text, message):
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=message):
+        read_shapes_csv(path, leading=True)
 
 
 def test_track_refuses_contours_outside_the_movie(movie_files, capsys, no_work):

@@ -402,8 +402,12 @@ def _track(args) -> int:
     start = _start_frame(args, leading)
     with open_stack(args.stack, channel=args.channel) as stack:  # the frames and start, before any work
         chosen = parse_frames(args.frames, len(stack)) if args.frames else list(range(len(stack)))
+        if chosen != sorted(chosen):
+            raise ValueError(f"--frames {args.frames}: list the frames in the movie's order (tracking runs both "
+                             "ways from the start frame by itself)")
         if start is not None and start not in chosen:
-            raise ValueError(f"the contours are drawn on frame {start}, not among --frames {args.frames}")
+            among = f"among --frames {args.frames}" if args.frames else f"in the stack (frames 0 to {len(stack) - 1})"
+            raise ValueError(f"the contours are drawn on frame {start}, not {among}")
         _check_contours(inits, stack.shape[1:], args.init)
     tr, frames, written = track_file(args.stack, inits, args.out, frames=args.frames, start=start,
                                      channel=args.channel, node_spacing=args.node_spacing,

@@ -79,10 +79,16 @@ def read_shapes_csv(path, *, leading: bool = False):
                 body = rows[1:]
             out = [np.asarray([[float(r[-2]), float(r[-1])] for r in body], dtype=np.float64)]
             before = [()]
-    except (ValueError, IndexError) as err:
+    except IndexError:
+        raise ValueError(f"could not read contours from {path}: a line has fewer columns than expected (is it "
+                         f"comma-separated, as napari writes it?)") from None
+    except ValueError as err:
         raise ValueError(f"could not read contours from {path}: {err}") from None
     if not out or all(len(s) == 0 for s in out):
         raise ValueError(f"{path} holds no shape")
+    bad = [i for i, (s, b) in enumerate(zip(out, before)) if not (np.isfinite(s).all() and np.isfinite(b).all())]
+    if bad:
+        raise ValueError(f"could not read contours from {path}: shape {bad[0]} has a NaN or infinite coordinate")
     return (out, before) if leading else out
 
 
@@ -302,4 +308,7 @@ def parse_frames(spec: str, n_frames: int) -> list[int]:
         raise ValueError(f"frames {spec!r}: the stack has frames 0 to {n_frames - 1}") from None
     if not frames:
         raise ValueError(f"frames {spec!r} selects no frame of the {n_frames}")
+    repeated = sorted({t for t in frames if frames.count(t) > 1})
+    if repeated:
+        raise ValueError(f"frames {spec!r} names frame {repeated[0]} more than once")
     return frames
