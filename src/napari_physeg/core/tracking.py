@@ -488,7 +488,7 @@ def _warn_not_found(run: _Run, shape) -> None:
                "no object came to rest under its drawing; check that it is drawn around (or inside) one object, "
                "or the segment_options (e.g. max_steps, material and stiffness)")
         warnings.warn(f"object {k} was not found on the start frame {run.start} and is reported lost: {why}",
-                      UserWarning, stacklevel=4)
+                      UserWarning, stacklevel=5)
 
 
 def _segment_frame(run: _Run, image, shared, t: int, step: int):
