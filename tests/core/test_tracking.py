@@ -241,6 +241,25 @@ def test_two_drawings_of_one_object_are_one_contour_and_a_warning(second):
     assert len(found) == 1 and tr.status[1 - found[0]] == [LOST] * 3
 
 
+@pytest.mark.parametrize("listed", ["generous first", "tight first"])
+def test_a_generous_drawing_over_a_neighbour_takes_nothing_from_it_whatever_the_order(listed):
+    """A circle around one cell that passes over the next cell's tight one
+    (found by probing, session 27): listed after it, the tight drawing's
+    object was lost on every frame, its cell within the generous drawing's
+    claim."""
+    centres = [[(40, 30 + 0.5 * t), (40, 66 + 0.5 * t)] for t in range(3)]
+    frames = _disk_movie(centres, radius=10, shape=(80, 100), noise=0.03)
+    generous, tight = _circle((40, 46), 32), _circle((40, 66), 14)
+    inits = [generous, tight] if listed == "generous first" else [tight, generous]
+    tr = track(frames, inits)
+    assert tr.status == [[TRACKED] * 3] * 2
+    rr, cc = np.mgrid[:80, :100]
+    for k, cell in enumerate((0, 1) if listed == "generous first" else (1, 0)):
+        for t in range(3):
+            r, c = centres[t][cell]
+            assert iou(tr.contours[k][t], (rr - r) ** 2 + (cc - c) ** 2 <= 100) > 0.9
+
+
 def test_an_object_not_found_on_the_start_frame_gets_a_warning():
     frames = _disk_movie([[(48, 48)]] * 2)
     with pytest.warns(UserWarning, match="object 0 was not found on the start frame 0.*max_steps"):

@@ -469,8 +469,8 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                  "total": t_end - t_start})
 
 
-#: A drawing that shares at least this share of its area with another's
-#: marks the same object (see _warn_not_found).
+#: A drawing that holds at least this share of another's area passes over
+#: the other's object, or marks the same one (see _settle_first, _warn_not_found).
 SAME_DRAWING_SHARE = 0.5
 
 
@@ -480,11 +480,10 @@ def _warn_not_found(run: _Run, shape) -> None:
     for k, init in enumerate(run.inits):
         if run.status[k][run.start] == TRACKED:
             continue
-        area = max(abs(signed_area(init)), 1.0)
         within = [j for j in range(len(run.inits))
-                  if j != k and _shared_area(init, run.inits[j], shape) >= SAME_DRAWING_SHARE * area]
-        why = (f"its drawing lies mostly within that of object {within[0]}: both mark the same object, which "
-               f"contours that never overlap cannot share; draw each object once" if within else
+                  if j != k and (_holds(run.inits[j], init, shape) or _holds(init, run.inits[j], shape))]
+        why = (f"one of its drawing and that of object {within[0]} lies mostly within the other: both mark the "
+               f"same object, which contours that never overlap cannot share; draw each object once" if within else
                "no object came to rest under its drawing; check that it is drawn around (or inside) one object, "
                "or the segment_options (e.g. max_steps, material and stiffness)")
         warnings.warn(f"object {k} was not found on the start frame {run.start} and is reported lost: {why}",
@@ -499,12 +498,15 @@ def _segment_frame(run: _Run, image, shared, t: int, step: int):
     # Which object each pixel belongs to, as far as known: the others'
     # contours on this frame once done, else on the frame before.
     owner = np.full(image.shape, -1, dtype=np.int32)
-    for j in range(len(run.inits)):
+    order = _segmenting_order(run, t, step)
+    for j in reversed(order):  # where claims overlap, the object done first has them
         _paint(owner, _claim_before(run, j, t, step), j)
     run.moved = []
-    order = _segmenting_order(run, t, step)
     for n, k in enumerate(order):
-        _settle(run, image, shared, owner, t, k, step)
+        if t == run.start:
+            _settle_first(run, image, shared, owner, k, order[n + 1:])
+        else:
+            _settle(run, image, shared, owner, t, k, step)
         if run.status[k][t] != TRACKED and t != run.start:
             _give_back(run, image, shared, owner, t, k, step, order[:n])
         yield k
@@ -563,6 +565,25 @@ def _settle(run: _Run, image, shared, owner, t: int, k: int, step: int, handed=N
     run.contours[k][t], run.status[k][t] = _one_object(run, image, shared, owner, t, k, step, handed)
     owner[owner == k] = -1
     _paint(owner, run.contours[k][t], k)
+
+
+def _settle_first(run: _Run, image, shared, owner, k: int, undone) -> None:
+    """:func:`_settle` on the start frame, where the objects not done yet
+    claim their drawings: but not those that hold most of ``k``'s (a
+    generous drawing that passes over ``k``, or goes around the object that
+    ``k`` marks from inside it), or ``k`` could not reach its object's border."""
+    holders = [j for j in undone if _holds(run.inits[j], run.inits[k], image.shape)]
+    if not holders:
+        return _settle(run, image, shared, owner, run.start, k, 1)
+    view = np.where(np.isin(owner, holders), -1, owner)
+    _settle(run, image, shared, view, run.start, k, 1)
+    owner[owner == k] = -1
+    _paint(owner, run.contours[k][run.start], k)
+
+
+def _holds(a: np.ndarray, b: np.ndarray, shape) -> bool:
+    """Whether drawing ``a`` holds at least SAME_DRAWING_SHARE of drawing ``b``'s area."""
+    return _shared_area(a, b, shape) >= SAME_DRAWING_SHARE * max(abs(signed_area(b)), 1.0)
 
 
 def _history(run: _Run, k: int, t: int, step: int):
@@ -676,10 +697,15 @@ def _segmenting_order(run: _Run, t: int, step: int) -> list[int]:
     tracked on the frame before first, then those looked for again after a
     gap (see MAX_GAP). Where one of the latter went while it was not seen is
     not known: it must not take part of a neighbour that moved next to where
-    it was before that neighbour is done."""
+    it was before that neighbour is done.
+
+    On the start frame, the smaller drawings first (in the order given, among
+    equals): a tight drawing says more about where its object is than a
+    generous one that passes over it, whatever order they were listed in.
+    """
     n_obj = len(run.inits)
     if t == run.start:
-        return list(range(n_obj))
+        return sorted(range(n_obj), key=lambda k: abs(signed_area(run.inits[k])))
     return sorted(range(n_obj), key=lambda k: run.status[k][t - step] != TRACKED)
 
 
