@@ -133,6 +133,15 @@ def _circle(centre, radius, n=40):
 @example(movie=([[np.array([32.0, 22.0]), None, None, None], [np.array([32.0, 58.0])] * 2 + [None] * 2,
                  [np.array([19.0, 39.0])] + [np.array([25.0, 37.0])] * 3], 4, [6.0, 6.0, 11.0], [0.5] * 3),
          dtype=np.uint8, bright=False, noise=0.0, seed=0, scale=1.25, start_at=0.0)
+# Found by this test with disks of other levels (session 26, fixed in 27): a
+# faint disk beside a bright one that jumped onto it; the faint one, done
+# first, took the part of the bright one beyond its claim (their contours
+# shared 5 px).
+@example(movie=([[np.array([28.5, 24.9375]), np.array([28.5, 24.9375]), np.array([30.25, 24.9375]),
+                  np.array([30.25, 23.9375])],
+                 [np.array([30.5625, 53.625]), np.array([31.078125, 53.625]), np.array([30.078125, 53.625]),
+                  np.array([30.078125, 45.375])]], 4, [11.25, 14.0], [0.3125, 0.75]),
+         dtype=np.uint8, bright=False, noise=0.015625, seed=0, scale=1.25, start_at=0.0)
 def test_track_keeps_its_promises_or_raises_a_documented_error(movie, dtype, bright, noise, seed, scale, start_at):
     paths, n_frames, radii, levels = movie
     firsts = [p[0] for p in paths]  # apart on the first frame (later they may meet)
