@@ -399,8 +399,8 @@ def test_options_reach_segment_by_name_and_the_rest_keep_its_defaults(scene, mon
                        "weights": {"edges": 0.5, "distance": 0.5}, "sigma_factor": 1.2, "max_steps": 400}
 
 
-def test_a_material_without_stiffness_gets_the_r_that_suits_it(scene, monkeypatch):
-    # As the widget does: copper's suggested r (the paper's 1e6), not rubber's default 2000.
+def test_a_material_without_stiffness_leaves_the_r_to_segment(scene, monkeypatch):
+    # segment() picks the r that suits the material (copper: the paper's 1e6), as the widget shows it.
     import napari_physeg.core as core
 
     seen, real = [], core.segment
@@ -413,7 +413,7 @@ def test_a_material_without_stiffness_gets_the_r_that_suits_it(scene, monkeypatc
     monkeypatch.setattr(core, "segment", spy)
     obj, image, init, tmp = scene
     assert main(["segment", str(image), "--init", str(init), "--out", str(tmp / "c.csv"), "--material", "copper"]) == 0
-    assert seen[-1] == {"material": "copper", "stiffness": 1e6}
+    assert seen[-1] == {"material": "copper"}
 
 
 def test_a_warning_is_one_line_of_the_program_s_own(scene, capsys):

@@ -90,6 +90,7 @@ def _weights(text):
 def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> None:
     from .core import MATERIALS, segment
     from .core.forces import DEFAULT_WEIGHTS
+    from .core.materials import suggested_stiffness
 
     d = _defaults(segment)
     g = p.add_argument_group("contour model (the Segmentation widget's options; defaults are segment()'s)")
@@ -105,7 +106,7 @@ def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> 
                    "density in kg/m^3 instead of the preset's, typically 1000-9000 (rubber 1100, copper 8960)")
     g.add_argument("--stiffness", type=_number(float, 0, True), metavar="R",
                    help=f"stiffness constant r (N/m) scaling the image forces: force on a node = r x its feature "
-                   f"force; default: the one that suits --material ({d['stiffness']:g} for {d['material']}, 1e6 for "
+                   f"force; default: the one that suits --material ({suggested_stiffness(d['material']):g} for {d['material']}, 1e6 for "
                    "copper, see core.materials.SUGGESTED_STIFFNESS); too low and the contour barely moves, far too "
                    "high and it may diverge")
     nodes = g.add_mutually_exclusive_group()
@@ -147,10 +148,6 @@ def _segment_options(args) -> dict:
 
         preset = get_material(opts.get("material", _defaults(segment)["material"]))
         opts["material"] = preset.with_(name=f"custom ({preset.name})", **changes)
-    if "material" in opts and "stiffness" not in opts:  # as the widget: the r that suits the material
-        from .core.materials import suggested_stiffness
-
-        opts["stiffness"] = suggested_stiffness(opts["material"])
     if args.weights is not None:
         opts["forces"] = tuple(k for k, w in args.weights.items() if w > 0)
         opts["weights"] = {k: args.weights[k] for k in opts["forces"]}

@@ -230,6 +230,20 @@ def test_absurd_stiffness_reports_divergence_instead_of_nan():
         assert np.all(np.isfinite(res.contour))
 
 
+@pytest.mark.parametrize("material", ["soft tissue", "copper", "steel"])
+def test_a_material_without_stiffness_gets_the_r_that_suits_it(material):
+    """As the widget and the command line show it: copper at rubber's r barely
+    moves (found by probing track(segment_options={"material": "copper"}),
+    whose objects were all lost)."""
+    from napari_physeg.core.materials import suggested_stiffness
+
+    obj = data.ellipse((96, 96))
+    res = segment(obj.image, obj.init_near, material=material)
+    given = segment(obj.image, obj.init_near, material=material, stiffness=suggested_stiffness(material))
+    np.testing.assert_array_equal(res.contour, given.contour)
+    assert res.converged and iou(res.contour, obj.mask) > 0.98
+
+
 # ------------------------------------------------------- sub-pixel accuracy
 def signed_distance(points, polygon):
     """Distance from each point to the closed polygon, negative inside."""

@@ -430,8 +430,12 @@ def test_defaults_are_the_cores(viewer_widget):
     _, widget = viewer_widget
     defaults = {k: v.default for k, v in inspect.signature(segment).parameters.items()}
     params = widget.parameters()
-    for name in ("material", "stiffness", "sigma_factor", "polarity", "max_steps"):
+    for name in ("material", "sigma_factor", "polarity", "max_steps"):
         assert params[name] == defaults[name], name
+    # segment()'s stiffness is the one that suits its material, which the widget shows.
+    from napari_physeg.core.materials import suggested_stiffness
+
+    assert defaults["stiffness"] is None and params["stiffness"] == suggested_stiffness(defaults["material"])
     assert params["weights"] == DEFAULT_WEIGHTS
     contour = np.array([[0, 0], [0, 30.0], [30, 30], [30, 0]])
     assert segment_kwargs(contour, **params)["n_nodes"] == 40  # 120 px at the default 3 px spacing

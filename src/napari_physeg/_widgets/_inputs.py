@@ -115,7 +115,8 @@ class PhysicsControls:
                                      tooltip=tips["poisson"], visible=False)
         self._density = FloatSpinBox(label="density (kg/m³)", value=rubber.density, min=1.0, max=30000.0,
                                      step=100.0, tooltip=tips["density"], visible=False)
-        self._stiffness = FloatSpinBox(label="stiffness r (N/m)", value=core_default(function, "stiffness"),
+        self._stiffness = FloatSpinBox(label="stiffness r (N/m)",
+                                       value=suggested_stiffness(core_default(function, "material")),
                                        min=1.0, max=1e10, step=100.0, tooltip=tips["stiffness"])
         self._spacing = FloatSpinBox(label="node spacing (px)", value=DEFAULT_NODE_SPACING, min=0.5, max=50.0,
                                      step=0.5, tooltip=tips["spacing"])

@@ -227,7 +227,7 @@ def segment_contours(image, contours, kwargs_list, *, cancel: threading.Event | 
 
 
 def segment_kwargs(contour, *, material=core_default(segment, "material"),
-                   stiffness=core_default(segment, "stiffness"), node_spacing=None, n_nodes=None,
+                   stiffness=None, node_spacing=None, n_nodes=None,
                    sigma_factor=core_default(segment, "sigma_factor"), weights=None,
                    polarity=core_default(segment, "polarity"), max_steps=core_default(segment, "max_steps")) -> dict:
     """Keyword arguments of :func:`segment` for one initial contour.
@@ -243,7 +243,7 @@ def segment_kwargs(contour, *, material=core_default(segment, "material"),
                          "a positive weight, e.g. 0.4 / 0.3 / 0.3")
     return {
         "material": material,
-        "stiffness": float(stiffness),
+        "stiffness": None if stiffness is None else float(stiffness),
         "n_nodes": node_count(contour, node_spacing, n_nodes),
         "sigma_factor": float(sigma_factor),
         "forces": forces,

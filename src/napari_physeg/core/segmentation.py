@@ -30,7 +30,7 @@ from .element import coefficient_system, rayleigh_coefficients, reference_freque
 from .features import (_as_image, _check_2d, _intensity_range, _noise_sigma, _normalize, chamfer_distance,
                        normalized_intensity, shen_castan_edges)
 from .forces import FORCE_NAMES, ForceField, normalize_weights
-from .materials import Material, get_material
+from .materials import Material, get_material, suggested_stiffness
 from .region import _disk, _fill, _scaled, drawing_levels, level_beyond_object, object_region, objectness
 from .subpixel import polish
 
@@ -846,10 +846,14 @@ class _RestDetector:
 
 def _checked_options(material, forces, weights, stiffness, reference, integrator, polarity, max_step_length, tol,
                      max_steps, n_nodes):
-    """The material and the force weights, once every option is checked (ValueError naming the bad one)."""
+    """The material, the force weights and the stiffness (None: the one that
+    suits the material), once every option is checked (ValueError naming the bad one)."""
     material = get_material(material)
     weights = normalize_weights(forces, weights)
-    if not (np.isfinite(stiffness) and stiffness > 0):
+    if stiffness is None:
+        stiffness = suggested_stiffness(material)
+    if isinstance(stiffness, (bool, np.bool_)) or not isinstance(stiffness, (int, float, np.integer, np.floating)) \
+            or not (np.isfinite(stiffness) and stiffness > 0):
         raise ValueError(f"stiffness r must be a positive number, got {stiffness!r}")
     if reference not in ("incremental", "total"):
         raise ValueError(f"reference must be 'incremental' or 'total', got {reference!r}")
@@ -861,7 +865,7 @@ def _checked_options(material, forces, weights, stiffness, reference, integrator
         raise ValueError("max_step_length and tol must be positive and max_steps non-negative")
     if n_nodes is not None and int(n_nodes) < 3:
         raise ValueError(f"n_nodes must be at least 3, got {n_nodes!r}")
-    return material, weights
+    return material, weights, float(stiffness)
 
 
 def check_segment_options(**options) -> None:
@@ -933,7 +937,7 @@ def _evolve(
     init,
     *,
     material: str | Material,
-    stiffness: float,
+    stiffness: float | None,
     n_nodes: int | None,
     sigma: float | None,
     sigma_factor: float,
@@ -967,8 +971,8 @@ def _evolve(
     from ._validation import check_contour  # the one validation of segment, match and simulate
 
     init = check_contour(init, "init")
-    material, weights = _checked_options(material, forces, weights, stiffness, reference, integrator, polarity,
-                                         max_step_length, tol, max_steps, n_nodes)
+    material, weights, stiffness = _checked_options(material, forces, weights, stiffness, reference, integrator,
+                                                    polarity, max_step_length, tol, max_steps, n_nodes)
     # The drawing as the user made it (partly beyond the image, maybe) tells
     # the object from its background; the clipped one starts the contour.
     drawing = init
@@ -1141,7 +1145,7 @@ def segment(
     init,
     *,
     material: str | Material = "rubber",
-    stiffness: float = 2000.0,
+    stiffness: float | None = None,
     n_nodes: int | None = None,
     sigma: float | None = None,
     sigma_factor: float = 1.0,
@@ -1188,7 +1192,9 @@ def segment(
     stiffness : float, optional
         The paper's stiffness constant ``r`` (N/m): the image force on a node
         is ``r`` times its dimensionless feature force (at most the sum of the
-        weights). Stiffer materials need larger ``r`` (rubber ~2e3, copper ~1e6).
+        weights). Stiffer materials need larger ``r``: by default, the one that
+        suits ``material`` (:func:`~.materials.suggested_stiffness`: rubber
+        2e3, copper 1e6).
     n_nodes : int, optional
         Nodes of the initial model (default: one every ~3 px, 24 to 1000). The
         spacing is then kept as the contour grows or shrinks.
