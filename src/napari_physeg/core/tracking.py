@@ -482,8 +482,8 @@ def _warn_not_found(run: _Run, shape) -> None:
             continue
         within = [j for j in range(len(run.inits))
                   if j != k and (_holds(run.inits[j], init, shape) or _holds(init, run.inits[j], shape))]
-        why = (f"one of its drawing and that of object {within[0]} lies mostly within the other: both mark the "
-               f"same object, which contours that never overlap cannot share; draw each object once" if within else
+        why = (f"its drawing and that of object {within[0]} lie one mostly within the other: both mark the same "
+               f"object, which contours that never overlap cannot share; draw each object once" if within else
                "no object came to rest under its drawing; check that it is drawn around (or inside) one object, "
                "or the segment_options (e.g. max_steps, material and stiffness)")
         warnings.warn(f"object {k} was not found on the start frame {run.start} and is reported lost: {why}",
