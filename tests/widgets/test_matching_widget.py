@@ -172,6 +172,32 @@ def test_local_method_vectors_output_reports_unmatched(viewer_widget, wait_done,
     assert g.method == "global" and len(g.pairs) == 67 and g.n_modes >= 8
 
 
+def _oval(turn_degrees, seed):
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    radius = 20 * (1 + 0.12 * np.cos(2 * t))
+    turned = t + np.deg2rad(turn_degrees)
+    return np.column_stack([50 + radius * np.sin(turned), 50 + radius * np.cos(turned)]) + \
+        np.random.default_rng(seed).normal(0, 0.3, (64, 2))
+
+
+def test_in_place_keeps_a_near_round_cell_from_turning_half_a_turn(viewer_widget, wait_done, notes):
+    """An oval turned 3 degrees, as on the next frame or z slice (found by
+    probing, session 27): the invariant matching cannot tell 3 degrees from
+    183 and took the latter; in place, each node keeps near where it was."""
+    viewer, widget = viewer_widget
+    viewer.add_shapes([_oval(0, 0), _oval(3, 100)], shape_type="polygon", name="ovals")
+    widget.reset_choices()
+    identity = np.arange(64)
+    for in_place, right in ((False, 0.0), (True, 1.0)):
+        widget._in_place.value = in_place
+        widget.run()
+        wait_done(widget)
+        assert notes["error"] == []
+        m = matching_layers(viewer)[-1].metadata["matching"]
+        off = np.abs(m.partner - identity) % 64
+        assert np.mean(np.minimum(off, 64 - off) <= 2) == right
+
+
 def test_two_shapes_of_one_layer_with_a_transform(viewer_widget, wait_done, notes, poses):
     viewer, widget = viewer_widget
     a, b, _ = poses
@@ -288,7 +314,7 @@ def test_real_error_notification_reaches_napari(viewer_widget, napari_notificati
 def test_every_parameter_has_a_tooltip(viewer_widget):
     _, widget = viewer_widget
     params = [widget._layer_a, widget._index_a, widget._layer_b, widget._index_b, widget._method,
-              widget._n_modes, widget._output, widget._legend, widget._run_btn, widget._cancel_btn]
+              widget._n_modes, widget._in_place, widget._output, widget._legend, widget._run_btn, widget._cancel_btn]
     for w in params:
         assert w.tooltip and len(w.tooltip) > 30, w.label
     for name in ("order", "global", "local"):
@@ -298,7 +324,7 @@ def test_every_parameter_has_a_tooltip(viewer_widget):
     assert "Blue = low cost" in widget._legend.tooltip
     combo = widget._method.native
     assert [combo.itemData(i, 3) for i in range(3)] == [METHOD_TIPS[m] for m in ("order", "global", "local")]
-    assert widget.parameters() == {"method": "order", "n_modes": None}
+    assert widget.parameters() == {"method": "order", "n_modes": None, "displacement_weight": 0.0}
 
 
 def test_widgets_open_from_the_plugin_menu(make_napari_viewer, wait_done, notes):

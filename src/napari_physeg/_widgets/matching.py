@@ -29,12 +29,13 @@ from dataclasses import dataclass
 
 import napari
 import numpy as np
-from magicgui.widgets import ComboBox, Label, PushButton, SpinBox
+from magicgui.widgets import CheckBox, ComboBox, Label, PushButton, SpinBox
 from napari.layers import Layer
 from napari.utils.colormaps import Colormap
 from napari.utils.notifications import show_info
 
 from ..core import iter_match, match
+from ..core.tracking import DISPLACEMENT_WEIGHT as IN_PLACE_WEIGHT  # as between the frames of a movie
 from ._inputs import (
     MATCHING_KEY,
     ContourPair,
@@ -118,6 +119,7 @@ class MatchingOutcome:
 
 
 def match_contours(a, b, *, method: str = core_default(match, "method"), n_modes: int | None = None,
+                   displacement_weight: float = core_default(match, "displacement_weight"),
                    cancel: threading.Event | None = None):
     """Match contour ``a`` to contour ``b``; a generator for a worker thread.
 
@@ -125,13 +127,16 @@ def match_contours(a, b, *, method: str = core_default(match, "method"), n_modes
     :func:`~._worker.relay`): it yields the core's
     :class:`~napari_physeg.core.MatchingProgress` and stops at its next stage
     once ``cancel`` is set. ``n_modes`` of 0 or None chooses the number of
-    modes automatically. Returns a :class:`MatchingOutcome`: the core's
-    errors are caught and returned in it, not raised.
+    modes automatically; ``displacement_weight`` > 0 keeps each node near
+    where it was (see :func:`~napari_physeg.core.match`). Returns a
+    :class:`MatchingOutcome`: the core's errors are caught and returned in
+    it, not raised.
     """
     cancel = cancel if cancel is not None else threading.Event()
     t0 = time.perf_counter()
     try:
-        m = yield from relay(iter_match(a, b, method=method, n_modes=int(n_modes) if n_modes else None), cancel)
+        m = yield from relay(iter_match(a, b, method=method, n_modes=int(n_modes) if n_modes else None,
+                                        displacement_weight=float(displacement_weight)), cancel)
     except Exception as err:  # reported to the user by the caller
         return MatchingOutcome(error=err, seconds=time.perf_counter() - t0)
     if m.stop_reason == "cancelled":
@@ -140,11 +145,13 @@ def match_contours(a, b, *, method: str = core_default(match, "method"), n_modes
 
 
 def compute_matching(a, b, *, method: str = core_default(match, "method"), n_modes: int | None = None,
+                     displacement_weight: float = core_default(match, "displacement_weight"),
                      cancel: threading.Event | None = None, on_progress=None) -> MatchingOutcome:
     """:func:`match_contours` run to its end, for scripts and tests;
     ``on_progress(fraction)`` (optional) sees the core's progress, 0 to 1."""
     report = None if on_progress is None else (lambda state: on_progress(state.fraction))
-    return run_to_completion(match_contours(a, b, method=method, n_modes=n_modes, cancel=cancel), report)
+    return run_to_completion(match_contours(a, b, method=method, n_modes=n_modes,
+                                            displacement_weight=displacement_weight, cancel=cancel), report)
 
 
 def error_message(err: Exception) -> str:
@@ -268,6 +275,10 @@ _TIPS = {
     "method": "How correspondences are chosen from the cost matrix.\n" + "\n".join(METHOD_TIPS.values()),
     "n_modes": "Number of vibration modes in the modal affinity (eq. 12). 0 = automatic (6 to 12, cut at a gap "
                "of both spectra). Fewer modes: coarser, more robust; more: finer, more sensitive to noise.",
+    "in_place": "The two contours lie in one frame of reference (consecutive frames or z slices of one "
+                "object): keep each node near where it was. Modes and curvature are blind to where the shapes "
+                "are, so a near-round cell can otherwise be matched half a turn off. Leave off to match shapes "
+                "wherever they are, turned or moved (the paper's invariant matching).",
     "output": "Draw the correspondences as a Shapes layer of lines (can be saved as napari's shapes CSV) or "
               "as a Vectors layer of arrows from a to b (lighter for thousands of pairs).",
     "legend": "Colour of each line: its matching cost (modal affinity eq. 12 over the number of modes plus "
@@ -314,6 +325,8 @@ class MatchingWidget(WorkerWidget):
         self._method = ComboBox(label="method", choices=list(METHOD_TIPS), value=core_default(match, "method"),
                                 tooltip=_TIPS["method"])
         self._n_modes = SpinBox(label="modes (0 = auto)", value=0, min=0, max=60, tooltip=_TIPS["n_modes"])
+        self._in_place = CheckBox(text="in place (keep nodes near where they were)", value=False,
+                                  tooltip=_TIPS["in_place"])
         self._output = ComboBox(label="output as", choices=[OUTPUT_LINES, OUTPUT_VECTORS], value=OUTPUT_LINES,
                                 tooltip=_TIPS["output"])
         self._run_btn = PushButton(text="Run", tooltip=_TIPS["run"])
@@ -322,7 +335,7 @@ class MatchingWidget(WorkerWidget):
         self._legend = Label(value=cost_legend_html(), tooltip=_TIPS["legend"])
         self._status = Label(value="")
         self._lay_out([self._layer_a, self._index_a, self._layer_b, self._index_b, self._method, self._output,
-                       self._legend], advanced=[self._n_modes], buttons=[self._export_btn])
+                       self._legend], advanced=[self._in_place, self._n_modes], buttons=[self._export_btn])
         self._export_btn.changed.connect(self._ask_export)
         self._set_item_tooltips()
         self._connect_signals()
@@ -356,7 +369,8 @@ class MatchingWidget(WorkerWidget):
     # ------------------------------------------------------------ state
     def parameters(self) -> dict:
         """The current settings as keyword arguments of :func:`compute_matching`."""
-        return {"method": self._method.value, "n_modes": self._n_modes.value or None}
+        return {"method": self._method.value, "n_modes": self._n_modes.value or None,
+                "displacement_weight": IN_PLACE_WEIGHT if self._in_place.value else 0.0}
 
     # ------------------------------------------------------------ run
     def run(self, *_):
