@@ -239,6 +239,7 @@ def test_two_drawings_of_one_object_are_one_contour_and_a_warning(second):
         tr = track(frames, [around, other])
     found = [k for k in range(2) if tr.status[k] == [TRACKED] * 3]
     assert len(found) == 1 and tr.status[1 - found[0]] == [LOST] * 3
+    assert len(tr.warnings) == 1 and "mark the same object" in tr.warnings[0]  # for the widget to show
 
 
 @pytest.mark.parametrize("listed", ["generous first", "tight first"])

@@ -172,3 +172,94 @@ def test_the_preview_does_not_take_the_users_selection(movie_in_viewer, qtbot, w
     assert widget._preview in viewer.layers
     assert viewer.layers.selection.active is drawn and set(viewer.layers.selection) == {drawn}
     wait_done(widget)
+
+
+def _disk_movie(n_frames=5, centre=(40, 40), radius=15):
+    rr, cc = np.mgrid[:96, :96]
+    rng = np.random.default_rng(0)
+    disk = (rr - centre[0]) ** 2 + (cc - centre[1]) ** 2 <= radius**2
+    return np.stack([np.where(disk, 0.8, 0.2) + rng.normal(0, 0.03, disk.shape) for _ in range(n_frames)])
+
+
+def _circle_on_frame(centre, radius, frame=0, n=40):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.column_stack([np.full(n, frame, float), centre[0] + radius * np.sin(t), centre[1] + radius * np.cos(t)])
+
+
+@pytest.fixture
+def warned(monkeypatch):
+    from napari_physeg._widgets import tracking
+
+    seen = []
+    monkeypatch.setattr(tracking, "show_warning", lambda message: seen.append(str(message)))
+    return seen
+
+
+@pytest.mark.parametrize("second", ["on the background", "inside the same cell"])
+def test_an_object_not_found_on_the_start_frame_is_named_with_its_cause(dock, wait_done, errors, warned, second):
+    """Found by probing (session 27): the core's warning never reached the
+    user, who read that the object was 'lost on the way'."""
+    viewer, widget = dock(TrackingWidget)
+    viewer.add_image(_disk_movie(), name="movie")
+    other = _circle_on_frame((75, 75), 6) if second == "on the background" else _circle_on_frame((40, 40), 4)
+    viewer.add_shapes([_circle_on_frame((40, 40), 20), other], shape_type="polygon", name="drawn")
+    widget.reset_choices()
+    viewer.dims.set_point(0, 0)
+    widget.run()
+    wait_done(widget)
+    assert errors == []
+    assert any("object 1 was not found on the start frame 0" in m or "object 0 was not found" in m for m in warned)
+    assert not any("lost on the way" in m for m in warned)
+    assert any(isinstance(layer, Shapes) for layer in widget.output_layers)
+
+
+def test_nothing_found_is_one_clear_message_and_no_layer(dock, wait_done, errors, warned):
+    """Found by probing (session 27): an empty result made a 2D Shapes layer
+    given the movie's 3D transform, 'could not broadcast ... (3,) into (2,)'."""
+    viewer, widget = dock(TrackingWidget)
+    viewer.add_image(_disk_movie(), name="movie")
+    viewer.add_shapes([_circle_on_frame((80, 80), 5)], shape_type="polygon", name="drawn")
+    widget.reset_choices()
+    viewer.dims.set_point(0, 0)
+    n_layers = len(viewer.layers)
+    widget.run()
+    wait_done(widget)
+    assert len(errors) == 1 and "Nothing was tracked" in errors[0]
+    assert any("not found on the start frame" in m for m in warned)
+    assert len(viewer.layers) == n_layers and widget.output_layers == []
+
+
+def test_an_error_of_the_core_is_one_message_not_a_traceback(dock, qtbot, wait_done, errors):
+    """Found by probing (session 27): napari re-raised the worker's error in
+    the GUI thread, a traceback on top of the widget's message."""
+    viewer, widget = dock(TrackingWidget)
+    movie = _disk_movie()
+    movie[:, :, :6] = np.nan  # the empty margin of a registered movie
+    viewer.add_image(movie, name="movie")
+    viewer.add_shapes([_circle_on_frame((40, 40), 20)], shape_type="polygon", name="drawn")
+    widget.reset_choices()
+    viewer.dims.set_point(0, 0)
+    with qtbot.capture_exceptions() as caught:
+        widget.run()
+        wait_done(widget)
+        qtbot.wait(50)
+    assert caught == []
+    assert len(errors) == 1 and "NaN" in errors[0]
+
+
+def test_a_movie_with_a_time_scale_keeps_its_slider_and_extent(dock, wait_done, errors):
+    """Found by probing (session 27): the hidden map layers, in pixels at the
+    origin, doubled the time slider's steps of a movie at 2 s a frame and
+    stretched the view's extent to the origin."""
+    viewer, widget = dock(TrackingWidget)
+    scale, translate = (2.0, 0.5, 0.5), (0.0, 100.0, -40.0)
+    viewer.add_image(_disk_movie(6), name="movie", scale=scale, translate=translate)
+    viewer.add_shapes([_circle_on_frame((40, 40), 20)], shape_type="polygon", name="drawn", scale=scale,
+                      translate=translate)
+    widget.reset_choices()
+    viewer.dims.set_point(0, 0)
+    before = (viewer.dims.nsteps[0], viewer.layers.extent.world.tolist())
+    widget.run()
+    wait_done(widget)
+    assert errors == [] and len(widget.output_layers) == 4
+    assert (viewer.dims.nsteps[0], viewer.layers.extent.world.tolist()) == before

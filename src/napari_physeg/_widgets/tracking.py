@@ -20,6 +20,7 @@ position), one slice per object along a leading "object" axis.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 
 import napari
 import numpy as np
@@ -93,7 +94,7 @@ def tracking_layer_data(result: TrackingResult, transform: dict, *, name: str, n
             features["frame"].append(t)
             features["status"].append(result.status[k][t])
     common = {key: transform[key] for key in ("scale", "translate", "rotate", "shear", "affine") if key in transform}
-    layers = [(polygons, dict(name=f"{name} contours", shape_type="polygon", edge_color=colours,
+    layers = [(polygons, dict(name=f"{name} contours", ndim=3, shape_type="polygon", edge_color=colours,
                               face_color="transparent", edge_width=1.5, features=features,
                               metadata={"tracking": result}, **common), "shapes")]
     tracks = []
@@ -117,8 +118,42 @@ def tracking_layer_data(result: TrackingResult, transform: dict, *, name: str, n
             continue
         lim = float(np.nanpercentile(np.abs(maps), 98)) or 1.0
         layers.append((maps, dict(name=f"{name} {quantity.replace('_', ' ')} (object x frame x arc)",
-                                  colormap=colormap, contrast_limits=(-lim, lim), visible=False), "image"))
+                                  colormap=colormap, contrast_limits=(-lim, lim), visible=False,
+                                  **_map_placement(maps.shape, transform)), "image"))
     return layers
+
+
+def _map_placement(shape, transform: dict) -> dict:
+    """Scale and translate that lay the maps (object x frame x arc) over the
+    movie's first frame: the maps share the viewer's axes with the movie, so
+    their objects step as its frames do and their (frame, arc) plane spans its
+    field of view; in pixels at the origin they stretched the time slider of a
+    movie with a time scale and the view's extent."""
+    scale = np.asarray(transform.get("scale", np.ones(3)), float)[-3:]
+    translate = np.asarray(transform.get("translate", np.zeros(3)), float)[-3:]
+    frame_shape = np.asarray(transform.get("frame_shape", shape[1:]), float)
+    # (napari's extent runs from the first pixel's centre to the last's)
+    stretch = scale[1:] * np.maximum(frame_shape - 1, 1) / np.maximum(np.asarray(shape[1:], float) - 1, 1)
+    return {"scale": (scale[0], *stretch), "translate": tuple(translate)}
+
+
+@dataclass
+class _Failed:
+    """The core's error, returned by :func:`track_movie` rather than raised:
+    napari re-raises a worker's exceptions in the GUI thread, a traceback on
+    top of the widget's own message."""
+
+    error: Exception
+
+
+def track_movie(run, cancel, interval: float = 0.0):
+    """Drive the core's ``iter_track`` generator ``run`` in the worker (see
+    :func:`~._worker.relay`); returns its :class:`TrackingResult`, or the
+    error it raised in a :class:`_Failed`."""
+    try:
+        return (yield from relay(run, cancel, interval))
+    except Exception as err:  # reported to the user by the widget
+        return _Failed(err)
 
 
 _TIPS = {
@@ -204,8 +239,9 @@ class TrackingWidget(WorkerWidget):
         self._begin(f"Tracking {len(contours)} object(s) from frame {start}…")
         total = len(contours) * frames.shape[0]
         # Cancel stops after the current object and frame; what was tracked is kept.
+        self._run_info["transform"]["frame_shape"] = tuple(frames.shape[-2:])
         run = iter_track(frames, contours, start=start, max_steps=int(self._max_steps.value), segment_options=options)
-        return self._start(total, relay, run, self._cancel, self.preview_interval)
+        return self._start(total, track_movie, run, self._cancel, self.preview_interval)
 
     # ------------------------------------------------------------ worker signals (GUI thread)
     def _on_yielded(self, update: TrackingProgress):
@@ -234,9 +270,18 @@ class TrackingWidget(WorkerWidget):
             self.viewer.layers.remove(self._preview)
         self._preview = None
 
-    def _on_returned(self, result: TrackingResult):
+    def _on_returned(self, result: TrackingResult | _Failed):
+        if isinstance(result, _Failed):
+            return self._on_errored(result.error)
         self.last_result = result
         if not self._gui_alive():
+            return
+        for message in result.warnings:
+            show_warning(message)
+        if not any(TRACKED in row for row in result.status):
+            self._remove_preview()
+            self._fail("Nothing was tracked: no object was found on the start frame (see the warnings); "
+                       "draw around (or inside) each object on the frame you stand on")
             return
         preview, self._preview = self._preview, None
         try:
@@ -250,8 +295,8 @@ class TrackingWidget(WorkerWidget):
         self._status.value = (f"{result.n_objects} object(s), {counts[TRACKED]} object-frames tracked, "
                               f"{counts[LOST]} lost ({done}, {result.timings['total']:.1f} s)")
         show_info(f"Tracking: {self._status.value}. The maps (frame x arc) are hidden image layers")
-        if counts[LOST]:
-            lost = [k for k in range(result.n_objects) if LOST in result.status[k]]
+        lost = [k for k in range(result.n_objects) if LOST in result.status[k] and TRACKED in result.status[k]]
+        if lost:
             show_warning(f"object(s) {lost} were lost on the way: their later frames have no contour")
 
     def _on_errored(self, err: Exception):

@@ -173,6 +173,9 @@ class TrackingResult:
         ``"completed"`` or ``"cancelled"``.
     timings : dict
         Seconds spent on ``"segmentation"``, ``"correspondence"`` and ``"total"``.
+    warnings : tuple of str
+        What the run also warned of (an object not found on the start frame,
+        and why), for callers that show warnings their own way (the widget).
     """
 
     contours: list
@@ -184,6 +187,7 @@ class TrackingResult:
     start: int
     stop_reason: str
     timings: dict = field(default_factory=dict)
+    warnings: tuple = ()
 
     @property
     def n_objects(self) -> int:
@@ -429,7 +433,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
     run = _Run(inits=inits, start=start, options=options,
                contours=[[None] * n_frames for _ in range(n_obj)], status=[[None] * n_frames for _ in range(n_obj)],
                seen=[_Seen(polarity, abs(signed_area(c))) for c in inits])
-    total, done, stop_reason = n_obj * n_frames, 0, "completed"
+    total, done, stop_reason, said = n_obj * n_frames, 0, "completed", []
     # Forward from the start frame, then backward from it.
     start_image = None
     for frame_order in (range(start, n_frames), range(start - 1, -1, -1)):
@@ -452,7 +456,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                     stop_reason = "cancelled"
                     break
             if t == start and stop_reason != "cancelled":
-                _warn_not_found(run, frame_shape)
+                said = _warn_not_found(run, frame_shape)
             if stop_reason == "cancelled":
                 break
         if stop_reason == "cancelled":
@@ -466,7 +470,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
     return TrackingResult(
         contours=contours, status=status, **analysis, start=start, stop_reason=stop_reason,
         timings={"segmentation": t_segmented - t_start, "correspondence": t_end - t_segmented,
-                 "total": t_end - t_start})
+                 "total": t_end - t_start}, warnings=tuple(said))
 
 
 #: A drawing that holds at least this share of another's area passes over
@@ -474,9 +478,11 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
 SAME_DRAWING_SHARE = 0.5
 
 
-def _warn_not_found(run: _Run, shape) -> None:
+def _warn_not_found(run: _Run, shape) -> list[str]:
     """Warn, naming the likely cause, of each object not found on the start
-    frame: it is reported lost on every frame, which is seldom what was meant."""
+    frame: it is reported lost on every frame, which is seldom what was meant.
+    Returns the messages."""
+    said = []
     for k, init in enumerate(run.inits):
         if run.status[k][run.start] == TRACKED:
             continue
@@ -486,8 +492,9 @@ def _warn_not_found(run: _Run, shape) -> None:
                f"object, which contours that never overlap cannot share; draw each object once" if within else
                "no object came to rest under its drawing; check that it is drawn around (or inside) one object, "
                "or the segment_options (e.g. max_steps, material and stiffness)")
-        warnings.warn(f"object {k} was not found on the start frame {run.start} and is reported lost: {why}",
-                      UserWarning, stacklevel=5)
+        said.append(f"object {k} was not found on the start frame {run.start} and is reported lost: {why}")
+        warnings.warn(said[-1], UserWarning, stacklevel=5)
+    return said
 
 
 def _segment_frame(run: _Run, image, shared, t: int, step: int):
