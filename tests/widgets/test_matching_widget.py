@@ -431,6 +431,21 @@ def test_pairs_saved_as_csv_match_the_layer(viewer_widget, wait_done, notes, tmp
     np.testing.assert_allclose([[float(r["b_row"]), float(r["b_col"])] for r in rows], pair.b[features["node_b"]])
 
 
+def test_saving_where_nothing_can_be_written_is_a_message(viewer_widget, wait_done, notes, qtbot, tmp_path,
+                                                          monkeypatch):
+    """Found by probing (session 27): the OSError escaped the button's
+    callback as a traceback."""
+    viewer, widget = viewer_widget
+    viewer.open_sample("napari-physeg", "hand_poses")
+    widget.run()
+    wait_done(widget)
+    monkeypatch.setattr(_worker, "ask_save_path", lambda *_: str(tmp_path / "no such folder" / "pairs.csv"))
+    with qtbot.capture_exceptions() as caught:
+        widget._export_btn.native.click()
+    assert caught == []
+    assert len(notes["error"]) == 1 and "Could not save" in notes["error"][0] and "another place" in notes["error"][0]
+
+
 def test_a_points_layer_is_a_contour(viewer_widget, wait_done, notes, poses):
     # Points clicked around an object, in order, are one polygon.
     viewer, widget = viewer_widget

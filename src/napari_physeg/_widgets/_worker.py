@@ -117,8 +117,12 @@ class WorkerWidget(Container):
         pair = getattr(self, "pair", None)
         name = f"{pair.a_label} to {pair.b_label} {self.export_what}.csv" if pair else f"{self.export_what}.csv"
         path = ask_save_path(self, f"Save the {self.export_what} as CSV", name)
-        if path:
+        if not path:
+            return
+        try:
             self.export_csv(path)
+        except OSError as err:  # a missing folder, a read-only share, a file open elsewhere
+            self._fail(f"Could not save {path}: {err.strerror or err}; choose another place")
 
     def export_csv(self, path) -> None:
         """Write the last result's :meth:`export_table` to ``path`` as CSV."""
