@@ -23,18 +23,32 @@ def widget(dock):
     return widget
 
 
-def test_a_busy_display_drops_updates_but_not_a_finished_contour(widget):
+def test_a_busy_display_drops_updates_but_not_a_finished_contour(widget, monkeypatch):
+    from napari_physeg._widgets import _worker, segmentation
+
     shown = []
     widget._on_yielded = shown.append
     display_cpu = iter(np.arange(100.0))  # each update finds the display a full CPU second busier
     widget._display_cpu = lambda: next(display_cpu)
-    updates = [_update(0, 1), _update(0, 2), _update(0, 3, done=True), _update(1, 1), _update(1, 2, done=True)]
+    clock = iter([0.0, 0.1, 0.2, 0.2, 0.3, 0.4, 0.5, 0.6])  # the first draw, then one update each 0.1 s
+    now = [0.0]
+
+    def perf_counter():
+        now[0] = next(clock, now[0] + 0.1)
+        return now[0]
+
+    for module in (_worker, segmentation):
+        monkeypatch.setattr(module.time, "perf_counter", perf_counter)
+    updates = [_update(0, 1, total=3), _update(0, 2, done=True, total=3), _update(1, 1, total=3),
+               _update(1, 2, total=3), _update(1, 3, done=True, total=3), _update(2, 1, total=3)]
     for update in updates:
         widget._on_yielded_once(update)
-    # The first is shown, then only the first contour's final state: the last
-    # contour's final state comes with the result layer.
-    assert shown == [updates[0], updates[2]]
-    assert widget.n_received == 5
+    # The first is shown; the first contour's final state, 0.1 s later, is not
+    # (but kept for the next preview drawn); the second's is, more than
+    # FINISHED_EVERY after the last drawing.
+    assert shown == [updates[0], updates[4]]
+    assert set(widget._finished) == {0, 1}
+    assert widget.n_received == 6
 
 
 def test_an_idle_display_shows_every_update(widget):

@@ -305,6 +305,7 @@ class WorkerWidget(Container):
         last), unless :meth:`_must_show` says otherwise.
         """
         self.n_received += 1
+        self._note_update(update)
         now, cpu = time.perf_counter(), self._display_cpu()
         if self._last_draw is not None and not self._must_show(update):
             wall, used = now - self._last_draw[0], cpu - self._last_draw[1]
@@ -316,6 +317,9 @@ class WorkerWidget(Container):
     def _must_show(self, update) -> bool:
         """Whether ``update`` is shown even when the GUI is busy (a subclass may say so)."""
         return False
+
+    def _note_update(self, update) -> None:
+        """See every update, shown or dropped (a subclass may keep what the next one shown must draw)."""
 
     def _on_returned_in_order(self, result):
         self._deliver(self._on_returned, result)
