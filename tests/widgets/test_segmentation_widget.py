@@ -166,6 +166,22 @@ def test_each_shape_is_segmented_ellipse_rectangle_polygon(viewer_widget, wait_d
     assert mask.data.shape == hand.image.shape and set(np.unique(mask.data)) <= {0, 1, 2, 3}
 
 
+def test_a_polygon_holding_a_vertex_twice_is_segmented(viewer_widget, wait_done, errors, hand):
+    """An imported ROI may hold a vertex twice: segmented as the tracking and
+    matching widgets take it, not refused (found by probing, session 27)."""
+    viewer, widget = viewer_widget
+    viewer.add_image(hand.image, name="hand")
+    drawn = light(hand.init_near)
+    viewer.add_shapes([np.insert(drawn, 6, drawn[5], axis=0)], shape_type="polygon", name="imported")
+    widget.reset_choices()
+    widget._shapes.value = viewer.layers["imported"]
+    widget.run()
+    wait_done(widget)
+    assert errors == []
+    (out,) = output_layers(viewer)
+    assert iou(out.data[0], hand.mask) >= 0.9
+
+
 def test_results_in_image_data_coordinates_with_its_scale_and_translate(viewer_widget, wait_done, errors,
                                                                         hand):
     viewer, widget = viewer_widget

@@ -321,7 +321,7 @@ def shapes_to_image_coords(shapes_layer, image_layer, world_point=None) -> Slice
         world = np.broadcast_to(point, (len(poly), n_world)).copy()
         world[:, n_world - ds:] = apply_affine(s_to_world, poly)
         in_image = apply_affine(world_to_i, world[:, n_world - di:])
-        contours.append(np.ascontiguousarray(in_image[:, -2:], dtype=np.float64))
+        contours.append(drop_repeated_nodes(in_image[:, -2:]))  # (an imported ROI may hold a vertex twice)
         indices.append(k)
     return SlicedShapes(contours=contours, indices=indices, off_slice=off)
 
