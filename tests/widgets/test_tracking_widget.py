@@ -263,3 +263,20 @@ def test_a_movie_with_a_time_scale_keeps_its_slider_and_extent(dock, wait_done, 
     wait_done(widget)
     assert errors == [] and len(widget.output_layers) == 4
     assert (viewer.dims.nsteps[0], viewer.layers.extent.world.tolist()) == before
+
+
+def test_the_tidy_table_is_saved_as_csv(movie_in_viewer, wait_done, tmp_path):
+    """As napari-physeg track writes it: one row per object, frame and node (found missing by probing)."""
+    import pandas as pd
+
+    viewer, widget = movie_in_viewer
+    assert not widget._export_btn.enabled  # nothing to save before a run
+    widget.run()
+    wait_done(widget)
+    assert widget._export_btn.enabled
+    widget.export_csv(tmp_path / "tracks.csv")
+    saved = pd.read_csv(tmp_path / "tracks.csv")
+    expected = widget.last_result.table()
+    assert list(saved.columns) == list(expected.columns) and len(saved) == len(expected)
+    np.testing.assert_allclose(saved["normal_velocity"], expected["normal_velocity"])
+    assert set(saved["status"]) == {"tracked"} and saved["frame"].max() == 7

@@ -163,6 +163,9 @@ _TIPS = {
     "max_steps": "Time steps per object and frame (each frame starts from the previous result).",
     "run": "Track the contours of the current frame through the whole movie (forward, then backward).",
     "cancel": "Stop: the frames tracked so far become layers.",
+    "export": "Save the last run's tidy table as a CSV file, one row per object, frame and node: object, frame, "
+              "node, row, col (the movie's pixels), arc position, normal velocity (px/frame, protrusion > 0), "
+              "curvature and status; as napari-physeg track writes it.",
 }
 
 
@@ -183,8 +186,11 @@ class TrackingWidget(WorkerWidget):
                                   max=10000, step=50, tooltip=_TIPS["max_steps"])
         self._run_btn = PushButton(text="Run", tooltip=_TIPS["run"])
         self._cancel_btn = PushButton(text="Cancel", tooltip=_TIPS["cancel"], enabled=False)
+        self._export_btn = PushButton(text="Save CSV…", tooltip=_TIPS["export"], enabled=False)
         self._status = Label(value="")
-        self._lay_out([self._image, self._shapes, *self.physics.main], advanced=[self._max_steps])
+        self._lay_out([self._image, self._shapes, *self.physics.main], advanced=[self._max_steps],
+                      buttons=[self._export_btn])
+        self._export_btn.changed.connect(self._ask_export)
         self._connect_signals()
 
     # ------------------------------------------------------------ inputs
@@ -233,6 +239,7 @@ class TrackingWidget(WorkerWidget):
             return None
         self.last_result = None
         self.output_layers = []
+        self._export_btn.enabled = False
         options = {k: v for k, v in self.physics.parameters().items() if k in ("material", "stiffness")}
         material = getattr(options["material"], "name", options["material"])
         self._run_info = dict(transform=image_transform_kwargs(image), name=f"{image.name} tracked ({material})")
@@ -290,6 +297,7 @@ class TrackingWidget(WorkerWidget):
         except Exception as err:  # never a silent failure
             self._fail(f"Could not add the tracking layers: {type(err).__name__}: {err}")
             return
+        self._export_btn.enabled = True
         counts = {s: sum(row.count(s) for row in result.status) for s in (TRACKED, LOST)}
         done = "cancelled: the frames tracked so far were kept" if result.stop_reason == "cancelled" else "done"
         self._status.value = (f"{result.n_objects} object(s), {counts[TRACKED]} object-frames tracked, "
@@ -298,6 +306,16 @@ class TrackingWidget(WorkerWidget):
         lost = [k for k in range(result.n_objects) if LOST in result.status[k] and TRACKED in result.status[k]]
         if lost:
             show_warning(f"object(s) {lost} were lost on the way: their later frames have no contour")
+
+    # ------------------------------------------------------------ export
+    export_what = "tracks"
+
+    def export_table(self) -> dict:
+        """The last run's tidy table (:meth:`~napari_physeg.core.TrackingResult.table`) as CSV columns."""
+        if self.last_result is None:
+            raise ValueError("nothing tracked to save yet: press Run first")
+        table = self.last_result.table()
+        return {name: table[name].to_numpy() for name in table.columns}
 
     def _on_errored(self, err: Exception):
         self._remove_preview()
