@@ -216,7 +216,8 @@ class TrackingWidget(WorkerWidget):
         frames = image.data[0] if image.multiscale else image.data
         if len(frames.shape) != 3:
             raise ValueError(f"the movie {image.name!r} has shape {tuple(frames.shape)}: the Tracking widget needs "
-                             "(time, rows, cols); for a z-stack movie pick one z first")
+                             "(time, rows, cols): split a movie with z slices or channels into one image per "
+                             "z or channel first (right-click the layer > Split Stack, or Split RGB)")
         point = tuple(self.viewer.dims.point)
         if isinstance(shapes, Points):  # its points on this frame, in the order clicked: one contour
             shapes = PointsAsPolygon(shapes, point)
