@@ -652,6 +652,21 @@ def test_a_shape_off_the_image_is_left_out_not_the_whole_run(viewer_widget, wait
     assert list(out.features["shape"]) == [0]
 
 
+def test_a_line_among_the_shapes_is_left_out_not_the_whole_run(viewer_widget, wait_done, errors, monkeypatch):
+    """One stray line among the contours refused every shape (found by probing, session 27)."""
+    viewer, widget = viewer_widget
+    viewer.open_sample("napari-physeg", "hand_segmentation")
+    shapes = viewer.layers["initial contour"]
+    shapes.add_lines(np.array([[10.0, 10.0], [60.0, 80.0]]))
+    warned = []
+    monkeypatch.setattr(seg, "show_warning", lambda message: warned.append(str(message)))
+    widget.reset_choices()
+    widget.run()
+    wait_done(widget)
+    assert errors == [] and widget.last_outcome.ok and len(widget.last_outcome.results) == 1
+    assert any("shape 1" in w and "line" in w and "left out" in w for w in warned)
+
+
 def test_advice_fits_why_a_contour_did_not_reach_a_border():
     """Raising 'max steps' helps a contour still moving, not one at rest away
     from any border (too low a stiffness, drawn too far): each gets its own advice."""

@@ -23,7 +23,7 @@ methods of napari layers; no Qt.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -242,11 +242,15 @@ class SlicedShapes:
         Index of each contour's shape in the Shapes layer.
     off_slice : int
         Shapes skipped because they lie on another slice.
+    refused : list of str
+        Why each shape of the current slice that encloses no region (a line,
+        fewer than 3 vertices) was left out.
     """
 
     contours: list
     indices: list
     off_slice: int
+    refused: list = field(default_factory=list)
 
 
 class PointsAsPolygon:
@@ -292,10 +296,8 @@ def shapes_to_image_coords(shapes_layer, image_layer, world_point=None) -> Slice
     -------
     SlicedShapes
 
-    Raises
-    ------
-    ValueError
-        If a shape on the current slice is a line or has fewer than 3 vertices.
+    A shape on the current slice that encloses no region (a line, fewer than
+    3 vertices) is left out, and said why in ``refused``.
     """
     ds, di = int(shapes_layer.ndim), int(image_layer.ndim)
     n_world = max(ds, di, len(world_point) if world_point is not None else 0)
@@ -308,7 +310,7 @@ def shapes_to_image_coords(shapes_layer, image_layer, world_point=None) -> Slice
     world_to_i = np.linalg.inv(i_to_world)
     s_point = np.asarray(shapes_layer.world_to_data(point), dtype=float) if ds > 2 else np.zeros(ds)
 
-    contours, indices, off = [], [], 0
+    contours, indices, off, refused = [], [], 0, []
     for k, (verts, kind) in enumerate(zip(shapes_layer.data, shapes_layer.shape_type)):
         verts = np.asarray(verts, dtype=np.float64)
         if ds > 2 and np.any(np.abs(verts[:, : ds - 2] - s_point[: ds - 2]) >= 0.5):
@@ -317,13 +319,14 @@ def shapes_to_image_coords(shapes_layer, image_layer, world_point=None) -> Slice
         try:
             poly = shape_to_polygon(verts, kind)
         except ValueError as err:
-            raise ValueError(f"shape {k} of {shapes_layer.name!r}: {err}") from None
+            refused.append(f"shape {k} of {shapes_layer.name!r}: {err}")
+            continue
         world = np.broadcast_to(point, (len(poly), n_world)).copy()
         world[:, n_world - ds:] = apply_affine(s_to_world, poly)
         in_image = apply_affine(world_to_i, world[:, n_world - di:])
         contours.append(drop_repeated_nodes(in_image[:, -2:]))  # (an imported ROI may hold a vertex twice)
         indices.append(k)
-    return SlicedShapes(contours=contours, indices=indices, off_slice=off)
+    return SlicedShapes(contours=contours, indices=indices, off_slice=off, refused=refused)
 
 
 def shape_in_layer_coords(shapes_layer, index: int, reference_layer=None, world_point=None):

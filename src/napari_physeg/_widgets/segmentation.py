@@ -373,10 +373,9 @@ def prepare_segmentation(image_layer, shapes_layer, *, world_point=None, channel
     leading = slice_index(image_layer, world_point if world_point is not None else np.zeros(ndim), shape)
     plane = _plane_2d(image_layer, leading, channel)
 
-    try:
-        sliced = shapes_to_image_coords(shapes_layer, image_layer, world_point)
-    except ValueError as err:
-        raise InputError(str(err)) from None
+    sliced = shapes_to_image_coords(shapes_layer, image_layer, world_point)
+    if sliced.refused and not sliced.contours:
+        raise InputError("; ".join(sliced.refused))
     if not sliced.contours:
         where = f" (slice {leading})" if leading else ""
         raise InputError(f"no shape of {shapes_layer.name!r} lies on the current slice{where}: draw an initial "
@@ -404,7 +403,7 @@ def prepare_segmentation(image_layer, shapes_layer, *, world_point=None, channel
         indices.append(k)
     if not contours:
         raise InputError("; ".join(off_image))
-    warnings.extend(f"{message}; it was left out" for message in off_image)
+    warnings.extend(f"{message}; it was left out" for message in sliced.refused + off_image)
     return SegmentationJob(
         image=plane,
         contours=contours,

@@ -222,6 +222,8 @@ class TrackingWidget(WorkerWidget):
         if isinstance(shapes, Points):  # its points on this frame, in the order clicked: one contour
             shapes = PointsAsPolygon(shapes, point)
         sliced = shapes_to_image_coords(shapes, image, world_point=point)
+        if sliced.refused:  # each drawing is an object: none is left out unsaid
+            raise ValueError(sliced.refused[0])
         if not sliced.contours:
             raise ValueError(f"no contour of {shapes.name!r} lies on the current frame: go to the frame the "
                              "contours were drawn on")
