@@ -296,6 +296,42 @@ def test_cancel_stops_the_worker(viewer_widget, wait_done, errors, monkeypatch):
     assert "ancel" in widget._status.value
 
 
+def test_cancel_keeps_the_contours_finished(viewer_widget, wait_done, errors, monkeypatch):
+    """As the tracking widget keeps its frames (probing, session 27: Cancel threw away every finished contour)."""
+    viewer, widget = viewer_widget
+    viewer.open_sample("napari-physeg", "hand_segmentation")
+    shapes = viewer.layers["initial contour"]
+    shapes.add_polygons([np.asarray(shapes.data[0]) + 0.5, np.asarray(shapes.data[0]) - 0.5])
+
+    real_iter_segment = seg.iter_segment
+
+    def slow_iter_segment(image, init, **kwargs):  # slow enough for the cancel to land on the third
+        run = real_iter_segment(image, init, **kwargs)
+        stop = None
+        try:
+            while True:
+                state = run.send(stop)
+                time.sleep(0.01)
+                stop = yield state
+        except StopIteration as done:
+            return done.value
+
+    monkeypatch.setattr(seg, "iter_segment", slow_iter_segment)
+
+    def cancel_on_the_third(update):
+        if update.index == 2:
+            widget.cancel()
+
+    record_updates(widget, monkeypatch, on_update=cancel_on_the_third)
+    widget.run()
+    wait_done(widget, timeout=60_000)
+    outcome = widget.last_outcome
+    assert outcome.cancelled and errors == []
+    assert outcome.indices == [0, 1]
+    (out,) = output_layers(viewer)
+    assert list(out.features["shape"]) == [0, 1] and "Cancelled" in widget._status.value
+
+
 # --------------------------------------------------------------------------
 # Bad input: a notification with the fix, no layer
 # --------------------------------------------------------------------------

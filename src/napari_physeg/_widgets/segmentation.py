@@ -523,7 +523,7 @@ _TIPS = {
     "labels": "Also add a Labels layer with each segmented contour filled (label k for shape k).",
     "run": "Segment every shape of 'initial contours' on the current slice, in the background, with a live "
            "preview.",
-    "cancel": "Stop the running segmentation; no layer is added.",
+    "cancel": "Stop the running segmentation; the contours already finished are kept.",
 }
 
 
@@ -705,9 +705,9 @@ class SegmentationWidget(WorkerWidget):
         if outcome.error is not None and not outcome.results:
             self._fail(error_message(outcome, job))
             return
-        if outcome.cancelled:
-            self._status.value = "Cancelled: no layer added"
-            show_info("Segmentation cancelled: no layer added")
+        if outcome.cancelled and not outcome.results:
+            self._status.value = "Cancelled before a contour was finished: no layer added"
+            show_info("Segmentation cancelled before a contour was finished: no layer added")
             return
         try:
             preview, self.preview_layer = self.preview_layer, None
@@ -720,7 +720,8 @@ class SegmentationWidget(WorkerWidget):
         for message in not_converged_messages(outcome, job):
             show_warning(message)
         rested = sum(r.converged for r in outcome.results)
-        self._status.value = (f"Segmented {len(outcome.results)} shape(s) in {outcome.seconds:.2f} s"
+        cancelled = f"Cancelled: of {len(job.contours)} shapes, the finished ones kept. " if outcome.cancelled else ""
+        self._status.value = (f"{cancelled}Segmented {len(outcome.results)} shape(s) in {outcome.seconds:.2f} s"
                               + ("" if rested == len(outcome.results) else
                                  f"; {len(outcome.results) - rested} did not reach a border (see the warnings)"))
         if outcome.error is not None:  # the others were kept; say which failed and why
