@@ -243,7 +243,7 @@ class WorkerWidget(Container):
         return worker
 
     def cancel(self, *_):
-        """Stop the running computation; no layer is added."""
+        """Stop the running computation (each widget says what it keeps)."""
         if self._running and self._cancel_btn is not None:
             self._cancel.set()
             self._status.value = "Cancelling…"
