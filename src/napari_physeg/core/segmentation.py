@@ -852,8 +852,11 @@ def _checked_options(material, forces, weights, stiffness, reference, integrator
     weights = normalize_weights(forces, weights)
     if stiffness is None:
         stiffness = suggested_stiffness(material)
-    if isinstance(stiffness, (bool, np.bool_)) or not isinstance(stiffness, (int, float, np.integer, np.floating)) \
-            or not (np.isfinite(stiffness) and stiffness > 0):
+    try:  # a number (numpy's too), not a flag or a text
+        r = np.nan if isinstance(stiffness, (bool, np.bool_, str, bytes)) else float(stiffness)
+    except (TypeError, ValueError):
+        r = np.nan
+    if not (np.isfinite(r) and r > 0):
         raise ValueError(f"stiffness r must be a positive number, got {stiffness!r}")
     if reference not in ("incremental", "total"):
         raise ValueError(f"reference must be 'incremental' or 'total', got {reference!r}")
@@ -865,7 +868,7 @@ def _checked_options(material, forces, weights, stiffness, reference, integrator
         raise ValueError("max_step_length and tol must be positive and max_steps non-negative")
     if n_nodes is not None and int(n_nodes) < 3:
         raise ValueError(f"n_nodes must be at least 3, got {n_nodes!r}")
-    return material, weights, float(stiffness)
+    return material, weights, r
 
 
 def check_segment_options(**options) -> None:
