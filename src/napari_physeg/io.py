@@ -17,6 +17,7 @@ import contextlib
 import csv
 import os
 import tempfile
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -308,7 +309,7 @@ def parse_frames(spec: str, n_frames: int) -> list[int]:
         raise ValueError(f"frames {spec!r}: the stack has frames 0 to {n_frames - 1}") from None
     if not frames:
         raise ValueError(f"frames {spec!r} selects no frame of the {n_frames}")
-    repeated = sorted({t for t in frames if frames.count(t) > 1})
-    if repeated:
-        raise ValueError(f"frames {spec!r} names frame {repeated[0]} more than once")
+    if len(set(frames)) < len(frames):
+        repeated = min(t for t, n in Counter(frames).items() if n > 1)
+        raise ValueError(f"frames {spec!r} names frame {repeated} more than once")
     return frames
