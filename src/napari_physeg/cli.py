@@ -106,9 +106,9 @@ def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> 
                    "density in kg/m^3 instead of the preset's, typically 1000-9000 (rubber 1100, copper 8960)")
     g.add_argument("--stiffness", type=_number(float, 0, True), metavar="R",
                    help=f"stiffness constant r (N/m) scaling the image forces: force on a node = r x its feature "
-                   f"force; default: the one that suits --material ({suggested_stiffness(d['material']):g} for {d['material']}, 1e6 for "
-                   "copper, see core.materials.SUGGESTED_STIFFNESS); too low and the contour barely moves, far too "
-                   "high and it may diverge")
+                   f"force; default: the one that suits --material ({suggested_stiffness(d['material']):g} for "
+                   f"{d['material']}, 1e6 for copper, see core.materials.SUGGESTED_STIFFNESS); too low and the "
+                   "contour barely moves, far too high and it may diverge")
     nodes = g.add_mutually_exclusive_group()
     if spacing:
         nodes.add_argument("--node-spacing", type=_number(float, 0, True), metavar="PX",

@@ -74,13 +74,14 @@ def node_trajectories(result: TrackingResult, k: int, n_points: int = 12) -> lis
     return paths
 
 
-def tracking_layer_data(result: TrackingResult, transform: dict, *, name: str, n_trajectories: int = 12,
-                        n_arc: int = 100) -> list[tuple]:
+def tracking_layer_data(result: TrackingResult, transform: dict, *, name: str, frame_shape=None,
+                        n_trajectories: int = 12, n_arc: int = 100) -> list[tuple]:
     """The output layers of a tracking run, as ``(data, meta, kind)`` tuples for ``Layer.create``.
 
     ``transform`` are the image's layer keyword arguments
     (:func:`~._layers.image_transform_kwargs`): the Shapes and Tracks layers
-    overlay the image; the maps are images of their own (arc x frame).
+    overlay the image; the maps are images of their own (arc x frame), laid
+    over a frame of ``frame_shape`` (rows, cols; default: their own size).
     """
     polygons, colours, features = [], [], {"object": [], "frame": [], "status": []}
     for k in range(result.n_objects):
@@ -119,11 +120,11 @@ def tracking_layer_data(result: TrackingResult, transform: dict, *, name: str, n
         lim = float(np.nanpercentile(np.abs(maps), 98)) or 1.0
         layers.append((maps, dict(name=f"{name} {quantity.replace('_', ' ')} (object x frame x arc)",
                                   colormap=colormap, contrast_limits=(-lim, lim), visible=False,
-                                  **_map_placement(maps.shape, transform)), "image"))
+                                  **_map_placement(maps.shape, transform, frame_shape)), "image"))
     return layers
 
 
-def _map_placement(shape, transform: dict) -> dict:
+def _map_placement(shape, transform: dict, frame_shape=None) -> dict:
     """Scale and translate that lay the maps (object x frame x arc) over the
     movie's first frame: the maps share the viewer's axes with the movie, so
     their objects step as its frames do and their (frame, arc) plane spans its
@@ -131,7 +132,7 @@ def _map_placement(shape, transform: dict) -> dict:
     movie with a time scale and the view's extent."""
     scale = np.asarray(transform.get("scale", np.ones(3)), float)[-3:]
     translate = np.asarray(transform.get("translate", np.zeros(3)), float)[-3:]
-    frame_shape = np.asarray(transform.get("frame_shape", shape[1:]), float)
+    frame_shape = np.asarray(shape[1:] if frame_shape is None else frame_shape, float)
     # (napari's extent runs from the first pixel's centre to the last's)
     stretch = scale[1:] * np.maximum(frame_shape - 1, 1) / np.maximum(np.asarray(shape[1:], float) - 1, 1)
     return {"scale": (scale[0], *stretch), "translate": tuple(translate)}
@@ -245,11 +246,11 @@ class TrackingWidget(WorkerWidget):
         self._export_btn.enabled = False
         options = {k: v for k, v in self.physics.parameters().items() if k in ("material", "stiffness")}
         material = getattr(options["material"], "name", options["material"])
-        self._run_info = dict(transform=image_transform_kwargs(image), name=f"{image.name} tracked ({material})")
+        self._run_info = dict(transform=image_transform_kwargs(image), name=f"{image.name} tracked ({material})",
+                              frame_shape=tuple(frames.shape[-2:]))
         self._begin(f"Tracking {len(contours)} object(s) from frame {start}…")
         total = len(contours) * frames.shape[0]
         # Cancel stops after the current object and frame; what was tracked is kept.
-        self._run_info["transform"]["frame_shape"] = tuple(frames.shape[-2:])
         run = iter_track(frames, contours, start=start, max_steps=int(self._max_steps.value), segment_options=options)
         return self._start(total, track_movie, run, self._cancel, self.preview_interval)
 
