@@ -268,6 +268,56 @@ def test_an_object_not_found_on_the_start_frame_gets_a_warning():
     assert tr.status[0] == [LOST] * 2
 
 
+def _dividing_cell_movie(n_frames=11, shape=(80, 110)):
+    """A disk that pinches into two daughters moving apart, 3 px a frame."""
+    from scipy import ndimage as ndi
+
+    rr, cc = np.mgrid[: shape[0], : shape[1]]
+    rng = np.random.default_rng(0)
+    frames = []
+    for t in range(n_frames):
+        apart, r = 1.5 * t, 14 - 3 * min(t / 8, 1)
+        cell = ((rr - 40) ** 2 + (cc - 55 + apart) ** 2 <= r * r) | ((rr - 40) ** 2 + (cc - 55 - apart) ** 2 <= r * r)
+        frames.append(ndi.gaussian_filter(np.where(cell, 0.8, 0.2), 1) + 0.03 * rng.standard_normal(shape))
+    return np.stack(frames)
+
+
+def test_a_cell_that_divides_ends_its_track_with_a_warning_that_says_so():
+    """The contour follows the pinching cell until its daughters stand apart;
+    then one contour cannot hold them: the object is lost, and the warning
+    says it divided and how to follow the daughters (it said nothing)."""
+    with pytest.warns(UserWarning, match="object 0 held two bodies on frame 8 .* divided.*start=9"):
+        tr = track(_dividing_cell_movie(), _circle((40, 55), 19))
+    assert tr.status[0] == [TRACKED] * 9 + [LOST] * 2
+    assert len(tr.warnings) == 1 and "divided" in tr.warnings[0]
+
+
+def _dumbbell(neck, lobe=12.0):
+    """Two disks of radius ``lobe``, 2 px apart, joined by a bar ``neck`` px
+    wide: the outline of the mask, about a node per pixel."""
+    from skimage import measure
+
+    rr, cc = np.mgrid[:60, :100]
+    a = (rr - 30) ** 2 + (cc - 20 - lobe) ** 2 <= lobe**2
+    b = (rr - 30) ** 2 + (cc - 22 - 3 * lobe) ** 2 <= lobe**2
+    bar = (abs(rr - 30) <= neck / 2) & (cc > 20 + lobe) & (cc < 22 + 3 * lobe)
+    return max(measure.find_contours((a | b | bar).astype(float), 0.5), key=len)[:-1]
+
+
+@pytest.mark.parametrize("neck, divided", [(0.5, True), (2.0, True), (8.0, False), (14.0, False)])
+def test_a_contour_is_two_bodies_only_across_a_narrow_neck(neck, divided):
+    from napari_physeg.core.tracking import pinched_bodies
+
+    contour = _dumbbell(neck)
+    for turned in (contour, np.roll(contour, 17, axis=0), contour[::-1], contour @ np.array([[0, 1], [-1, 0]])):
+        bodies = pinched_bodies(turned)
+        assert (bodies is not None) == divided
+        if divided:  # the two disks, not a lobe and the rest
+            areas = sorted(abs(signed_area(b)) for b in bodies)
+            assert areas[0] > 0.8 * areas[1]
+    assert pinched_bodies(_circle((0, 0), 10)) is None
+
+
 def test_an_object_that_vanishes_is_lost_not_returned_as_garbage():
     centres = [[(48, 48)]] * 4 + [[(None, None)]] * 3
     tr = track(_disk_movie(centres), _circle((48, 48), 16))

@@ -252,12 +252,17 @@ def test_nd_stack_segments_the_current_slice(viewer_widget, wait_done, errors):
 # --------------------------------------------------------------------------
 
 
-def slow_down_the_core(monkeypatch) -> list:
-    """Make each step of the core's ``iter_segment`` take 10 ms more; the steps taken are listed."""
-    steps = []
+def slow_down_the_core(monkeypatch, hold=None) -> list:
+    """Make each step of the core's ``iter_segment`` take 10 ms more; the steps taken are listed.
+
+    ``hold``: (n, event): the n-th run (from 0) takes no step further until
+    ``event`` is set (at most 30 s), so that a cancel lands on it however slow the GUI thread is."""
+    steps, calls = [], []
     real_iter_segment = seg.iter_segment
 
     def slow_iter_segment(image, init, **kwargs):
+        calls.append(None)
+        held = hold is not None and len(calls) - 1 == hold[0]
         run = real_iter_segment(image, init, **kwargs)
         stop = None
         try:
@@ -266,6 +271,8 @@ def slow_down_the_core(monkeypatch) -> list:
                 steps.append(state.step)
                 time.sleep(0.01)
                 stop = yield state
+                if held and not stop:
+                    hold[1].wait(30)
         except StopIteration as done:
             return done.value
 
@@ -305,11 +312,13 @@ def test_cancel_keeps_the_contours_finished(viewer_widget, wait_done, errors, mo
     shapes = viewer.layers["initial contour"]
     shapes.add_polygons([np.asarray(shapes.data[0]) + 0.5, np.asarray(shapes.data[0]) - 0.5])
 
-    slow_down_the_core(monkeypatch)  # for the cancel to land on the third
+    cancelled = threading.Event()
+    slow_down_the_core(monkeypatch, hold=(2, cancelled))  # for the cancel to land on the third
 
     def cancel_on_the_third(update):
         if update.index == 2:
             widget.cancel()
+            cancelled.set()
 
     record_updates(widget, monkeypatch, on_update=cancel_on_the_third)
     widget.run()

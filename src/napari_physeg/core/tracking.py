@@ -462,6 +462,8 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                     break
             if t == start and stop_reason != "cancelled":
                 said = _warn_not_found(run, frame_shape)
+            elif t != start and stop_reason != "cancelled":
+                said += _warn_divided(run, t, step)
             if stop_reason == "cancelled":
                 break
         if stop_reason == "cancelled":
@@ -500,6 +502,67 @@ def _warn_not_found(run: _Run, shape) -> list[str]:
         said.append(f"object {k} was not found on the start frame {run.start} and is reported lost: {why}")
         warnings.warn(said[-1], UserWarning, stacklevel=5)
     return said
+
+
+#: A contour pinched into two bodies, each at least DIVISION_SHARE of its
+#: area, by a neck narrower than DIVISION_NECK times the smaller body's
+#: diameter, holds two objects: a cell in division (its nucleus' two masses
+#: apart, or nearly), or the object and a neighbour it took in. A nucleus'
+#: notch or a cell's waist leaves a neck of half its width or more.
+DIVISION_SHARE = 0.25
+DIVISION_NECK = 0.25
+
+
+def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
+    """Warn of each object lost on frame ``t`` whose contour on the frame
+    before held two bodies (see :func:`pinched_bodies`): a division ends a
+    track, which is seldom what "lost" alone would tell. Returns the messages."""
+    said = []
+    for k in range(len(run.inits)):
+        before = run.contours[k][t - step] if 0 <= t - step < len(run.contours[k]) else None
+        if run.status[k][t] != LOST or before is None:
+            continue
+        bodies = pinched_bodies(before)
+        if bodies is None:
+            continue
+        where = " and ".join(f"({c[0]:.0f}, {c[1]:.0f})" for c in (area_centroid(b) for b in bodies))
+        said.append(f"object {k} held two bodies on frame {t - step} (at {where}, joined by a neck "
+                    f"{np.linalg.norm(bodies[0][-1] - bodies[0][0]):.1f} px wide): it divided, or took in a neighbour, and is "
+                    f"reported lost from frame {t} on; to follow the two, draw each on frame {t} and track "
+                    f"from there (start={t})")
+        warnings.warn(said[-1], UserWarning, stacklevel=5)
+    return said
+
+
+def pinched_bodies(contour: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The two bodies of a contour pinched by a narrow neck, or None.
+
+    The contour is cut between the two nodes that are closest in space among
+    the pairs that split it into parts of at least :data:`DIVISION_SHARE` of
+    its area each; the parts are two bodies when that gap is below
+    :data:`DIVISION_NECK` times the smaller part's equivalent diameter.
+    """
+    c = np.asarray(contour, dtype=np.float64)
+    n = len(c)
+    if n < 8:
+        return None
+    # Area of the part i..j (closed by the chord j -> i) from the prefix sums of the shoelace terms.
+    cross = c[:, 0] * np.roll(c[:, 1], -1) - np.roll(c[:, 0], -1) * c[:, 1]
+    prefix = np.concatenate([[0.0], np.cumsum(cross)])
+    i, j = np.triu_indices(n, k=2)
+    part = 0.5 * np.abs(prefix[j] - prefix[i] + c[j, 0] * c[i, 1] - c[i, 0] * c[j, 1])
+    whole = abs(signed_area(c))
+    balanced = (part >= DIVISION_SHARE * whole) & (whole - part >= DIVISION_SHARE * whole)
+    if not balanced.any():
+        return None
+    i, j, part = i[balanced], j[balanced], part[balanced]
+    gap = np.linalg.norm(c[i] - c[j], axis=1)
+    best = int(np.argmin(gap))
+    diameter = 2.0 * np.sqrt(min(part[best], whole - part[best]) / np.pi)
+    if gap[best] >= DIVISION_NECK * diameter:
+        return None
+    a, b = int(i[best]), int(j[best])
+    return c[a: b + 1], np.vstack([c[b:], c[: a + 1]])
 
 
 def _segment_frame(run: _Run, image, shared, t: int, step: int):
