@@ -109,6 +109,42 @@ def test_rigid_copies_recovered_exactly(shape, transform, method):
         assert is_cyclically_ordered(m.pairs, len(b))
 
 
+@pytest.mark.parametrize("mirror", [lambda c: c[:, ::-1], lambda c: c * [1, -1], lambda c: similarity(c * [-1, 1], 30)],
+                         ids=["(x, y) for (row, col)", "flipped left-right", "flipped, turned and scaled"])
+def test_a_mirror_image_is_matched_with_a_warning(mirror):
+    """A reflection is no deformation: modal matching cannot follow it and
+    pairs the hand's fingers wrongly. Said, not silent (probing, session 27);
+    the commonest way to get one is a contour in (x, y) beside one in (row, col)."""
+    with pytest.warns(UserWarning, match="mirror image.*swap the columns"):
+        match(HAND, mirror(HAND))
+
+
+@pytest.mark.parametrize("poses", [("open", "closed"), ("spread", "closed"), ("open", "spread")])
+def test_a_deformed_hand_is_no_mirror_image(poses, recwarn):
+    a, b, _ = data.hand_pair(67, 66, pose_a=poses[0], pose_b=poses[1])
+    match(a, b)
+    match(a, similarity(b, 90))
+    assert not [w for w in recwarn if "mirror" in str(w.message)]
+
+
+def test_mirror_fit_is_similarity_invariant():
+    from napari_physeg.core.matching import mirror_fit
+
+    a, b, _ = data.hand_pair(67, 66, pose_a="open", pose_b="closed")
+    fit = mirror_fit(a, b)
+    assert fit > 1.0  # a deformation: b fits a better read forward
+    assert mirror_fit(a, np.roll(similarity(b, 45), 9, axis=0)) == pytest.approx(fit, rel=0.05)
+    assert mirror_fit(a, a) == 1.0 and mirror_fit(a, b[::-1][::-1]) == pytest.approx(fit)
+    flipped = (b * [1, -1])[::-1]  # reflected, then positively oriented again
+    assert mirror_fit(a, flipped) == pytest.approx(1.0 / fit, rel=0.05)
+
+
+def test_contours_in_one_frame_of_reference_are_not_checked_for_reflection(recwarn):
+    """Consecutive frames of a movie (displacement_weight > 0, as tracking matches them)."""
+    match(HAND, HAND[:, ::-1], displacement_weight=1.0)
+    assert not [w for w in recwarn if "mirror" in str(w.message)]
+
+
 def test_self_match_affinity_zero_on_the_diagonal():
     m = match(HAND, HAND)
     assert np.allclose(np.diag(m.affinity), 0.0, atol=1e-12)
