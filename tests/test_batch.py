@@ -231,3 +231,160 @@ def test_a_batch_leaves_dask_on_its_default_scheduler(client, movies):
     batch.segment_files(paths[:1], init, tmp / "seg2", frames="0", workers=1, progress=False)
     assert dask.config.get("scheduler", None) is None
     assert int(da.ones(4, chunks=2).sum().compute()) == 4
+
+
+# --------------------------------------------------------------------------
+# A task refuses what `track` refuses; its row says what happened
+# --------------------------------------------------------------------------
+
+
+def _track_task(path, out, inits, **kw):
+    (out / "results").mkdir(parents=True, exist_ok=True)
+    inits = tuple(np.asarray(c, float).tolist() for c in inits)
+    return batch._Task("track", str(path), path.name, str(out), inits, stamp=batch._stamp(path), **kw)
+
+
+@pytest.mark.parametrize("case, message", [
+    ("channel on a grayscale stack", "has no channels (a 4 x 96 x 96 stack): leave out --channel"),
+    ("a 2-D image", "is a single 2-D image; track needs a time-lapse (T x H x W)"),
+    ("contour outside", "shape 0 of the contours lies wholly outside the image (96 x 96 px)"),
+    ("start beyond the end", "drawn on frame 9, not in the stack (frames 0 to 3)"),
+])
+def test_a_track_task_fails_for_what_track_refuses_with_who_ran_it(movies, movie, case, message):
+    paths, _, tmp = movies
+    path, inits, kw = paths[0], [movie.outlines[0][::6]], {}
+    if case == "channel on a grayscale stack":
+        kw = {"channel": 1}
+    elif case == "a 2-D image":
+        path = tmp / "one.tif"
+        tifffile.imwrite(path, (movie.frames[0] * 1000).astype(np.uint16), photometric="minisblack")
+    elif case == "contour outside":
+        inits = [movie.outlines[0][::6] + [300, 0]]  # below the movie, its columns inside it (as `track` sees)
+    else:
+        kw = {"start": 9}
+    (row,) = batch._execute(_track_task(path, tmp / "out", inits, **kw))
+    assert row["status"] == "failed" and message in row["error"] and "None" not in row["error"]
+    assert row["host"] and row["pid"] == os.getpid()  # failed rows too say where they ran
+
+
+def test_a_track_task_on_a_movie_without_the_object_is_not_ok_and_keeps_its_warning(tmp_path, movie):
+    blank = tmp_path / "blank.tif"
+    tifffile.imwrite(blank, np.full((4, 96, 96), 7, np.uint16), photometric="minisblack")
+    (row,) = batch._execute(_track_task(blank, tmp_path / "out", [movie.outlines[0][::6]]))
+    assert row["status"] == "not found" and (row["tracked"], row["lost"]) == (0, 4)
+    assert "found on none of the 4 frames" in row["error"]
+    assert "was not found on the start frame 0" in row["warnings"]  # caught in the task, not printed there
+    assert row["tracks"] == "results/blank.tif/tracks.csv"  # the CSV, written with or without pyarrow
+
+
+def test_the_summary_line_counts_lost_objects_and_the_exit_status_as_track_does(capsys):
+    from napari_physeg.cli import _batch_report
+
+    def table(*rows):
+        return pd.DataFrame([dict(input=f"m{k}.tif", object=0, status=s, error=e, lost=n)
+                             for k, (s, e, n) in enumerate(rows)]).convert_dtypes()
+
+    assert _batch_report(table(("ok", "", 0), ("ok", "", 0)), batch.Path("o")) == 0
+    assert _batch_report(table(("ok", "", 2), ("ok", "", 0)), batch.Path("o")) == 1  # track: exit 1 when lost
+    assert "2 of 2 rows ok, 1 lost on some frames" in capsys.readouterr().out
+    assert _batch_report(table(("ok", "", 0), ("not found", "object 0 was found on none", 4),
+                               ("failed", "could not read", pd.NA)), batch.Path("o")) == 1
+    out, err = capsys.readouterr()
+    assert "1 of 3 rows ok, 1 failed, 1 object(s) never found" in out
+    assert "not found: m1.tif: object 0 was found on none" in err and "failed: m2.tif: could not read" in err
+
+
+# --------------------------------------------------------------------------
+# Resuming: a replaced input is run again
+# --------------------------------------------------------------------------
+
+
+def test_an_input_replaced_since_its_results_is_run_again(movies, movie):
+    paths, _, tmp = movies
+    out = tmp / "out"
+    task = _track_task(paths[0], out, [movie.outlines[0][::6]])
+    assert batch._execute(task)[0]["frames"] == 4
+    assert batch._pending([task]) == (batch._read_rows(out / "results" / task.name), [])  # unchanged: done
+    longer = data.deforming_cell(n_frames=6, shape=(96, 96))
+    tifffile.imwrite(paths[0], (longer.frames * 1000).astype(np.uint16), photometric="minisblack")
+    again = _track_task(paths[0], out, [movie.outlines[0][::6]])
+    with pytest.warns(UserWarning, match="well0.tif has changed since its results were made: tracking it again"):
+        done, todo = batch._pending([again])
+    assert done == [] and todo == [again] and not (out / "results" / task.name).exists()
+    assert batch._execute(again)[0]["frames"] == 6
+
+
+# --------------------------------------------------------------------------
+# Refused up front: exit 2, one line, nothing written, no cluster started
+# --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("kind, inputs, options, message", [
+    ("track", [], ["--frames", "0:abc"], "frames '0:abc': expected e.g."),
+    ("track", [], ["--frames", "abc"], "frames 'abc': expected e.g."),
+    ("track", [], ["--frames", "0:3:0"], "frames '0:3:0': expected e.g."),
+    ("track", [], ["--frames", "3,0,2"], "list the frames in the movie's order"),
+    ("track", [], ["--frames", "0:2", "--start", "3"], "drawn on frame 3, not among --frames 0:2"),
+    ("segment", [], ["--frames", "0,0"], "names frame 0 more than once"),
+    ("segment", [], ["--frames", "5:3"], "frames '5:3' selects no frame"),
+    ("track", ["{tmp}"], [], "is a folder, not an image or a zarr store"),
+    ("track", ["{well0}"], [], "the input {well0} is given twice"),
+])
+def test_batch_refuses_bad_frames_and_inputs_before_any_work(movies, monkeypatch, capsys, kind, inputs, options,
+                                                             message):
+    paths, init, tmp = movies
+
+    def no_cluster(*args, **kwargs):
+        raise AssertionError("a cluster was started")
+
+    monkeypatch.setattr(batch, "_client", no_cluster)
+    names = dict(tmp=tmp, well0=paths[0])
+    before = sorted(p.name for p in tmp.iterdir())
+    assert main(["batch", kind, str(paths[0]), *[i.format(**names) for i in inputs], "--init", str(init),
+                 "--out", str(tmp / "out"), *options]) == 2
+    err = capsys.readouterr().err
+    assert message.format(**names) in err and len(err.strip().splitlines()) == 1
+    assert sorted(p.name for p in tmp.iterdir()) == before
+
+
+def test_batch_without_dask_distributed_says_what_to_install(movies, monkeypatch, capsys):
+    paths, init, tmp = movies
+    monkeypatch.setitem(__import__("sys").modules, "distributed", None)  # import distributed -> ImportError
+    monkeypatch.setitem(__import__("sys").modules, "dask.distributed", None)
+    assert main(["batch", "track", str(paths[0]), "--init", str(init), "--out", str(tmp / "out")]) == 2
+    err = capsys.readouterr().err
+    assert 'pip install "napari-physeg[batch]"' in err and len(err.strip().splitlines()) == 1
+    assert not (tmp / "out").exists()
+
+
+# --------------------------------------------------------------------------
+# End to end: lost objects, the workers' warnings, no idle workers
+# --------------------------------------------------------------------------
+
+
+def test_cli_batch_track_names_the_file_of_a_worker_warning_and_starts_no_idle_worker(movies, movie, monkeypatch,
+                                                                                     capsys):
+    import dask.distributed
+
+    paths, init, tmp = movies
+    blank = tmp / "blank.tif"
+    tifffile.imwrite(blank, np.full((4, 96, 96), 7, np.uint16), photometric="minisblack")
+    started, real = [], dask.distributed.LocalCluster
+
+    def spy(*args, **kwargs):
+        started.append(kwargs["n_workers"])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(dask.distributed, "LocalCluster", spy)
+    out = tmp / "out"
+    assert main(["batch", "track", str(paths[0]), str(blank), "--init", str(init), "--out", str(out),
+                 "--workers", "8", "--quiet"]) == 1  # an object was lost, as `track` says
+    assert started == [2]  # two tasks: two workers, not eight
+    captured = capsys.readouterr()
+    assert "1 of 2 rows ok, 1 object(s) never found" in captured.out
+    warned = [line for line in captured.err.splitlines() if "was not found on the start frame" in line]
+    assert len(warned) == 1 and warned[0].startswith(f"napari-physeg: warning: {blank}: object 0")
+    assert "UserWarning" not in captured.err and ".py:" not in captured.err
+    table = pd.read_csv(out / "summary.csv", keep_default_na=False)
+    assert list(table["status"]) == ["not found", "ok"]
+    assert table["warnings"].iloc[0] and not table["warnings"].iloc[1]

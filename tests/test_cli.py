@@ -425,3 +425,47 @@ def test_a_warning_is_one_line_of_the_program_s_own(scene, capsys):
     warned = [line for line in err.splitlines() if "outside the image" in line]
     assert len(warned) == 1 and warned[0].startswith("napari-physeg: warning: ")
     assert "UserWarning" not in err and ".py:" not in err
+
+
+@pytest.mark.parametrize("command", ["segment", "track"])
+def test_channel_on_a_grayscale_stack_is_refused(movie_files, capsys, no_work, command):
+    movie, stack, init, tmp = movie_files
+    out = tmp / ("o.csv" if command == "segment" else "tracked")
+    assert main([command, str(stack), "--init", str(init), "--out", str(out), "--channel", "1"]) == 2
+    err = capsys.readouterr().err
+    h, w = movie.frames.shape[1:]
+    assert f"{stack} has no channels (a 6 x {h} x {w} stack): leave out --channel" in err
+    assert len(err.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_channel_of_an_rgb_image_is_still_read(tmp_path):
+    from napari_physeg.io import open_stack
+
+    rgb = np.zeros((20, 30, 3), np.uint8)
+    rgb[..., 1] = 9
+    io.imsave(tmp_path / "rgb.png", rgb, check_contrast=False)
+    with open_stack(tmp_path / "rgb.png", channel=1) as stack:
+        assert stack.shape == (1, 20, 30) and int(stack.max()) == 9
+
+
+def test_track_refuses_a_single_image(scene, capsys, no_work):
+    obj, image, init, tmp = scene
+    assert main(["track", str(image), "--init", str(init), "--out", str(tmp / "tracked")]) == 2
+    err = capsys.readouterr().err
+    assert f"{image} is a single 2-D image; track needs a time-lapse (T x H x W)" in err
+    assert not (tmp / "tracked").exists()
+
+
+@pytest.mark.skipif(os.name != "posix", reason="POSIX file modes")
+def test_outputs_get_the_mode_open_gives_them(tmp_path):
+    pd = pytest.importorskip("pandas")
+    from napari_physeg.io import write_table
+
+    old = os.umask(0o027)
+    try:
+        written = [write_shapes_csv(tmp_path / "s.csv", [[[0, 0], [0, 5], [5, 0]]])]
+        written += write_table(pd.DataFrame({"a": [1]}), tmp_path / "t")
+    finally:
+        os.umask(old)
+    assert {oct(p.stat().st_mode & 0o777) for p in written} == {oct(0o640)}
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no temporary file left

@@ -15,7 +15,9 @@ renamed when complete, so:
 * a run that is stopped (or a worker that is killed) leaves no half result,
   and a task the cluster runs again finds its result and does not redo it;
 * running the same command again skips every task already complete
-  (*resumable*); failed tasks are tried again.
+  (*resumable*); failed tasks are tried again, and so are the tasks of an
+  input replaced since (its size or modification time changed: a warning
+  says so).
 
 A file that cannot be read, or a task that raises, becomes rows with
 ``status="failed"`` and the error; the other tasks finish. When all are done
@@ -28,20 +30,23 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import logging
 import os
 import shutil
+import signal
 import socket
 import sys
 import time
 import traceback
 import uuid
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .io import (TIFF_SUFFIXES, atomic_path, is_zarr, open_stack, parse_frames, read_shapes_csv, write_shapes_csv,
-                 write_table)
+from .io import (TIFF_SUFFIXES, atomic_path, check_frames, is_zarr, open_stack, parse_frames, read_shapes_csv,
+                 write_shapes_csv, write_table)
 
 __all__ = ["segment_files", "track_files", "track_file", "check_writable", "default_workers", "segment_options_for"]
 
@@ -49,10 +54,14 @@ __all__ = ["segment_files", "track_files", "track_file", "check_writable", "defa
 FAILED = "failed"
 #: Status of a row whose task completed (see the other columns for the outcome).
 OK = "ok"
+#: Status of a tracking row whose object was found on no frame (lost, or left, on every one).
+NOT_FOUND = "not found"
 
 _RESULTS = "results"
 _SETTINGS = "batch.json"
 _SUMMARY = "summary"
+_SOURCE = "input.json"  # the input's size and modification time when the task read it
+_SEP = " | "  # between the messages of the warnings column
 
 
 def default_workers() -> int:
@@ -96,6 +105,7 @@ class _Task:
     node_spacing: float | None = None
     max_steps: int | None = None
     match_options: dict = field(default_factory=dict)
+    stamp: list | None = None  # _stamp(path) when the task was made: a result made from another file is stale
 
     def failed(self, error: str) -> list[dict]:
         base = {"input": self.path, "frame": self.frame} if self.kind == "segment" else {"input": self.path}
@@ -106,17 +116,21 @@ def _execute(task: _Task) -> list[dict]:
     """Run ``task`` unless its result exists; its rows. Never raises: an
     error becomes failed rows, so one bad file cannot stop the batch."""
     final = Path(task.out) / _RESULTS / task.name
-    if (final / "rows.json").exists():  # done before (an earlier run, or before a worker died)
+    if _is_done(final, task):  # done before (an earlier run, or before a worker died)
         return _read_rows(final)
+    # Caught here, not printed by the worker: the client shows them naming the file.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("default")  # each distinct warning once per task
+        return _attempt(task, final, caught)
+
+
+def _attempt(task: _Task, final: Path, caught: list) -> list[dict]:
     tmp = final.parent / f".{final.name}.tmp-{uuid.uuid4().hex}"
     try:
         tmp.mkdir(parents=True)
-        rows = (_segment_task if task.kind == "segment" else _track_task)(task, tmp)
-        for row in rows:  # outputs named relative to out; who ran it, for the cluster's logs
-            row.update(host=socket.gethostname(), pid=os.getpid())
-            for key in ("contours", "tracks"):
-                if row.get(key):
-                    row[key] = str(Path(_RESULTS) / task.name / row[key])
+        stamp = _stamp(task.path)  # before reading: a file replaced meanwhile is run again next time
+        rows = _annotated((_segment_task if task.kind == "segment" else _track_task)(task, tmp), task, caught)
+        (tmp / _SOURCE).write_text(json.dumps(stamp))
         (tmp / "rows.json").write_text(json.dumps(rows))  # written last: marks the folder complete
         try:
             os.rename(tmp, final)
@@ -126,7 +140,35 @@ def _execute(task: _Task) -> list[dict]:
         return rows
     except Exception as err:  # noqa: BLE001 - isolation: any failure is reported, not raised
         shutil.rmtree(tmp, ignore_errors=True)
-        return task.failed(_one_line(err))
+        return _annotated(task.failed(_one_line(err)), task, caught)
+
+
+def _annotated(rows: list[dict], task: _Task, caught: list) -> list[dict]:
+    """Rows with who ran them (for the cluster's logs), the warnings caught, outputs named relative to out."""
+    said = _SEP.join(dict.fromkeys(" ".join(str(w.message).split()) for w in caught))
+    for row in rows:
+        row.update(host=socket.gethostname(), pid=os.getpid(), warnings=said)
+        for key in ("contours", "tracks"):
+            if row.get(key):
+                row[key] = str(Path(_RESULTS) / task.name / row[key])
+    return rows
+
+
+def _stamp(path) -> list:
+    """Size and modification time (ns) of an input (of a zarr store: also of its metadata, rewritten
+    with the array), to tell the file a result was made from from one put in its place."""
+    path = Path(path)
+    files = [path] + ([path / n for n in ("zarr.json", ".zarray") if (path / n).exists()] if path.is_dir() else [])
+    return [[f.stat().st_size, f.stat().st_mtime_ns] for f in files]
+
+
+def _is_done(folder: Path, task: _Task) -> bool:
+    """Whether ``folder`` holds the task's complete result, made from the input as it is now."""
+    if not (folder / "rows.json").exists():
+        return False
+    if task.stamp is None or not (folder / _SOURCE).exists():  # no stamp to compare (older results)
+        return True
+    return json.loads((folder / _SOURCE).read_text()) == task.stamp
 
 
 def _one_line(err: BaseException) -> str:
@@ -180,10 +222,14 @@ def _track_task(task: _Task, tmp: Path) -> list[dict]:
     rows = []
     for k in range(tr.n_objects):
         counts = {s: tr.status[k].count(s) for s in (TRACKED, LOST, LEFT)}
-        rows.append({"input": task.path, "object": k, "status": OK, "error": "", "frames": tr.n_frames,
+        found = counts[TRACKED] > 0  # else lost (or left) on every frame: not an outcome to call ok
+        rows.append({"input": task.path, "object": k, "status": OK if found else NOT_FOUND,
+                     "error": "" if found else f"object {k} was found on none of the {tr.n_frames} frames: check "
+                     "that the contours were drawn on this movie", "frames": tr.n_frames,
                      "tracked": counts[TRACKED], "lost": counts[LOST], "left": counts[LEFT],
                      "last_status": tr.status[k][-1], "seconds": seconds / tr.n_objects,
-                     "contours": written[0].name if written[0].exists() else "", "tracks": written[-1].name})
+                     # The CSV, written with or without pyarrow (the .parquet, if any, is next to it).
+                     "contours": written[0].name if written[0].exists() else "", "tracks": written[1].name})
     return rows
 
 
@@ -215,19 +261,22 @@ def track_file(path, inits, folder, *, frames: str | None = None, start: int | N
     frames : list of int
     written : list of Path
         ``contours.csv`` (absent when no object was found on any frame), then the tables.
+
+    Raises
+    ------
+    ValueError
+        Before tracking (:func:`check_track`): for a single 2D image, frames that are
+        malformed, out of the movie's order or without ``start``, contours wholly outside
+        the frames.
     """
     from .core import track
 
     folder = Path(folder)
     with open_stack(path, channel=channel) as stack:
-        chosen = parse_frames(frames, len(stack)) if frames is not None else list(range(len(stack)))
-        start = chosen[0] if start is None else int(start)
-        if start not in chosen:
-            raise ValueError(f"the contours are drawn on frame {start}, which is not among the frames chosen "
-                             f"({frames}): include it, or give the frame they are drawn on (--start)")
+        inits = [np.asarray(c, dtype=np.float64) for c in inits]
+        chosen, start = check_track(stack, path, inits, "the contours", frames=frames, start=start)
         movie = stack if chosen == list(range(len(stack))) else stack[chosen]
         options = {"max_steps": max_steps} if max_steps is not None else {}
-        inits = [np.asarray(c, dtype=np.float64) for c in inits]
         tr = track(movie, inits, start=chosen.index(start), callback=callback,
                    segment_options=segment_options_for(_mean_contour(inits), segment_options, node_spacing),
                    match_options=dict(match_options or {}), **options)
@@ -245,6 +294,55 @@ def track_file(path, inits, folder, *, frames: str | None = None, start: int | N
     table["frame"] = np.asarray(chosen)[table["frame"].to_numpy()]
     written += write_table(table, folder / "tracks")
     return tr, chosen, written
+
+
+def check_track(stack, path, inits, contours_name, *, frames: str | None = None, start: int | None = None):
+    """What tracking would refuse, found before it runs: a single image, bad frames, contours outside.
+
+    ``stack`` is the opened movie (:func:`~napari_physeg.io.open_stack`) of ``path``; ``contours_name``
+    names the contours in a message. Returns the frames to track and the start frame.
+    """
+    if len(stack) < 2:
+        raise ValueError(f"{path} is a single 2-D image; track needs a time-lapse (T x H x W)")
+    chosen, start = track_frames(frames, start, len(stack))
+    check_contours(inits, stack.shape[1:], contours_name)
+    return chosen, start
+
+
+def track_frames(frames: str | None, start: int | None, n_frames: int | None = None):
+    """The frames to track (in the movie's order) and the start frame among them.
+
+    With ``n_frames`` None (before the movie is opened), what can be told without its
+    length: the spec's syntax, order and repeats, the start among them; then the
+    frames are None when the spec does not say them without the length.
+    """
+    if n_frames is None:
+        chosen = check_frames(frames, include=start) if frames is not None else None
+        if chosen is None:
+            return None, start
+    else:
+        chosen = parse_frames(frames, n_frames) if frames is not None else list(range(n_frames))
+    if chosen != sorted(chosen):
+        raise ValueError(f"--frames {frames}: list the frames in the movie's order (tracking runs both ways from "
+                         "the start frame by itself)")
+    start = chosen[0] if start is None else int(start)
+    if start not in chosen:
+        among = f"among --frames {frames}" if frames is not None else f"in the stack (frames 0 to {n_frames - 1})"
+        raise ValueError(f"the contours are drawn on frame {start}, not {among}: include it, or give the frame "
+                         "they are drawn on with --start")
+    return chosen, start
+
+
+def check_contours(shapes, frame_shape, name) -> None:
+    """What :func:`~napari_physeg.core.segment` would refuse for a contour (fewer than 3 nodes, wholly
+    outside the image), found before the first one runs; ``name`` names the contours in the message."""
+    from .core.contour import as_contour
+
+    for k, shape in enumerate(shapes):
+        c = as_contour(shape, name=f"shape {k} of {name}")
+        if np.any(c.max(0) < 0) or np.any(c.min(0) > np.array(frame_shape) - 1):
+            raise ValueError(f"shape {k} of {name} lies wholly outside the image ({frame_shape[0]} x "
+                             f"{frame_shape[1]} px): check that the contours were drawn on this image")
 
 
 def _mean_contour(inits):
@@ -305,18 +403,23 @@ def segment_files(inputs, inits, out, *, frames: str | None = None, channel: int
         ``"failed"``), ``error``, ``converged, stop_reason, steps, n_nodes,
         area, perimeter, centroid_row, centroid_col, seconds``, ``contours``
         (napari shapes CSV under ``out``), ``shape`` (the object's shape
-        index in it), and ``host``, ``pid`` (the worker that ran the task).
+        index in it), and ``host``, ``pid`` (the worker that ran the task),
+        ``warnings`` (those the task raised, ``" | "`` between them; each is
+        also warned here, naming the file).
 
     Raises
     ------
     ValueError
-        Before any work, for a missing input, bad contours or options, an
-        output folder that cannot be written or that holds results made with
-        other settings.
+        Before any work, for a missing input or a folder, bad contours, frames
+        or options, a missing package of the ``batch`` extra, an output folder
+        that cannot be written or that holds results made with other settings.
     """
     from .core.segmentation import check_segment_options
 
+    _check_installed(client)
     check_segment_options(**segment_options)
+    if frames is not None:
+        check_frames(frames)  # what is wrong in any stack: before anything is written
     paths, inits, out = _checked_run(inputs, inits, out)
     _check_scheduler(scheduler)
     settings = dict(kind="segment", frames=frames, channel=channel, node_spacing=node_spacing,
@@ -324,6 +427,7 @@ def segment_files(inputs, inits, out, *, frames: str | None = None, channel: int
     _prepare_out(out, settings, inits, overwrite)
     tasks, failed = [], []
     for path in paths:
+        stamp = _stamp(path)
         try:
             n_frames = _frame_count(path, channel)
             chosen = parse_frames(frames, n_frames) if frames is not None else range(n_frames)
@@ -331,7 +435,7 @@ def segment_files(inputs, inits, out, *, frames: str | None = None, channel: int
             failed += _Task("segment", path, "", str(out), inits).failed(_one_line(err))
             continue
         tasks += [_Task("segment", path, f"{_name(path)}/t{t:05d}", str(out), inits, segment_options, frame=t,
-                        channel=channel, node_spacing=node_spacing) for t in chosen]
+                        channel=channel, node_spacing=node_spacing, stamp=stamp) for t in chosen]
     return _finish(out, failed + _run(tasks, workers, scheduler, client, progress), ["input", "frame", "object"])
 
 
@@ -378,23 +482,29 @@ def track_files(inputs, inits, out, *, frames: str | None = None, start: int | N
     -------
     pandas.DataFrame
         The summary, one row per input and object (also in
-        ``out/summary.csv``): ``input, object, status`` (``"ok"`` or
-        ``"failed"``), ``error``, ``frames, tracked, lost, left`` (frame
-        counts), ``last_status``, ``seconds``, ``contours`` (napari shapes CSV,
-        the frame as axis-0) and ``tracks`` (the per-node table of
+        ``out/summary.csv``): ``input, object, status`` (``"ok"``, ``"not
+        found"`` when the object was found on no frame, or ``"failed"``),
+        ``error``, ``frames, tracked, lost, left`` (frame counts),
+        ``last_status``, ``seconds``, ``contours`` (napari shapes CSV, the
+        frame as axis-0) and ``tracks`` (``tracks.csv``, the per-node table of
         :meth:`~napari_physeg.core.TrackingResult.table`, frames numbered as in
-        the stack), ``host``, ``pid``.
+        the stack; ``tracks.parquet`` next to it with pyarrow), ``host, pid,
+        warnings``.
 
     Raises
     ------
     ValueError
-        As :func:`segment_files`.
+        As :func:`segment_files`; also for frames out of the movie's order or
+        a ``start`` not among them. What needs a movie's length (a frame
+        beyond its end) fails that movie's rows instead.
     """
     from .core.segmentation import check_segment_options
 
+    _check_installed(client)
     check_segment_options(**segment_options)
     if inits is not None and not isinstance(inits, (list, tuple)) and start is None:
         start = _drawn_on(inits)
+    track_frames(frames, start)  # what can be told without the movies: before anything is written
     paths, inits, out = _checked_run(inputs, inits, out)
     _check_scheduler(scheduler)
     settings = dict(kind="track", frames=frames, start=start, channel=channel, node_spacing=node_spacing,
@@ -402,7 +512,7 @@ def track_files(inputs, inits, out, *, frames: str | None = None, start: int | N
     _prepare_out(out, settings, inits, overwrite)
     tasks = [_Task("track", path, _name(path), str(out), inits, segment_options, frames=frames, start=start,
                    channel=channel, node_spacing=node_spacing, max_steps=max_steps,
-                   match_options=match_options or {}) for path in paths]
+                   match_options=match_options or {}, stamp=_stamp(path)) for path in paths]
     return _finish(out, _run(tasks, workers, scheduler, client, progress), ["input", "object"])
 
 
@@ -428,8 +538,16 @@ def _checked_run(inputs, inits, out):
     if missing:
         more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
         raise ValueError(f"no such input: {', '.join(missing[:3])}{more}")
-    if len(set(_name(p) for p in paths)) < len(paths):
-        raise ValueError("an input is given twice")
+    folders = [p for p in paths if Path(p).is_dir() and not is_zarr(Path(p))]
+    if folders:
+        raise ValueError(f"{folders[0]} is a folder, not an image or a zarr store: give the files in it "
+                         f"(e.g. {Path(folders[0]) / '*.tif'})")
+    seen: dict[str, str] = {}
+    for p in paths:
+        if _name(p) in seen:
+            same = "is given twice" if seen[_name(p)] == p else f"is the same file as {seen[_name(p)]}"
+            raise ValueError(f"the input {p} {same}: give each file once")
+        seen[_name(p)] = p
     if isinstance(inits, (str, Path)):
         inits = read_shapes_csv(inits)
     inits = tuple(as_contour(c, name=f"contour {k}").tolist() for k, c in enumerate(inits))
@@ -438,6 +556,16 @@ def _checked_run(inputs, inits, out):
     out = Path(out).absolute()
     check_writable(out, folder=True)
     return paths, inits, out
+
+
+def _check_installed(client) -> None:
+    """The batch extra's packages (a client given brings its own dask.distributed), before anything is written."""
+    for module in ("pandas", "tqdm") + (("distributed",) if client is None else ()):
+        try:
+            __import__(module)
+        except ImportError:
+            raise ValueError(f'the batch needs the {module} package, which is not installed: pip install '
+                             '"napari-physeg[batch]"') from None
 
 
 def _check_scheduler(scheduler) -> None:
@@ -531,35 +659,86 @@ def _client(workers, scheduler, client):
     # binds 8787): on a free port, two batches at once do not clash.
     with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \
             Client(cluster, set_as_default=False) as local:
+        local.run(_ignore_interrupt)
         yield local
+
+
+def _ignore_interrupt() -> None:
+    """On a local cluster's workers: Ctrl-C reaches the terminal's whole process group, and the client
+    alone is to handle it (it closes the cluster); a worker would print a traceback."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _run(tasks, workers, scheduler, client, progress) -> list[dict]:
     """Run the tasks on the cluster; every task's rows (failed ones too)."""
-    out_rows: list[dict] = []
-    todo = []
-    for task in tasks:  # complete ones need no cluster
-        done = Path(task.out) / _RESULTS / task.name
-        (out_rows.extend(_read_rows(done)) if (done / "rows.json").exists() else todo.append(task))
+    out_rows, todo = _pending(tasks)
     if not todo:
         return out_rows
-    from dask.distributed import as_completed
     from tqdm.auto import tqdm
 
-    with _client(workers, scheduler, client) as c:
-        futures = {c.submit(_execute, task, key=f"napari-physeg-{task.name}-{uuid.uuid4().hex[:8]}",
-                            pure=False): task for task in todo}
-        bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), unit="task", disable=not progress,
-                   file=sys.stderr, desc=todo[0].kind)
+    n = default_workers() if workers is None else int(workers)
+    level = logging.getLogger("distributed").level
+    try:
+        with _client(min(n, len(todo)), scheduler, client) as c:  # a worker without a task only costs memory
+            futures = {c.submit(_execute, task, key=f"napari-physeg-{task.name}-{uuid.uuid4().hex[:8]}",
+                                pure=False): task for task in todo}
+            bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), unit="task", disable=not progress,
+                       file=sys.stderr, desc=todo[0].kind)
+            new_rows = _gather(c, futures, bar)
+    finally:
+        logging.getLogger("distributed").setLevel(level)
+    _warn(new_rows)
+    return out_rows + new_rows
+
+
+def _gather(c, futures: dict, bar) -> list[dict]:
+    """The rows of the tasks as they finish; the bar closed however it ends (no bar redrawn after Ctrl-C)."""
+    from dask.distributed import as_completed
+
+    rows: list[dict] = []
+    try:
         for future in as_completed(futures, loop=c.loop):  # c need not be the default client
             try:
-                rows = future.result()
+                rows.extend(future.result())
             except Exception as err:  # noqa: BLE001 - e.g. KilledWorker: the task's workers kept dying
-                rows = futures[future].failed(_one_line(err))
-            out_rows.extend(rows)
+                rows.extend(futures[future].failed(_one_line(err)))
             bar.update(1)
+    except KeyboardInterrupt:  # the cluster now closes with tasks running: dask's warnings about it are no news
+        logging.getLogger("distributed").setLevel(logging.ERROR)
+        raise
+    finally:
         bar.close()
-    return out_rows
+    return rows
+
+
+def _pending(tasks) -> tuple[list[dict], list]:
+    """The rows of the tasks complete already, and the tasks to run. A result made from another file
+    at the same path (replaced since) is deleted, and its task run again, with a warning."""
+    rows, todo, changed = [], [], {}
+    for task in tasks:  # complete ones need no cluster
+        done = Path(task.out) / _RESULTS / task.name
+        if _is_done(done, task):
+            rows.extend(_read_rows(done))
+            continue
+        if (done / "rows.json").exists():
+            shutil.rmtree(done)
+            changed[task.path] = task.kind
+        todo.append(task)
+    for path, kind in changed.items():
+        warnings.warn(f"{path} has changed since its results were made: {kind}ing it again", stacklevel=4)
+    return rows, todo
+
+
+def _warn(rows) -> None:
+    """The warnings the tasks caught, here: one per input and message, naming the file (and frames)."""
+    said: dict = {}
+    for row in rows:
+        for text in filter(None, str(row.get("warnings") or "").split(_SEP)):
+            said.setdefault((row["input"], text), set()).add(row.get("frame"))
+    for (path, text), frames in said.items():
+        frames = sorted(t for t in frames if t is not None)
+        where = f" (frame{'s' * (len(frames) > 1)} {', '.join(map(str, frames[:5]))}{', ...' * (len(frames) > 5)})"
+        warnings.warn(f"{path}{where if frames else ''}: {text}", stacklevel=4)
 
 
 def _finish(out: Path, rows: list[dict], keys: list[str]):
@@ -571,7 +750,7 @@ def _finish(out: Path, rows: list[dict], keys: list[str]):
     # Nullable dtypes: a failed row's missing counts leave the others' integers whole.
     table = pd.DataFrame(rows).convert_dtypes()
     table = table.sort_values(keys, kind="stable").reset_index(drop=True)
-    lead = [*keys, "status", "error"]
-    table = table[lead + [c for c in table.columns if c not in lead]]
+    lead, last = [*keys, "status", "error"], ["host", "pid", "warnings"]  # the outcome first, then who ran it
+    table = table[lead + [c for c in table.columns if c not in lead + last] + [c for c in last if c in table]]
     write_table(table, out / _SUMMARY)
     return table

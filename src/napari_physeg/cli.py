@@ -38,7 +38,7 @@ Contours are napari's shapes CSV (File > Save Selected Layer: columns index,
 shape-type, vertex-index, axis-0, axis-1, ...; polygons, rectangles, paths and
 ellipses) or a plain 'row,col' table. Exit status: 0 on success, 2 for bad
 input (one line saying what to fix; nothing is written), 1 when a run did not
-converge or diverged (track: an object was lost; batch: a task failed).
+converge or diverged (track, batch track: an object was lost; batch: a task failed).
 """
 
 
@@ -215,7 +215,7 @@ def _read_contours(path: Path, what: str = "--init", leading: bool = False):
 
 def _segment(args) -> int:
     from .core import segment
-    from .batch import segment_options_for
+    from .batch import check_contours, segment_options_for
 
     _check_input(args.image, "image")
     shapes, leading = _read_contours(args.init, leading=True)
@@ -225,7 +225,7 @@ def _segment(args) -> int:
     options = _segment_options(args)
     with open_stack(args.image, channel=args.channel) as stack:
         jobs, is_stack = _segment_jobs(args, len(stack), leading, len(shapes))
-        _check_contours(shapes, stack.shape[1:], args.init)
+        check_contours(shapes, stack.shape[1:], args.init)
         results, frames, status = [], [], 0
         for t in sorted({t for t, _ in jobs}):
             image = np.asarray(stack[t], dtype=np.float64)  # one frame at a time
@@ -245,17 +245,6 @@ def _segment(args) -> int:
         _write_mask(args.mask, results, frames, shape)
         print(f"wrote {args.mask}")
     return status
-
-
-def _check_contours(shapes, frame_shape, path) -> None:
-    """What segment() would refuse for a contour, found before the first one runs."""
-    from .core.contour import as_contour
-
-    for k, shape in enumerate(shapes):
-        c = as_contour(shape, name=f"shape {k} of {path}")
-        if np.any(c.max(0) < 0) or np.any(c.min(0) > np.array(frame_shape) - 1):
-            raise ValueError(f"shape {k} of {path} lies wholly outside the image ({frame_shape[0]} x "
-                             f"{frame_shape[1]} px): check that the contours were drawn on this image")
 
 
 def _segment_jobs(args, n_frames: int, leading, n_shapes: int):
@@ -389,7 +378,7 @@ def _start_frame(args, leading):
 
 
 def _track(args) -> int:
-    from .batch import track_file
+    from .batch import check_track, track_file
     from .core import LOST
 
     _check_input(args.stack, "stack")
@@ -398,14 +387,7 @@ def _track(args) -> int:
     options = _segment_options(args)
     start = _start_frame(args, leading)
     with open_stack(args.stack, channel=args.channel) as stack:  # the frames and start, before any work
-        chosen = parse_frames(args.frames, len(stack)) if args.frames else list(range(len(stack)))
-        if chosen != sorted(chosen):
-            raise ValueError(f"--frames {args.frames}: list the frames in the movie's order (tracking runs both "
-                             "ways from the start frame by itself)")
-        if start is not None and start not in chosen:
-            among = f"among --frames {args.frames}" if args.frames else f"in the stack (frames 0 to {len(stack) - 1})"
-            raise ValueError(f"the contours are drawn on frame {start}, not {among}")
-        _check_contours(inits, stack.shape[1:], args.init)
+        chosen, _ = check_track(stack, args.stack, inits, args.init, frames=args.frames, start=start)
     tr, frames, written = track_file(args.stack, inits, args.out, frames=args.frames, start=start,
                                      channel=args.channel, node_spacing=args.node_spacing,
                                      max_steps=args.steps_per_frame, match_options=_match_options(args),
@@ -437,11 +419,30 @@ def _batch(args) -> int:
         table = batch.track_files(args.inputs, shapes, args.out, start=_start_frame(args, leading),
                                   max_steps=args.steps_per_frame, match_options=_match_options(args),
                                   **common, **options)
-    failed = table[table["status"] == batch.FAILED]
-    print(f"{len(table) - len(failed)} of {len(table)} rows ok; summary in {args.out / 'summary.csv'}")
-    for _, row in failed.drop_duplicates("input").iterrows():
-        print(f"failed: {row['input']}: {row['error']}", file=sys.stderr)
-    return 1 if len(failed) else 0
+    return _batch_report(table, args.out)
+
+
+def _batch_report(table, out) -> int:
+    """The summary line, a line per input that failed (or whose objects were never found), the exit status:
+    1 as for one file (a task failed; track: an object was lost)."""
+    from . import batch
+
+    counts = [f"{(table['status'] == batch.OK).sum()} of {len(table)} rows ok"]
+    failed = (table["status"] == batch.FAILED).sum()
+    if failed:
+        counts.append(f"{failed} failed")
+    if "lost" in table:  # tracking: objects lost on some frames, or found on none
+        never = (table["status"] == batch.NOT_FOUND).sum()
+        partly = ((table["status"] == batch.OK) & table["lost"].gt(0).fillna(False)).sum()
+        counts += [f"{never} object(s) never found"] * bool(never) + [f"{partly} lost on some frames"] * bool(partly)
+    else:
+        never = partly = 0
+    print(f"{', '.join(counts)}; summary in {out / 'summary.csv'}")
+    bad = table[table["status"] != batch.OK]
+    for _, row in bad.drop_duplicates(["input", "status"]).iterrows():
+        named = str(row["input"]) in str(row["error"])  # e.g. "could not read FILE: ..."
+        print(f"{row['status']}: {row['error'] if named else f'{row.input}: {row.error}'}", file=sys.stderr)
+    return 1 if failed or never or partly else 0
 
 
 # --------------------------------------------------------------------------
@@ -562,9 +563,10 @@ def _add_batch(sub):
         q = _subparser(kinds, kind, text, text[0].upper() + text[1:] + ", each task on a worker of a dask "
                        "cluster: a local one (--workers) or an existing one (--scheduler). Writes OUT/summary.csv "
                        "(and summary.parquet with pyarrow), one row per input" + (", frame" if kind == "segment"
-                       else "") + " and object with a status column (ok or failed, with the error), and each "
-                       "task's contours under OUT/results/. Run the same command again to resume: complete "
-                       "results are kept, failed tasks are tried again.")
+                       else "") + " and object with a status column (ok" + (", not found: on no frame"
+                       if kind == "track" else "") + " or failed, with the error), and each task's contours "
+                       "under OUT/results/. Run the same command again to resume: complete results are kept; "
+                       "failed tasks, and inputs replaced since, are run again.")
         q.add_argument("inputs", type=Path, nargs="+", metavar="INPUT",
                        help="images or stacks (TIFF, zarr, ...); a file that cannot be read is reported as failed")
         _add_io(q, out_help="output folder (created; an earlier run's results there are reused)")

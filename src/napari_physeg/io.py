@@ -16,7 +16,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import os
-import tempfile
+import uuid
 from collections import Counter
 from pathlib import Path
 
@@ -26,8 +26,8 @@ import numpy as np
 # it does not import napari): an ellipse is its polygon, not its 4 box corners.
 from ._widgets._layers import CLOSED_SHAPE_TYPES, shape_to_polygon
 
-__all__ = ["read_shapes_csv", "write_shapes_csv", "open_stack", "parse_frames", "write_table", "atomic_path", "is_zarr",
-           "TIFF_SUFFIXES"]
+__all__ = ["read_shapes_csv", "write_shapes_csv", "open_stack", "parse_frames", "check_frames", "write_table",
+           "atomic_path", "is_zarr", "TIFF_SUFFIXES"]
 
 #: File name endings read with tifffile (lazily, one page per chunk).
 TIFF_SUFFIXES = (".tif", ".tiff", ".btf", ".tf8", ".tf2")
@@ -145,9 +145,10 @@ def atomic_path(path):
     ends without error (and removed when it fails): a reader, or a batch run
     that resumes, never sees half a file."""
     path = Path(path)
-    # The suffix kept last: writers that choose the format by it still do.
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=path.parent)
-    os.close(fd)
+    # The suffix kept last: writers that choose the format by it still do. Created with mode 0o666
+    # (not mkstemp's 0o600): the umask applies, so the file gets the mode a plain open() gives it.
+    tmp = path.parent / f".{path.stem}.{uuid.uuid4().hex[:12]}.part{path.suffix}"
+    os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
     try:
         yield Path(tmp)
         os.replace(tmp, path)
@@ -267,8 +268,12 @@ def _tiff_without_zarr(path):
 def _as_frames(stack, samples: bool, channel, path):
     """``stack`` as ``(T, H, W)`` with one chunk per frame, the channel chosen."""
     if channel is not None:
-        if not samples and stack.ndim != 3:
-            raise ValueError(f"--channel given but {path} has shape {tuple(stack.shape)}, not (rows, cols, channels)")
+        # The file says so (TIFF samples), or an image whose last axis is 3 or 4 long: any 3D array
+        # would take a (T, H, W) stack's columns for channels.
+        if not (samples or (stack.ndim == 3 and stack.shape[-1] in (3, 4))):
+            kind = "image" if stack.ndim == 2 else "stack"
+            raise ValueError(f"{path} has no channels (a {' x '.join(map(str, stack.shape))} {kind}): "
+                             "leave out --channel")
         if not 0 <= channel < stack.shape[-1]:
             raise ValueError(f"channel {channel} is out of range: {path} has {stack.shape[-1]} channels")
         stack = stack[..., channel]
@@ -292,24 +297,87 @@ def parse_frames(spec: str, n_frames: int) -> list[int]:
     ValueError
         For a malformed spec or a frame outside ``[0, n_frames)``.
     """
-    frames: list[int] = []
+    parts = _frame_parts(spec)
     try:
-        for part in str(spec).split(","):
-            if ":" in part:
-                bounds = [int(x) if x.strip() else None for x in part.split(":")]
-                frames.extend(range(n_frames)[slice(*bounds)])
-            else:
-                t = int(part)
-                if not -n_frames <= t < n_frames:
-                    raise IndexError(t)
-                frames.append(t % n_frames)
-    except (ValueError, TypeError):
-        raise ValueError(f"frames {spec!r}: expected e.g. 3, 0:10, 0:30:2 or 2,5,9") from None
+        frames = _select(parts, n_frames)
     except IndexError:
         raise ValueError(f"frames {spec!r}: the stack has frames 0 to {n_frames - 1}") from None
     if not frames:
         raise ValueError(f"frames {spec!r} selects no frame of the {n_frames}")
+    _no_repeat(spec, frames)
+    return frames
+
+
+def check_frames(spec: str, include: int | None = None) -> list[int] | None:
+    """Check a frame spec before the stack's length is known (before a batch starts).
+
+    Parameters
+    ----------
+    spec : str
+        As for :func:`parse_frames`.
+    include : int, optional
+        A frame the answer must tell about (e.g. the start frame of tracking).
+
+    Returns
+    -------
+    list of int or None
+        The frames ``spec`` chooses in any stack long enough to hold the frames it
+        names (and ``include``), in its order: a range left open is cut after them,
+        which keeps its order and repeats. None if the spec counts from the end
+        (then only its syntax is checked here; the rest with the stack).
+
+    Raises
+    ------
+    ValueError
+        For a spec that is wrong in any stack: malformed, a step of 0, no frame,
+        a frame named twice.
+    """
+    parts = _frame_parts(spec)
+    named = [p for p in parts if isinstance(p, int)] + [b for p in parts if isinstance(p, slice)
+                                                        for b in (p.start, p.stop) if b is not None]
+    if any(n < 0 for n in named) or any((p.step or 1) < 0 and p.start is None for p in parts
+                                        if isinstance(p, slice)):
+        return None  # counts from the end: its meaning depends on the stack's length
+    # Long enough that each open range reaches past every frame named: its order and repeats show.
+    steps = [abs(p.step or 1) for p in parts if isinstance(p, slice)]
+    frames = _select(parts, max(named + [include or 0]) + max(steps, default=1) + 1)
+    if not frames:
+        raise ValueError(f"frames {spec!r} selects no frame")
+    _no_repeat(spec, frames)
+    return frames
+
+
+def _frame_parts(spec) -> list:
+    """The parts of a frame spec, ints and slices; ValueError for a malformed one."""
+    parts: list = []
+    try:
+        for part in str(spec).split(","):
+            if ":" in part:
+                bounds = [int(x) if x.strip() else None for x in part.split(":")]
+                if len(bounds) > 3 or (len(bounds) == 3 and bounds[2] == 0):
+                    raise ValueError(part)
+                parts.append(slice(*bounds))
+            else:
+                parts.append(int(part))
+    except ValueError:
+        raise ValueError(f"frames {spec!r}: expected e.g. 3, 0:10, 0:30:2 or 2,5,9") from None
+    return parts
+
+
+def _select(parts, n_frames: int) -> list[int]:
+    """The frames of ``parts`` in a stack of ``n_frames``; IndexError for a frame beyond it."""
+    frames: list[int] = []
+    for part in parts:
+        if isinstance(part, slice):
+            frames.extend(range(n_frames)[part])
+        elif -n_frames <= part < n_frames:
+            frames.append(part % n_frames)
+        else:
+            raise IndexError(part)
+    return frames
+
+
+def _no_repeat(spec, frames) -> None:
     if len(set(frames)) < len(frames):
         repeated = min(t for t, n in Counter(frames).items() if n > 1)
         raise ValueError(f"frames {spec!r} names frame {repeated} more than once")
-    return frames
