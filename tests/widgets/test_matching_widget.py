@@ -463,3 +463,17 @@ def test_a_points_layer_is_a_contour(viewer_widget, wait_done, notes, poses):
     widget.reset_choices()
     widget._layer_a.value = viewer.layers["two points"]
     assert widget.run() is None and "at least 3" in notes["error"][-1]
+
+
+def test_a_mirror_image_is_matched_with_a_warning_napari_shows(viewer_widget, wait_done, notes, poses,
+                                                               napari_notifications):
+    """A contour in (x, y) beside one in (row, col): the core's warning reaches napari, not only a log."""
+    viewer, widget = viewer_widget
+    hand = np.asarray(data.hand_outline("open", n_nodes=67)) + 100
+    viewer.add_shapes([hand, hand[:, ::-1].copy()], shape_type="polygon", name="hands")
+    widget.reset_choices()
+    widget.run()
+    wait_done(widget)
+    assert notes["error"] == []
+    said = [str(n.message) for n in napari_notifications] + notes["warning"] + notes["info"]
+    assert any("mirror image" in s for s in said), said

@@ -19,7 +19,7 @@ import numpy as np
 
 from magicgui.widgets import Container, ProgressBar
 from napari.qt.threading import GeneratorWorker, thread_worker
-from napari.utils.notifications import show_error
+from napari.utils.notifications import show_error, show_warning
 from threadpoolctl import threadpool_limits
 
 from ..core._drain import drain
@@ -55,6 +55,11 @@ class WorkerWidget(Container):
 
     #: Widgets whose computation cannot be stopped have no Cancel button.
     _cancel_btn = None
+
+    #: Whether the core's warnings, raised in the worker thread (where napari
+    #: does not see them), are shown as napari warnings. A widget that shows
+    #: them its own way (from the result) sets it False.
+    relay_warnings = True
 
     def __init__(self, viewer):
         super().__init__(labels=True)
@@ -237,6 +242,8 @@ class WorkerWidget(Container):
             worker.yielded.connect(self._on_yielded_once)
         worker.returned.connect(self._on_returned_in_order)
         worker.errored.connect(self._on_errored_in_order)
+        if self.relay_warnings:
+            worker.warned.connect(self._on_warned_in_order)
         worker.finished.connect(self._on_finished_in_order)
         self.worker = worker
         worker.start()
@@ -326,6 +333,9 @@ class WorkerWidget(Container):
 
     def _on_errored_in_order(self, err):
         self._deliver(self._on_errored, err)
+
+    def _on_warned_in_order(self, showwarning_args):
+        self._deliver(show_warning, str(showwarning_args[0]))
 
     def _on_finished_in_order(self):
         self._deliver(self._on_finished)

@@ -552,6 +552,8 @@ class SegmentationWidget(WorkerWidget):
     preview removed. Problems are reported as napari notifications.
     """
 
+    relay_warnings = False  # the drawings' warnings are made here; the core's repeat them
+
     def __init__(self, viewer: napari.viewer.Viewer):
         super().__init__(viewer)
         self.job: SegmentationJob | None = None

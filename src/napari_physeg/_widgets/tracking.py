@@ -173,6 +173,8 @@ _TIPS = {
 class TrackingWidget(WorkerWidget):
     """Follow the objects of a Shapes layer through a movie (see the module's docstring)."""
 
+    relay_warnings = False  # the result's warnings are shown
+
     def __init__(self, viewer: napari.viewer.Viewer):
         super().__init__(viewer)
         self.preview_interval = 0.1
