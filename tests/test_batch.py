@@ -294,6 +294,20 @@ def test_the_summary_line_counts_lost_objects_and_the_exit_status_as_track_does(
     assert "not found: m1.tif: object 0 was found on none" in err and "failed: m2.tif: could not read" in err
 
 
+def test_a_segmentation_batch_exits_1_when_a_contour_did_not_converge_as_segment_does(capsys):
+    from napari_physeg.cli import _batch_report
+
+    def table(*rows):
+        return pd.DataFrame([dict(input=f"m{k}.tif", frame=0, object=0, status=s, error="", converged=c)
+                             for k, (s, c) in enumerate(rows)])
+
+    assert _batch_report(table(("ok", True), ("ok", True)), batch.Path("o")) == 0
+    assert _batch_report(table(("ok", True), ("ok", False)), batch.Path("o")) == 1
+    assert "2 of 2 rows ok, 1 did not converge" in capsys.readouterr().out
+    assert _batch_report(pd.DataFrame([dict(input="m.tif", status="failed", error="could not read")]),
+                         batch.Path("o")) == 1  # no row ran: no converged column
+
+
 # --------------------------------------------------------------------------
 # Resuming: a replaced input is run again
 # --------------------------------------------------------------------------

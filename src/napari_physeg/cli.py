@@ -424,7 +424,7 @@ def _batch(args) -> int:
 
 def _batch_report(table, out) -> int:
     """The summary line, a line per input that failed (or whose objects were never found), the exit status:
-    1 as for one file (a task failed; track: an object was lost)."""
+    1 as for one file (a task failed; segment: a contour did not converge; track: an object was lost)."""
     from . import batch
 
     counts = [f"{(table['status'] == batch.OK).sum()} of {len(table)} rows ok"]
@@ -435,8 +435,11 @@ def _batch_report(table, out) -> int:
         never = (table["status"] == batch.NOT_FOUND).sum()
         partly = ((table["status"] == batch.OK) & table["lost"].gt(0).fillna(False)).sum()
         counts += [f"{never} object(s) never found"] * bool(never) + [f"{partly} lost on some frames"] * bool(partly)
-    else:
-        never = partly = 0
+    else:  # segmentation: contours that did not come to rest on a border (see stop_reason)
+        never = 0
+        done = table[table["status"] == batch.OK]
+        partly = int((~done["converged"].astype(bool)).sum()) if "converged" in done else 0
+        counts += [f"{partly} did not converge"] * bool(partly)
     print(f"{', '.join(counts)}; summary in {out / 'summary.csv'}")
     bad = table[table["status"] != batch.OK]
     for _, row in bad.drop_duplicates(["input", "status"]).iterrows():
