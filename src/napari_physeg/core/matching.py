@@ -229,7 +229,11 @@ def _canonical_order(nodes: np.ndarray) -> np.ndarray:
     numbering starts and of its direction.
     """
     m = len(nodes)
-    order = np.arange(m) if signed_area(nodes) >= 0 else (-np.arange(m)) % m
+    # An area that is zero but for rounding (a balanced figure-8) has no
+    # orientation: its sign would follow where the numbering starts, and
+    # flip one of two copies of a contour. The caller's direction is kept.
+    area, scale = signed_area(nodes), float(np.sum(np.ptp(nodes, axis=0))) ** 2
+    order = (-np.arange(m)) % m if area < -1e-9 * scale else np.arange(m)
     centred = nodes - nodes.mean(axis=0)
     start = int(np.argmax(np.einsum("ij,ij->i", centred, centred)[order]))
     return np.roll(order, -start)
