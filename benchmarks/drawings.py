@@ -3,7 +3,7 @@
 ``benchmarks/real.py`` starts each object from four drawings (a rough circle, a freehand
 lasso, a circle half the object's size inside it, a box 1.1-1.5x its bounding box) and runs the
 scikit-image anchors beside ours. People draw in other ways too; this script tries ours alone
-(the anchors have no answer to most of these) on every object of the real groups from six more,
+(the anchors have no answer to most of these) on every object of the real groups from seven more,
 each seeded by the case's name:
 
 * **polygon**: 5-8 clicks around the object at 1.2-1.6x its radius (+-15 %), their angles
@@ -14,7 +14,10 @@ each seeded by the case's name:
 * **tight**: the object's outline 0.5-1.5 px outside it (a label's outline, an earlier result);
 * **click inside**: a circle of 0.3x the local depth (1.5-6 px) at a random point at least
   0.3 of the object's depth inside it, as one click-drags inside a large object;
-* **box 2x**: a box twice the bounding box, holding whole neighbours in a crowded field.
+* **box 2x**: a box twice the bounding box, holding whole neighbours in a crowded field;
+* **over the edge**: a circle 0.45x the object's radius, three quarters of the way from its
+  centroid to a random point of its outline, so that it crosses the object's edge (a hasty
+  click-drag near the border).
 
 Run::
 
@@ -81,8 +84,14 @@ def box_2x(obj, rng):
     return real_data.rectangle(centre, 2 * half)
 
 
+def over_the_edge(obj, rng):
+    outline = real_data.outline_of(obj.mask)
+    point = outline[rng.integers(len(outline))]
+    return real_data.circle(obj.centroid + 0.75 * (point - obj.centroid), 0.45 * obj.radius)
+
+
 DRAWINGS = {"polygon": polygon, "ellipse": ellipse, "off-centre": off_centre, "tight": tight,
-            "click inside": click_inside, "box 2x": box_2x}
+            "click inside": click_inside, "box 2x": box_2x, "over the edge": over_the_edge}
 
 
 def run(groups=GROUPS):

@@ -9,6 +9,7 @@ deep inside numpy or scipy.
 import warnings
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, example, given, settings, strategies as st
 from skimage.draw import polygon2mask
 
@@ -80,6 +81,20 @@ def test_segment_is_honest_or_raises_a_documented_error(init, dtype, bright, noi
     covers_object = polygon2mask(mask.shape, init)[mask].mean() > 0.5
     if res.converged and covers_object:
         assert _iou(res.contour, mask) >= 0.5, res.stop_reason
+
+
+@pytest.mark.parametrize("bright", [True, False], ids=["bright disk", "dark disk"])
+@pytest.mark.parametrize("centre, radius", [((48, 62), 9), ((36, 56), 8), ((60, 40), 10)])
+def test_a_drawing_across_the_object_s_edge_finds_the_whole_object(centre, radius, bright):
+    """A small circle mostly on the disk, over its edge, holding a fifth of it:
+    read as drawn around an object (its line lies partly on the background),
+    its limit cut the disk there and the contour "converged" on that part (IoU
+    0.25-0.30, found by fuzzing in session 28). It holds too little of one
+    convex body to go around it: the body is the object."""
+    image, mask = _blob(np.float64, bright, 0.05, 0)
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    res = segment(image, np.column_stack([centre[0] + radius * np.sin(t), centre[1] + radius * np.cos(t)]))
+    assert res.converged and _iou(res.contour, mask) > 0.95
 
 
 @settings(max_examples=15, deadline=None)
