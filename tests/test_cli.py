@@ -292,6 +292,15 @@ def test_track_a_zarr_stack_on_a_range_of_frames(movie_files):
     assert sorted(set(table["frame"])) == [1, 2, 3, 4] and (table["status"] == "tracked").all()
 
 
+def test_match_of_contours_in_x_y_and_row_col_says_so_on_one_line(tmp_path, capsys):
+    a = data.hand_outline("open", n_nodes=67)
+    hands = write_shapes_csv(tmp_path / "hands.csv", [a, a[:, ::-1]])
+    assert main(["match", str(hands), "--out", str(tmp_path / "pairs.csv")]) == 0  # a warning, not a failure
+    warned = [line for line in capsys.readouterr().err.splitlines() if "mirror image" in line]
+    assert len(warned) == 1 and warned[0].startswith("napari-physeg: warning: b is a's mirror image")
+    assert "swap the columns" in warned[0]
+
+
 def test_match_and_simulate_from_one_csv(tmp_path, capsys):
     a, b, truth = data.hand_pair(67, 66)
     hands = write_shapes_csv(tmp_path / "hands.csv", [a, b])

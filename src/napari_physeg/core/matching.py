@@ -1035,9 +1035,10 @@ def _warn_if_mirrored(a: np.ndarray, b: np.ndarray) -> None:
     """Warn when ``b`` (both positively oriented) looks like ``a`` reflected (see MIRROR_FIT)."""
     fit = mirror_fit(a, b)
     if fit <= MIRROR_FIT:
+        how = ("is a's mirror image (its outline is a's reflected)" if fit < 0.01 else
+               f"looks like a's mirror image (its outline fits a's reflection {1 / fit:.1f} times better than a)")
         warnings.warn(
-            f"b looks like a's mirror image (its outline fits a's reflection {1 / max(fit, 1e-3):.0f} times better "
-            "than a itself): the matching follows deformations, not reflections, so its pairs are likely wrong. "
+            f"b {how}: the matching follows deformations, not reflections, so its pairs are likely wrong. "
             "If one contour is (x, y) and the other (row, col), swap the columns of one; to match a mirror "
             "image on purpose, flip one contour first (e.g. b * [1, -1])",
             UserWarning, stacklevel=4)
