@@ -519,9 +519,16 @@ def track_files(inputs, inits, out, *, frames: str | None = None, start: int | N
 def _drawn_on(csv_path) -> int | None:
     """The one frame (axis-0) the contours of a shapes CSV lie on, or None for 2D ones."""
     _, leading = read_shapes_csv(csv_path, leading=True)
+    return drawn_frame(leading, csv_path)
+
+
+def drawn_frame(leading, name) -> int | None:
+    """The one frame that contours with leading coordinates ``leading`` (as
+    :func:`~napari_physeg.io.read_shapes_csv` gives them) lie on, or None for 2D
+    ones; ``name`` names the contours in the message."""
     drawn = sorted({int(round(lead[0])) for lead in leading if lead})
     if len(drawn) > 1:
-        raise ValueError(f"the contours of {csv_path} lie on frames {drawn}: draw them all on one frame, "
+        raise ValueError(f"the contours of {name} lie on frames {drawn}: draw them all on one frame, "
                          "or say which with start (--start)")
     return drawn[0] if drawn else None
 
@@ -634,7 +641,7 @@ def _digest(inits) -> str:
 @contextlib.contextmanager
 def _client(workers, scheduler, client):
     """The client to run on: the one given, one connected to ``scheduler``, or
-    a local cluster of ``workers`` single-threaded processes."""
+    a local cluster of ``workers`` (an int, see _run) single-threaded processes."""
     if client is not None:
         yield client
         return
@@ -648,7 +655,7 @@ def _client(workers, scheduler, client):
         with connected:
             yield connected
         return
-    n = default_workers() if workers is None else int(workers)
+    n = int(workers)
     if n < 1:
         raise ValueError(f"workers must be at least 1, got {workers!r}")
     # Processes, one thread each: the core is numpy/scipy code that holds the

@@ -368,13 +368,9 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
 
 def _start_frame(args, leading):
-    if args.start is not None:
-        return args.start
-    drawn = sorted({int(round(lead[0])) for lead in leading if lead})
-    if len(drawn) > 1:
-        raise ValueError(f"the contours of {args.init} lie on frames {drawn}: draw them all on one frame, or say "
-                         "which with --start")
-    return drawn[0] if drawn else None
+    from .batch import drawn_frame
+
+    return args.start if args.start is not None else drawn_frame(leading, args.init)
 
 
 def _track(args) -> int:
