@@ -460,12 +460,9 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                 if stop:
                     stop_reason = "cancelled"
                     break
-            if t == start and stop_reason != "cancelled":
-                said = _warn_not_found(run, frame_shape)
-            elif t != start and stop_reason != "cancelled":
-                said += _warn_divided(run, t, step)
             if stop_reason == "cancelled":
                 break
+            said += _warn_not_found(run, frame_shape) if t == start else _warn_divided(run, t, step)
         if stop_reason == "cancelled":
             break
     contours = run.contours
@@ -519,17 +516,17 @@ def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
     track, which is seldom what "lost" alone would tell. Returns the messages."""
     said = []
     for k in range(len(run.inits)):
-        before = run.contours[k][t - step] if 0 <= t - step < len(run.contours[k]) else None
+        before = run.contours[k][t - step]  # the frame done before (t is not the start frame)
         if run.status[k][t] != LOST or before is None:
             continue
         bodies = pinched_bodies(before)
         if bodies is None:
             continue
         where = " and ".join(f"({c[0]:.0f}, {c[1]:.0f})" for c in (area_centroid(b) for b in bodies))
+        neck = np.linalg.norm(bodies[0][-1] - bodies[0][0])  # the nodes it was cut between
         said.append(f"object {k} held two bodies on frame {t - step} (at {where}, joined by a neck "
-                    f"{np.linalg.norm(bodies[0][-1] - bodies[0][0]):.1f} px wide): it divided, or took in a neighbour, and is "
-                    f"reported lost from frame {t} on; to follow the two, draw each on frame {t} and track "
-                    f"from there (start={t})")
+                    f"{neck:.1f} px wide): it divided, or took in a neighbour, and is reported lost from frame "
+                    f"{t} on; to follow the two, draw each on frame {t} and track from there (start={t})")
         warnings.warn(said[-1], UserWarning, stacklevel=5)
     return said
 
