@@ -292,6 +292,18 @@ def test_a_cell_that_divides_ends_its_track_with_a_warning_that_says_so():
     assert len(tr.warnings) == 1 and "divided" in tr.warnings[0]
 
 
+def test_tracked_backward_two_cells_that_came_together_are_not_said_to_divide():
+    """Backward in time a division reads as two bodies that meet: the warning
+    says so, and names the frame to draw the two on (it said 'divided ... from
+    frame 1 on', of the frames before)."""
+    frames = _dividing_cell_movie()[::-1]
+    with pytest.warns(UserWarning, match=r"object 0 held two bodies on frame 2 .* came together .* lost on frame 1 "
+                                         r"and before.*start=1"):
+        tr = track(frames, _circle((40, 55), 19), start=10)
+    assert tr.status[0] == [LOST] * 2 + [TRACKED] * 9
+    assert len(tr.warnings) == 1 and "divided" not in tr.warnings[0]
+
+
 def _dumbbell(neck, lobe=12.0):
     """Two disks of radius ``lobe``, 2 px apart, joined by a bar ``neck`` px
     wide: the outline of the mask, about a node per pixel."""

@@ -512,8 +512,10 @@ DIVISION_NECK = 0.25
 
 def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
     """Warn of each object lost on frame ``t`` whose contour on the frame
-    before held two bodies (see :func:`pinched_bodies`): a division ends a
-    track, which is seldom what "lost" alone would tell. Returns the messages."""
+    done before held two bodies (see :func:`pinched_bodies`): a division ends
+    a track, which is seldom what "lost" alone would tell. Tracking backward
+    (``step`` -1), the two bodies came together on the frame after ``t``.
+    Returns the messages."""
     said = []
     for k in range(len(run.inits)):
         before = run.contours[k][t - step]  # the frame done before (t is not the start frame)
@@ -524,9 +526,12 @@ def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
             continue
         where = " and ".join(f"({c[0]:.0f}, {c[1]:.0f})" for c in (area_centroid(b) for b in bodies))
         neck = np.linalg.norm(bodies[0][-1] - bodies[0][0])  # the nodes it was cut between
+        what = ("it divided, or took in a neighbour, and is reported lost from frame {t} on" if step > 0 else
+                "the two came together there (two objects that met, or a neighbour it took in), and it is "
+                "reported lost on frame {t} and before")
         said.append(f"object {k} held two bodies on frame {t - step} (at {where}, joined by a neck "
-                    f"{neck:.1f} px wide): it divided, or took in a neighbour, and is reported lost from frame "
-                    f"{t} on; to follow the two, draw each on frame {t} and track from there (start={t})")
+                    f"{neck:.1f} px wide): {what.format(t=t)}; to follow the two, draw each on frame {t} "
+                    f"and track from there (start={t})")
         warnings.warn(said[-1], UserWarning, stacklevel=5)
     return said
 
