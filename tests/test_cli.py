@@ -320,6 +320,35 @@ def test_match_and_simulate_from_one_csv(tmp_path, capsys):
     assert "holds 2 shape(s)" in capsys.readouterr().err
 
 
+def test_a_rectangle_is_matched_and_simulated_along_its_sides_not_by_its_corners(tmp_path, capsys):
+    """A rectangle in a shapes CSV is its 4 corners: it was matched, and
+    driven, as a quadrilateral (4 nodes of a, the 200 of b mostly unpaired)."""
+    from napari_physeg.io import write_shapes_csv as write
+
+    t = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+    ellipse = np.c_[50 + 30 * np.sin(t), 55 + 35 * np.cos(t)]
+    box = np.array([[25.0, 25.0], [25.0, 80.0], [85.0, 80.0], [85.0, 25.0]])
+    shapes = write(tmp_path / "shapes.csv", [box, ellipse])
+    pairs = tmp_path / "pairs.csv"
+    assert main(["match", str(shapes), "--out", str(pairs)]) == 0
+    table = np.genfromtxt(pairs, delimiter=",", names=True)
+    assert len(table) >= 70  # 230 px of outline, a node every 3 px or less
+    frames = tmp_path / "frames.csv"
+    main(["simulate", str(shapes), "--out", str(frames)])
+    last = read_shapes_csv(frames)[-1]
+    assert len(last) == len(table) and _outline_distance(ellipse, last).max() < 3.0
+
+
+def _outline_distance(points, contour):
+    """Distance of each point to the closed polyline ``contour`` (finely resampled)."""
+    from scipy.spatial import cKDTree
+
+    c = np.asarray(contour, float)
+    t = np.linspace(0, 1, 20, endpoint=False)
+    dense = (c[:, None] + t[None, :, None] * (np.roll(c, -1, axis=0) - c)[:, None]).reshape(-1, 2)
+    return cKDTree(dense).query(np.asarray(points, float))[0]
+
+
 def test_every_option_of_every_command_is_explained():
     from napari_physeg.cli import build_parser
 

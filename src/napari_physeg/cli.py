@@ -294,7 +294,10 @@ def _pair(args):
             raise ValueError(f"{opt} {index}: {path} holds {len(shapes)} shape(s), numbered from 0"
                              + ("; give a second file B, or two shapes in A" if not args.b and len(shapes) < 2
                                 else ""))
-    return a_shapes[args.a_shape], b_shapes[b_index]
+    from .core.segmentation import drawing_nodes
+
+    # A rectangle's 4 corners are a drawing, not the element's nodes.
+    return drawing_nodes(a_shapes[args.a_shape]), drawing_nodes(b_shapes[b_index])
 
 
 def _match(args) -> int:

@@ -5,6 +5,7 @@ from hypothesis import given, settings, strategies as st
 from napari_physeg.core.contour import (
     bounding_window,
     as_contour,
+    densify,
     outward_normals,
     perimeter,
     resample,
@@ -161,3 +162,31 @@ def test_bounding_window_holds_the_margin_and_stays_in_the_image():
     # Grown to cover a window it must keep.
     rows, cols = bounding_window(contour, (100, 60), 0.0, keep=(slice(2, 12), slice(40, 59)))
     assert (rows.start, rows.stop, cols.start, cols.stop) == (2, 32, 20, 59)
+
+
+def test_densify_splits_long_edges_only_and_keeps_every_vertex_in_order():
+    # A rectangle's 4 corners and one short edge: the long sides get nodes at most 3 px apart.
+    box = np.array([[0.0, 0.0], [0.0, 40.0], [2.0, 40.0], [2.0, 0.0]])
+    dense = densify(box, 3.0, 6.0)
+    assert segment_lengths(dense).max() <= 3.0 + 1e-9
+    np.testing.assert_allclose(perimeter(dense), perimeter(box))
+    corners = [np.flatnonzero(np.all(dense == v, axis=1)) for v in box]
+    assert all(len(i) == 1 for i in corners) and np.all(np.diff([i[0] for i in corners]) > 0)
+    assert len(dense) == 2 * 14 + 2  # ceil(40 / 3) pieces on each long side, the short ones kept
+    circle = _circle(64)
+    assert densify(circle, 3.0, 6.0) is not None and np.array_equal(densify(circle, 3.0, 6.0), circle)
+
+
+def test_a_drawing_gets_nodes_along_its_long_edges_and_a_node_set_is_kept():
+    from napari_physeg import data
+    from napari_physeg.core.segmentation import DEFAULT_NODE_SPACING, drawing_nodes
+
+    box = np.array([[0.0, 0.0], [0.0, 60.0], [30.0, 60.0], [30.0, 0.0]])  # napari's rectangle: 4 corners
+    nodes = drawing_nodes(box)
+    assert len(nodes) == 60 and segment_lengths(nodes).max() <= DEFAULT_NODE_SPACING
+    hand = data.hand_outline("open", n_nodes=67)  # evenly spaced, 14 px apart: the paper's nodes
+    assert np.array_equal(drawing_nodes(hand), hand)
+    # 30 clicks, one side a long straight run: that run gets nodes at the clicks' spacing
+    clicks = np.vstack([_circle(30, r=20.0)[:29], [[-60.0, 60.0]]])
+    spaced = drawing_nodes(clicks)
+    assert len(spaced) > len(clicks) and segment_lengths(spaced).max() <= 2 * np.median(segment_lengths(clicks))

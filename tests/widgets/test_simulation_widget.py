@@ -25,6 +25,7 @@ from napari_physeg._widgets.simulation import (  # noqa: E402
     simulate_contours,
 )
 from napari_physeg._widgets._inputs import is_matching_layer  # noqa: E402
+from napari_physeg._widgets._layers import shape_to_polygon  # noqa: E402
 from napari_physeg.core import match  # noqa: E402
 
 pytestmark = [
@@ -355,6 +356,30 @@ def test_the_widget_says_which_matching_it_uses(viewer_widgets, wait_done, notes
     assert is_matching_layer(widget._matching.value)
     assert "'local'" in widget._matching_info.value and widget._matching.value.name in widget._matching_info.value
     assert not widget._method.visible  # the method only matters when one is computed
+
+
+@pytest.mark.parametrize("a_is_rectangle", [True, False])
+def test_a_rectangle_drawn_in_napari_is_driven_along_its_sides(viewer_widgets, wait_done, notes, a_is_rectangle):
+    """napari stores a rectangle as its 4 corners: they were its only nodes,
+    so a rectangle driven onto an ellipse ended a quadrilateral 20 px off it,
+    and an ellipse driven onto a rectangle piled its nodes onto the corners
+    and crossed itself (with advice to use the 'order' matching it used)."""
+    viewer, _, widget = viewer_widgets
+    layer = viewer.add_shapes(name="drawn")
+    box = np.array([[25.0, 25.0], [85.0, 80.0]])
+    ellipse = np.array([[20.0, 20.0], [20.0, 90.0], [80.0, 90.0], [80.0, 20.0]])
+    drawn = [lambda: layer.add_rectangles(box), lambda: layer.add_ellipses(ellipse)]
+    for add in drawn if a_is_rectangle else drawn[::-1]:
+        add()
+    widget.reset_choices()
+    widget._layer_a.value, widget._index_a.value, widget._layer_b.value, widget._index_b.value = layer, 0, layer, 1
+    widget.run()
+    wait_done(widget)
+    res = widget.last_outcome.result
+    assert res.frames.shape[1] >= 70 and notes["error"] == []
+    assert not any("Use a matching made with method 'order'" in w for w in notes["warning"])
+    target = shape_to_polygon(layer.data[1], layer.shape_type[1])
+    assert outline_distance(target, res.frames[-1]).max() < 3.0
 
 
 def test_crossing_frames_are_found():

@@ -19,7 +19,7 @@ from napari.layers import Image, Points, Shapes, Vectors
 from ..core import MATERIALS, Material
 from ..core.contour import nodes_for_spacing
 from ..core.materials import suggested_stiffness
-from ..core.segmentation import DEFAULT_NODE_SPACING
+from ..core.segmentation import DEFAULT_NODE_SPACING, drawing_nodes
 from ._layers import PointsAsPolygon, image_transform_kwargs, shape_in_layer_coords
 
 __all__ = [
@@ -267,7 +267,7 @@ def _read_one(layer, index: int, role: str, reference=None, world_point=None):
     if not np.all(np.isfinite(contour)):
         raise MatchingInputError(f"contour {role} (shape {index} of {layer.name!r}) has non-finite "
                                  "coordinates (NaN); redraw it")
-    return contour, leading
+    return drawing_nodes(contour), leading
 
 
 def read_contour_pair(layer_a, index_a: int, layer_b, index_b: int, *, world_point=None,

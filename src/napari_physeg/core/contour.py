@@ -135,6 +135,22 @@ def resample(contour: np.ndarray, n_nodes: int | None = None, *, spacing: float 
     return np.column_stack([np.interp(targets, s, closed[:, k]) for k in range(2)])
 
 
+def densify(contour: np.ndarray, spacing: float, longest: float) -> np.ndarray:
+    """The closed ``contour`` with nodes added, evenly, along each edge
+    longer than ``longest`` px, at most ``spacing`` px apart; its own
+    vertices are kept (a rectangle keeps its corners) and so is their order."""
+    contour = np.asarray(contour, dtype=np.float64)
+    lengths = segment_lengths(contour)
+    pieces = np.where(lengths > longest, np.ceil(lengths / spacing), 1).astype(int)
+    if (pieces == 1).all():
+        return contour
+    edge = np.roll(contour, -1, axis=0) - contour
+    start = np.repeat(np.arange(len(contour)), pieces)
+    # Position of each new node along its edge: 0, 1/p, ..., (p-1)/p.
+    offset = np.arange(pieces.sum()) - np.repeat(np.cumsum(pieces) - pieces, pieces)
+    return contour[start] + (offset / pieces[start])[:, None] * edge[start]
+
+
 def outward_normals(contour: np.ndarray) -> np.ndarray:
     """Unit normals pointing out of the region the contour encloses.
 

@@ -21,9 +21,9 @@ from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist
 
 from .background import background_plane, plane_removed
-from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, cut_pinches, nearest_node,
-                      nodes_for_spacing, outward_normals, pair_indices, pairs_within, perimeter, remove_loops, resample,
-                      segment_lengths, signed_area)
+from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, cut_pinches, densify,
+                      nearest_node, nodes_for_spacing, outward_normals, pair_indices, pairs_within, perimeter,
+                      remove_loops, resample, segment_lengths, signed_area)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
@@ -49,6 +49,24 @@ DENSE_MAX_NODES = 100
 #: Nodes are redistributed (and the element rebuilt) when an edge of the
 #: contour grows past this many target spacings (see also PINCH_GAP).
 REMESH_STRETCH = 2.0
+
+
+def drawing_nodes(contour) -> np.ndarray:
+    """A drawn shape's nodes for matching and simulation: its vertices, with
+    nodes added along each edge longer than REMESH_STRETCH node spacings.
+
+    The spacing is the contour's median edge, or DEFAULT_NODE_SPACING px (at
+    most MAX_DEFAULT_NODES nodes) for one of fewer than MIN_NODES vertices:
+    a rectangle's 4 corners, or the few clicks of a polygon, are a drawing,
+    and matched and driven as they are they would make a quadrilateral. A
+    contour whose nodes are about evenly spaced (an ellipse's polygon, a
+    segmentation's result, the paper's 67-node hands) is returned unchanged.
+    """
+    contour = np.asarray(contour, dtype=np.float64)
+    edges = segment_lengths(contour)
+    spacing = (float(np.median(edges)) if len(contour) >= MIN_NODES else
+               max(DEFAULT_NODE_SPACING, float(edges.sum()) / MAX_DEFAULT_NODES))
+    return densify(contour, spacing, REMESH_STRETCH * spacing)
 
 
 @dataclass(frozen=True)
