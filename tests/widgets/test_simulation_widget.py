@@ -382,6 +382,21 @@ def test_a_rectangle_drawn_in_napari_is_driven_along_its_sides(viewer_widgets, w
     assert outline_distance(target, res.frames[-1]).max() < 3.0
 
 
+def test_the_frames_of_a_simulation_keep_a_movie_s_time_axis_name(viewer_widgets, wait_done, notes):
+    """Found by probing (session 29): with a movie open, the simulation's
+    frames play on its time axis, which they renamed "frame"."""
+    viewer, _, widget = viewer_widgets
+    a, b, _ = data.hand_pair(67, 66)
+    viewer.add_image(np.zeros((20, 256, 256), np.float32), name="movie", axis_labels=("t", "y", "x"))
+    viewer.add_shapes([a, b], shape_type="polygon", name="hands")
+    before = viewer.dims.axis_labels
+    widget.reset_choices()
+    widget.run()
+    wait_done(widget)
+    assert notes["error"] == [] and len(sim_layers(viewer)) == 1
+    assert viewer.dims.axis_labels == before
+
+
 def test_crossing_frames_are_found():
     from types import SimpleNamespace
 

@@ -265,6 +265,45 @@ def test_a_movie_with_a_time_scale_keeps_its_slider_and_extent(dock, wait_done, 
     assert (viewer.dims.nsteps[0], viewer.layers.extent.world.tolist()) == before
 
 
+def test_a_movie_in_seconds_and_micrometres_keeps_its_units(dock, wait_done, errors):
+    """Found by probing (session 29): the output layers were in pixels, and
+    with layers of mixed units the viewer drops its own (scale bar, status
+    bar): (s, um, um) became None after a run."""
+    viewer, widget = dock(TrackingWidget)
+    units = ("s", "um", "um")
+    viewer.add_image(_disk_movie(4), name="movie", scale=(30.0, 0.2, 0.2), units=units)
+    viewer.add_shapes([_circle_on_frame((40, 40), 20)], shape_type="polygon", name="drawn", scale=(30.0, 0.2, 0.2),
+                      units=units)
+    widget.reset_choices()
+    viewer.dims.set_point(0, 0)
+    before = viewer.dims.units
+    widget.run()
+    wait_done(widget)
+    assert errors == [] and len(widget.output_layers) == 4
+    assert viewer.dims.units == before and all(layer.units == before for layer in widget.output_layers)
+
+
+@pytest.mark.parametrize("view", ["3D view", "transposed axes", "drawn off the movie"])
+def test_a_view_or_drawing_that_cannot_be_tracked_is_refused_as_in_segmentation(dock, errors, view):
+    """Found by probing (session 29): the Tracking widget ran from a frame the
+    3D view hides, and a drawing off the movie (layers of different scales)
+    was 'not found ... under its drawing' rather than said to lie off it."""
+    viewer, widget = dock(TrackingWidget)
+    viewer.add_image(_disk_movie(3), name="movie")
+    centre = (40, 200) if view == "drawn off the movie" else (40, 40)
+    viewer.add_shapes([_circle_on_frame(centre, 20)], shape_type="polygon", name="drawn")
+    widget.reset_choices()
+    viewer.dims.set_point(0, 0)
+    if view == "3D view":
+        viewer.dims.ndisplay = 3
+    elif view == "transposed axes":
+        viewer.dims.order = (1, 0, 2)
+    assert widget.run() is None and widget.output_layers == []
+    expected = {"3D view": "switch to the 2D view", "transposed axes": "reset the axis order",
+                "drawn off the movie": "lies outside the movie 'movie'"}[view]
+    assert len(errors) == 1 and expected in errors[0]
+
+
 def test_the_tidy_table_is_saved_as_csv(movie_in_viewer, wait_done, tmp_path):
     """As napari-physeg track writes it: one row per object, frame and node (found missing by probing)."""
     import pandas as pd

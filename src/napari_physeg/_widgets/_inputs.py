@@ -79,6 +79,27 @@ class InputError(ValueError):
     """Bad input to a widget; the message says what is wrong and how to fix it."""
 
 
+def check_plane_view(n_world: int, ndisplay: int, dims_order=None, what: str = "segment the current 2D slice"):
+    """Refuse a view in which the current 2D plane is not what the user sees:
+    the 3D view, or displayed axes other than the last two (rows, columns)."""
+    if ndisplay != 2:
+        raise InputError(f"the viewer is in 3D view: switch to the 2D view (the square/cube button at the "
+                         f"bottom left) to {what}")
+    if dims_order is not None and set(tuple(dims_order)[-2:]) != {n_world - 2, n_world - 1}:
+        raise InputError("the displayed plane is not the image's last two axes: reset the axis order "
+                         "(the 'transpose'/'roll dimensions' buttons) so that rows and columns are displayed")
+
+
+def off_image(contour, shape, where: str) -> str | None:
+    """Why ``contour`` (image data coordinates) cannot be an object of an
+    image of ``shape`` (rows, cols): it lies wholly outside; None when it does not."""
+    lo, hi = contour.min(0), contour.max(0)
+    if np.all(hi >= 0) and np.all(lo <= np.asarray(shape[-2:], float) - 1):
+        return None
+    return (f"{where} (rows {lo[0]:.0f}..{hi[0]:.0f}, cols {lo[1]:.0f}..{hi[1]:.0f}; the image has {shape[-2]} x "
+            f"{shape[-1]} pixels): draw it on the image, or give the two layers the same scale and translate")
+
+
 def core_default(function, name: str):
     """The default of keyword ``name`` of the core ``function``: the one source of defaults."""
     return inspect.signature(function).parameters[name].default

@@ -46,10 +46,12 @@ from ._inputs import (
     PREVIEW_KEY,
     InputError,
     PhysicsControls,
+    check_plane_view,
     contour_layer_choices,
     core_default,
     image_layer_choices,
     node_count,
+    off_image,
 )
 from ._layers import (
     contours_to_labels,
@@ -362,12 +364,7 @@ def prepare_segmentation(image_layer, shapes_layer, *, world_point=None, channel
         raise InputError(f"{image_layer.name!r} is {ndim}D: the segmentation needs a 2D image or a stack of them")
     n_world = len(world_point) if world_point is not None else ndim
     if ndim > 2:
-        if ndisplay != 2:
-            raise InputError("the viewer is in 3D view: switch to the 2D view (the square/cube button at the "
-                             "bottom left) to segment the current 2D slice")
-        if dims_order is not None and set(tuple(dims_order)[-2:]) != {n_world - 2, n_world - 1}:
-            raise InputError("the displayed plane is not the image's last two axes: reset the axis order "
-                             "(the 'transpose'/'roll dimensions' buttons) so that rows and columns are displayed")
+        check_plane_view(n_world, ndisplay, dims_order)
     data = image_layer.data[0] if image_layer.multiscale else image_layer.data
     shape = tuple(int(s) for s in data.shape[: ndim])
     leading = slice_index(image_layer, world_point if world_point is not None else np.zeros(ndim), shape)
@@ -382,16 +379,14 @@ def prepare_segmentation(image_layer, shapes_layer, *, world_point=None, channel
                          f"contour on this slice, or move to a slice with one ({sliced.off_slice} shapes elsewhere)")
     h, w = plane.shape
     hi = np.array([h - 1.0, w - 1.0])
-    contours, indices, warnings, off_image = [], [], [], []
+    contours, indices, warnings, off_images = [], [], [], []
     for k, c in zip(sliced.indices, sliced.contours):
         if not np.all(np.isfinite(c)):
             raise InputError(f"shape {k} of {shapes_layer.name!r} has non-finite coordinates (NaN); redraw it")
-        lo_box, hi_box = c.min(0), c.max(0)
-        if np.any(hi_box < 0) or np.any(lo_box > hi):
-            off_image.append(
-                f"shape {k} of {shapes_layer.name!r} lies outside the image {image_layer.name!r} (rows "
-                f"{lo_box[0]:.0f}..{hi_box[0]:.0f}, cols {lo_box[1]:.0f}..{hi_box[1]:.0f}; the image has "
-                f"{h} x {w} pixels): draw it on the image, or give the two layers the same scale and translate")
+        outside_image = off_image(c, (h, w), f"shape {k} of {shapes_layer.name!r} lies outside the image "
+                                             f"{image_layer.name!r}")
+        if outside_image:
+            off_images.append(outside_image)
             continue
         outside = np.any((c < 0) | (c > hi), axis=1)
         if outside.any():
@@ -402,8 +397,8 @@ def prepare_segmentation(image_layer, shapes_layer, *, world_point=None, channel
         contours.append(c)
         indices.append(k)
     if not contours:
-        raise InputError("; ".join(off_image))
-    warnings.extend(f"{message}; it was left out" for message in sliced.refused + off_image)
+        raise InputError("; ".join(off_images))
+    warnings.extend(f"{message}; it was left out" for message in sliced.refused + off_images)
     return SegmentationJob(
         image=plane,
         contours=contours,

@@ -510,6 +510,9 @@ class SimulationWidget(WorkerWidget):
         try:
             for data, meta, kind in simulation_layer_data(outcome, pair, tracks=self._tracks.value,
                                                           material=self._material.value):
+                if self.viewer.dims.ndim > len(pair.leading) + 2:
+                    # The frames play on an axis the viewer has (a movie's time): it keeps its name.
+                    meta.pop("axis_labels", None)
                 self.output_layers.append(self.viewer.add_layer(Layer.create(data, meta, kind)))
         except Exception as err:  # never leave the user with a silent failure
             self._fail(f"Could not add the simulation layers: {type(err).__name__}: {err}")

@@ -29,8 +29,8 @@ from napari.layers import Points, Shapes
 from napari.utils.notifications import show_info, show_warning
 
 from ..core import LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, segment, track
-from ._inputs import (PHYSICS_TIPS, PREVIEW_COLOR, PREVIEW_KEY, PhysicsControls, contour_layer_choices,
-                      core_default, image_layer_choices)
+from ._inputs import (PHYSICS_TIPS, PREVIEW_COLOR, PREVIEW_KEY, PhysicsControls, check_plane_view,
+                      contour_layer_choices, core_default, image_layer_choices, off_image)
 from ._layers import PointsAsPolygon, image_transform_kwargs, shapes_to_image_coords, slice_index
 from ._worker import WorkerWidget, relay
 
@@ -94,7 +94,7 @@ def tracking_layer_data(result: TrackingResult, transform: dict, *, name: str, f
             features["object"].append(k)
             features["frame"].append(t)
             features["status"].append(result.status[k][t])
-    common = {key: transform[key] for key in ("scale", "translate", "rotate", "shear", "affine") if key in transform}
+    common = _placement(transform)
     layers = [(polygons, dict(name=f"{name} contours", ndim=3, shape_type="polygon", edge_color=colours,
                               face_color="transparent", edge_width=1.5, features=features,
                               metadata={"tracking": result}, **common), "shapes")]
@@ -124,6 +124,14 @@ def tracking_layer_data(result: TrackingResult, transform: dict, *, name: str, f
     return layers
 
 
+def _placement(transform: dict) -> dict:
+    """The movie's transform and units for a layer of (frame, row, col) data:
+    a layer in pixels among layers in (s, um, um) would take the viewer's
+    units (scale bar, status bar) away."""
+    return {key: transform[key] for key in ("scale", "translate", "rotate", "shear", "affine", "units")
+            if key in transform}
+
+
 def _map_placement(shape, transform: dict, frame_shape=None) -> dict:
     """Scale and translate that lay the maps (object x frame x arc) over the
     movie's first frame: the maps share the viewer's axes with the movie, so
@@ -135,7 +143,10 @@ def _map_placement(shape, transform: dict, frame_shape=None) -> dict:
     frame_shape = np.asarray(shape[1:] if frame_shape is None else frame_shape, float)
     # (napari's extent runs from the first pixel's centre to the last's)
     stretch = scale[1:] * np.maximum(frame_shape - 1, 1) / np.maximum(np.asarray(shape[1:], float) - 1, 1)
-    return {"scale": (scale[0], *stretch), "translate": tuple(translate)}
+    placement = {"scale": (scale[0], *stretch), "translate": tuple(translate)}
+    if "units" in transform:  # in the movie's units, as its frames: the viewer keeps them
+        placement["units"] = tuple(transform["units"])[-3:]
+    return placement
 
 
 @dataclass
@@ -222,6 +233,8 @@ class TrackingWidget(WorkerWidget):
                              "(time, rows, cols): split a movie with z slices or channels into one image per "
                              "z or channel first (right-click the layer > Split Stack, or Split RGB)")
         point = tuple(self.viewer.dims.point)
+        check_plane_view(len(point), self.viewer.dims.ndisplay, tuple(self.viewer.dims.order),
+                         "track from the current frame")
         if isinstance(shapes, Points):  # its points on this frame, in the order clicked: one contour
             shapes = PointsAsPolygon(shapes, point)
         sliced = shapes_to_image_coords(shapes, image, world_point=point)
@@ -230,8 +243,13 @@ class TrackingWidget(WorkerWidget):
         if not sliced.contours:
             raise ValueError(f"no contour of {shapes.name!r} lies on the current frame: go to the frame the "
                              "contours were drawn on")
+        contours = [c[:, -2:] for c in sliced.contours]
+        for k, c in zip(sliced.indices, contours):  # it would be lost on every frame, for no visible reason
+            outside = off_image(c, frames.shape, f"shape {k} of {shapes.name!r} lies outside the movie {image.name!r}")
+            if outside:
+                raise ValueError(outside)
         (start,) = slice_index(image, point, frames.shape)
-        return image, frames, [c[:, -2:] for c in sliced.contours], start
+        return image, frames, contours, start
 
     # ------------------------------------------------------------ run
     def run(self, *_):
@@ -271,7 +289,7 @@ class TrackingWidget(WorkerWidget):
         data = [np.column_stack([np.full(len(update.contour), update.frame, float), update.contour])]
         if self._preview is None or self._preview not in self.viewer.layers:
             transform = self._run_info["transform"]
-            common = {key: transform[key] for key in ("scale", "translate", "rotate", "shear", "affine")}
+            common = _placement(transform)
             self._preview = self._add_preview(Shapes(data, shape_type="polygon", edge_color=PREVIEW_COLOR,
                                                      face_color="transparent", name="tracking preview",
                                                      metadata={PREVIEW_KEY: True}, **common))
