@@ -186,6 +186,26 @@ def test_contour_partly_outside_is_clipped_with_a_warning():
     assert iou(res.contour, obj.mask) >= 0.9
 
 
+def test_a_figure_8_drawing_is_warned_of_and_an_overshooting_lasso_is_not():
+    """Found by probing (session 29): a bow-tie drawn around a disk ended on
+    part of it (IoU 0.77), silently. A lasso that overshoots its start makes
+    a small loop, which is just cut."""
+    import warnings
+
+    obj = data.ellipse((96, 96))
+    (r0, c0), (r1, c1) = np.argwhere(obj.mask).min(0) - 8, np.argwhere(obj.mask).max(0) + 8
+    bowtie = np.array([[r0, c0], [r1, c1], [r1, c0], [r0, c1]], float)
+    with pytest.warns(UserWarning, match=r"init crosses itself \(a figure-8\).* 50% of what it encloses") as caught:
+        segment(obj.image, bowtie)
+    assert caught[0].filename == __file__
+    t = np.linspace(0, 2 * np.pi * 1.08, 90)
+    centre, radius = obj.mask.nonzero()[0].mean(), 0.5 * (r1 - r0)
+    lasso = np.column_stack([centre + radius * np.sin(t), obj.mask.nonzero()[1].mean() + radius * np.cos(t)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert iou(segment(obj.image, lasso).contour, obj.mask) >= 0.9
+
+
 @pytest.mark.parametrize("n_vertices, centre_row, radius", [(9, -30, 40), (13, -30, 60), (13, -20, 40)])
 def test_drawing_mostly_beyond_the_image_side_is_repaired(n_vertices, centre_row, radius):
     """A coarse polygon mostly beyond the top side, clipped to the image, runs

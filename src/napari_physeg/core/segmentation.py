@@ -21,9 +21,9 @@ from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist
 
 from .background import background_plane, plane_removed
-from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, cut_pinches, densify,
-                      nearest_node, nodes_for_spacing, outward_normals, pair_indices, pairs_within, perimeter,
-                      remove_loops, resample, segment_lengths, signed_area)
+from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, crosses_itself,
+                      cut_pinches, densify, nearest_node, nodes_for_spacing, outward_normals, pair_indices,
+                      pairs_within, perimeter, polygon_mask, remove_loops, resample, segment_lengths, signed_area)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
@@ -122,6 +122,28 @@ def _validate_image(image) -> np.ndarray:
     arr = np.asarray(image)
     _check_2d(arr, "image")
     return arr
+
+
+#: A drawing that crosses itself is a figure-8 when the loops a contour
+#: cannot keep hold at least this share of what it encloses; a lasso that
+#: overshoots its start makes a small loop, which is just cut.
+FIGURE_EIGHT_SHARE = 0.1
+
+
+def _warn_if_figure_eight(drawing: np.ndarray) -> None:
+    """Warn when ``drawing`` crosses itself around a large share of what it
+    encloses: the contour cannot, and may end on a part of the object."""
+    if not crosses_itself(drawing):
+        return
+    lo = np.floor(drawing.min(0)) - 1
+    enclosed = polygon_mask(drawing - lo, np.ceil(drawing.max(0) - lo) + 2).sum()
+    # (remove_loops needs a few nodes between crossings: a 4-click bow-tie has none)
+    kept = remove_loops(resample(drawing, max(len(drawing), 64)))
+    cut = 1.0 - abs(signed_area(kept)) / max(float(enclosed), 1.0)
+    if cut >= FIGURE_EIGHT_SHARE:
+        warnings.warn(f"init crosses itself (a figure-8): the loops a contour cannot keep hold {cut:.0%} of what "
+                      "it encloses, and the result may hold a part of the object only; draw one outline that does "
+                      "not cross itself, around (or inside) the object", UserWarning, stacklevel=5)
 
 
 def _clip_to_image(init: np.ndarray, shape) -> np.ndarray:
@@ -997,6 +1019,7 @@ def _evolve(
     # The drawing as the user made it (partly beyond the image, maybe) tells
     # the object from its background; the clipped one starts the contour.
     drawing = init
+    _warn_if_figure_eight(drawing)
     init = _clip_to_image(init, image.shape)
     first = init if start is None else _clip_to_image(check_contour(start, "start"), image.shape)
     nodes, spacing, sigma_used = _initial_nodes(first, n_nodes, sigma, sigma_factor)
