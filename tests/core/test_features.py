@@ -491,6 +491,7 @@ def test_compute_features_accepts_bool_and_minimal_images():
         (np.zeros((20, 30, 3)), r"looks like an RGB image.*rgb2gray.*stain.*rgb2hed"),
         (np.zeros((20, 30, 4), dtype=np.uint8), r"RGBA image.*one\s+channel.*rgb2hed\(image\[\.\.\., :3\]\)"),
         (np.zeros((5, 20, 30)), r"3D stack.*single 2D slice"),
+        (np.zeros((20, 30, 1)), r"one channel, last; pass image\[\.\.\., 0\]"),
         (np.zeros(30), r"2D"),
         (np.zeros((2, 3, 4, 5)), r"2D"),
         (np.zeros((0, 10)), r"empty"),
@@ -499,7 +500,7 @@ def test_compute_features_accepts_bool_and_minimal_images():
         (np.array([["a", "b"], ["c", "d"]]), r"numeric"),
         (np.zeros((10, 10), dtype=object), r"numeric"),
     ],
-    ids=["rgb", "rgba", "stack", "1d", "4d", "empty", "tiny", "complex", "str", "object"],
+    ids=["rgb", "rgba", "stack", "channel-last", "1d", "4d", "empty", "tiny", "complex", "str", "object"],
 )
 def test_compute_features_rejects_bad_images(image, match):
     with pytest.raises(ValueError, match=match):

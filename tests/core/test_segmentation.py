@@ -692,6 +692,47 @@ def test_modal_integrator_refuses_long_contours_before_any_work():
         segment(obj.image, obj.init_near, integrator="modal", n_nodes=2000)
 
 
+@pytest.mark.parametrize("integrator, cap_name", [("modal", "MODAL_MAX_NODES"), ("newmark", "MAX_DEFAULT_NODES")])
+def test_a_growing_contour_stays_within_its_node_budget(monkeypatch, integrator, cap_name):
+    """Found by probing (session 29): a click with a fine node spacing that
+    grows into a large object kept its spacing, 978 nodes by step 94 and a
+    dense eigenproblem at each remesh (modal: minutes). Past the budget the
+    spacing grows, and the object is still found."""
+    from napari_physeg.core import segmentation as seg
+
+    monkeypatch.setattr(seg, cap_name, 40)
+    rr, cc = np.mgrid[:96, :96]
+    disk = (rr - 48) ** 2 + (cc - 48) ** 2 <= 30**2
+    image = np.where(disk, 0.8, 0.2) + np.random.default_rng(0).normal(0, 0.03, disk.shape)
+    t = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    click = np.column_stack([48 + 6 * np.sin(t), 48 + 6 * np.cos(t)])  # 1.6 px apart: 120 nodes on the disk
+    counts = []
+    res = segment(image, click, integrator=integrator, n_nodes=24,
+                  callback=lambda step, contour: counts.append(len(contour)))
+    assert max(counts) <= 40 and res.converged and iou(res.contour, disk) >= 0.9
+
+
+def test_a_freehand_line_that_twists_over_itself_starts_untwisted_with_either_reference():
+    """Found by probing (session 29): a jittery lasso, resampled, kept a
+    twist; with the total reference (which never remeshes) its element was
+    singular and a DivergenceError advised a finer node spacing, which did
+    not help."""
+    from napari_physeg.core.contour import crosses_itself
+    from napari_physeg.core.segmentation import _initial_nodes
+
+    rr, cc = np.mgrid[:96, :96]
+    disk = (rr - 48) ** 2 + (cc - 48) ** 2 <= 22**2
+    image = np.where(disk, 0.8, 0.2) + np.random.default_rng(0).normal(0, 0.03, disk.shape)
+    t = np.linspace(0, 2 * np.pi, 120, endpoint=False)
+    circle = np.column_stack([48 + 30 * np.sin(t), 48 + 30 * np.cos(t)])
+    twist = circle[0] + np.array([[0, 0], [3, 4], [3, -4], [0, 0.5]])  # a flick of the hand
+    lasso = np.vstack([twist, circle[1:]])
+    assert not crosses_itself(_initial_nodes(lasso, None, None, 1.0)[0])
+    for reference in ("incremental", "total"):
+        res = segment(image, lasso, reference=reference)
+        assert res.stop_reason in ("converged", "stalled", "oscillating") and not crosses_itself(res.contour)
+
+
 def test_remesh_of_a_contour_doubled_back_along_the_image_side():
     """Nodes clipped onto the image's side can overlap there: this contour of
     a real nucleus (z26/n19) runs up the side and its last two nodes come

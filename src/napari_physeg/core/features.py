@@ -157,6 +157,8 @@ def _check_2d(arr: np.ndarray, name: str = "image") -> None:
             f"for a brightfield stain, the stain's own channel (e.g. skimage.color.rgb2hed({colours})[..., 0], "
             "hematoxylin)"
         )
+    if arr.ndim == 3 and arr.shape[-1] == 1 < min(arr.shape[:2]):
+        raise ValueError(f"{name} has shape {arr.shape}: one channel, last; pass {name}[..., 0]")
     if arr.ndim == 3:
         raise ValueError(
             f"{name} has shape {arr.shape}: it is a 3D stack; pass a single 2D "

@@ -709,6 +709,8 @@ class _ElasticBody:
         # Counts the times the nodes were replaced (a remesh) and their frame shifted.
         self.remeshes, self.shifts = 0, 0
         self.remesh_watch = _RemeshWatch(spacing)
+        # A contour that grows keeps its spacing up to this many nodes (see remesh).
+        self.max_nodes = MODAL_MAX_NODES if integrator == "modal" else max(len(nodes), MAX_DEFAULT_NODES)
         self._build()
         self._reset_caps()
 
@@ -789,6 +791,14 @@ class _ElasticBody:
         ``keep`` is kept. Each new node inherits the trust cap of the old node
         nearest to it.
         """
+        # Beyond max_nodes the spacing (and the element's width with it)
+        # grows: a click with a fine spacing that grows into a large object
+        # made thousands of nodes, a dense eigenproblem each for "modal".
+        coarser = perimeter(nodes) / self.max_nodes
+        if coarser > self.spacing:
+            self.sigma *= coarser / self.spacing
+            self.spacing = coarser
+            self.remesh_watch = _RemeshWatch(coarser)
         old, nodes = nodes, _repaired(nodes, bounds, self.spacing, keep)
         nearest = nearest_node(nodes, old)
         cap, last_sign = self.cap[nearest], self.last_sign[nearest]
@@ -937,7 +947,13 @@ def _initial_nodes(init, n_nodes, sigma, sigma_factor):
             f"sigma = {sigma_used!r} must be positive and at most 2 x the node spacing ({spacing:.3g} px); "
             "typical values are 0.75-1.5 x the spacing"
         )
-    return resample(init, int(n_nodes)), spacing, sigma_used
+    # A jittery freehand line, resampled, can twist over itself: an element
+    # on a twist is singular (the "total" reference, which never remeshes,
+    # diverged at its first step). The twists are cut as at a remesh.
+    nodes = resample(init, int(n_nodes))
+    if crosses_itself(nodes):
+        nodes = resample(remove_loops(nodes), spacing=spacing)
+    return nodes, spacing, sigma_used
 
 
 def iter_segment(image, init, **options):
@@ -1241,7 +1257,9 @@ def segment(
         2e3, copper 1e6).
     n_nodes : int, optional
         Nodes of the initial model (default: one every ~3 px, 24 to 1000). The
-        spacing is then kept as the contour grows or shrinks.
+        spacing is then kept as the contour grows or shrinks, up to 1000 nodes
+        (or ``n_nodes`` if more; ``MODAL_MAX_NODES`` with the modal
+        integrator), beyond which the spacing and ``sigma`` grow.
     sigma : float, optional
         Gaussian width of the element (px). Default ``sigma_factor`` times the
         node spacing.
