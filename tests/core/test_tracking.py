@@ -610,3 +610,43 @@ def test_objects_that_moved_together_beyond_their_predictions_show_a_common_moti
     assert not _common_motion([stage]).any()
     assert not _common_motion(list(rng.normal(0, 4.0, (9, 2)))).any()
     assert not _common_motion(list(np.array([0.6, 0.3]) + rng.normal(0, 0.05, (5, 2)))).any()
+
+
+def _stardist_image_and_labels():
+    """The Data Science Bowl test image of the stardist wheel and its hand-made labels (make setup installs it)."""
+    import importlib.util
+    from pathlib import Path
+
+    tifffile = pytest.importorskip("tifffile")
+    spec = importlib.util.find_spec("stardist")
+    if spec is None:
+        pytest.skip("stardist's test images are not installed (make setup installs them)")
+    folder = Path(list(spec.submodule_search_locations)[0]) / "data" / "images"
+    return tifffile.imread(folder / "img2d.tif").astype(float), tifffile.imread(folder / "mask2d.tif")
+
+
+def test_two_touching_nuclei_drifting_together_keep_their_own_places():
+    """Found by probing (session 29) on a real image: each object's pixels
+    were claimed, for the objects done before it, where they were on the
+    frame before; as the field drifted, the nucleus done first took the
+    band its neighbour moved into, frame after frame: it ended on the
+    neighbour's place, reported tracked, and the neighbour was lost."""
+    from scipy import ndimage as ndi
+
+    from napari_physeg.core.contour import outward_normals, remove_loops
+    from skimage import measure
+
+    image, labels = _stardist_image_and_labels()
+    box, drift = (slice(230, 380), slice(260, 430)), np.array([2.5, 1.5])
+    frames = np.stack([ndi.shift(image, drift * t, order=1, mode="nearest")[box] for t in range(12)])
+    truth = np.stack([ndi.shift(labels, drift * t, order=0)[box] for t in range(12)])
+    inits = []
+    for label in (138, 139):
+        outline = max(measure.find_contours((truth[0] == label).astype(float), 0.5), key=len)[:-1]
+        inits.append(remove_loops(outline + 3.0 * outward_normals(outline)))
+    tr = track(frames, inits)
+    for k, label in enumerate((138, 139)):
+        assert tr.status[k] == [TRACKED] * 12
+        for t, contour in enumerate(tr.contours[k]):
+            mask = polygon_mask(contour, frames.shape[1:])
+            assert (truth[t][mask] == label).mean() > 0.5, (k, t)
