@@ -650,3 +650,16 @@ def test_two_touching_nuclei_drifting_together_keep_their_own_places():
         for t, contour in enumerate(tr.contours[k]):
             mask = polygon_mask(contour, frames.shape[1:])
             assert (truth[t][mask] == label).mean() > 0.5, (k, t)
+
+
+def test_a_drawing_beyond_the_image_side_is_tracked_without_segment_s_clipping_warning():
+    """Found by probing (session 29): every drawing grown beyond the image's
+    side warned "2 of 31 nodes of init lie outside the image and were
+    clipped to it", naming neither the object nor the frame, on every run."""
+    import warnings
+
+    frames = _disk_movie([[(48, 8 + t)] for t in range(3)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tr = track(frames, _circle((48, 8), 16))
+    assert tr.status[0] == [TRACKED] * 3 and tr.warnings == ()

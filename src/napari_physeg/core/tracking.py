@@ -888,8 +888,10 @@ def _found(image, shared, owner, t, k, init, predicted, previous, seen: _Seen, o
                            polarity=seen.polarity, **options)
     try:
         with warnings.catch_warnings():
-            if previous is not None:  # a contour predicted partly beyond the image is expected
-                warnings.filterwarnings("ignore", message=".*lie outside the image", category=UserWarning)
+            # A drawing (or a predicted contour) partly beyond the image is
+            # expected of an object at its side; segment's warning would not
+            # even say which object or frame.
+            warnings.filterwarnings("ignore", message=".*lie outside the image", category=UserWarning)
             res = segment_here(init, predicted) if previous is None else _redrawn(segment_here, init, predicted)
     except (ValueError, DivergenceError):
         return None, LEFT if previous is not None and _touches_side(init, image.shape) else LOST
