@@ -594,3 +594,25 @@ def test_a_contour_that_spreads_over_the_whole_image_has_leaked(volume):
     spread = polygon2mask(image.shape, res.contour).mean() > 0.9
     assert spread == (res.stop_reason == "leaked")
     assert iou > 0.5 or not res.converged
+
+
+def test_a_contour_that_shrinks_onto_the_image_side_collapses_it_does_not_diverge():
+    """Found by probing (session 29): in a 48-px strip of an electron
+    tomogram, an ellipse around a vesicle that fills the strip's height
+    shrank to 6 nodes on the image's side, whose element was singular: a
+    DivergenceError with the defaults, advising a finer node spacing. It
+    has collapsed, as the same drawing as a circle does: the error says so."""
+    from napari_physeg.core import DivergenceError
+
+    slice_ = tifffile.imread(SAMPLES / "tomo.tif")[50].astype(float)
+    strip = ((slice_ - slice_.min()) / np.ptp(slice_))[44:92]
+    t = np.linspace(0, 2 * np.pi, 100, endpoint=False)
+    ellipse = np.column_stack([31.0 + 16.28940173 * np.sin(t), 53.0 + 15.6617063 * np.cos(t)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # clipped to the strip
+        try:
+            segment(strip, ellipse)
+        except DivergenceError as err:
+            pytest.fail(f"diverged: {err}")
+        except ValueError as err:
+            assert "collapsed to a point" in str(err)

@@ -708,6 +708,7 @@ class _ElasticBody:
         self.rest = nodes.copy()
         # Counts the times the nodes were replaced (a remesh) and their frame shifted.
         self.remeshes, self.shifts = 0, 0
+        self.initial_perimeter, self.shrunk = perimeter(nodes), False
         self.remesh_watch = _RemeshWatch(spacing)
         # A contour that grows keeps its spacing up to this many nodes (see remesh).
         self.max_nodes = MODAL_MAX_NODES if integrator == "modal" else max(len(nodes), MAX_DEFAULT_NODES)
@@ -806,12 +807,20 @@ class _ElasticBody:
         self.remeshes += 1
         self.remesh_watch.forget()
         if not self.collapsed:
-            self._build()
+            try:
+                self._build()
+            except (np.linalg.LinAlgError, RuntimeError, ValueError):
+                # A contour shrunk to a few nodes at the image's side (or
+                # anywhere) whose element is singular has collapsed: the
+                # same outcome as one shrunk to a point, not a divergence.
+                if perimeter(nodes) >= SHRUNK_PERIMETER * self.initial_perimeter:
+                    raise
+                self.shrunk = True
         self.cap, self.last_sign = cap, last_sign
 
     @property
     def collapsed(self) -> bool:
-        return len(self.nodes) < 3 or abs(signed_area(self.nodes)) < 1.0
+        return self.shrunk or len(self.nodes) < 3 or abs(signed_area(self.nodes)) < 1.0
 
     def shift(self, offset: np.ndarray) -> None:
         if not offset.any():
@@ -819,6 +828,11 @@ class _ElasticBody:
         self.shifts += 1
         self.nodes, self.rest = self.nodes + offset, self.rest + offset
         self.remesh_watch.shift(offset)
+
+
+#: A contour whose element cannot be built at a remesh has collapsed when
+#: its length has shrunk below this share of its initial length.
+SHRUNK_PERIMETER = 0.25
 
 
 def _repaired(nodes: np.ndarray, bounds: np.ndarray, spacing: float, keep=None) -> np.ndarray:
