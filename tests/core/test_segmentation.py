@@ -957,3 +957,21 @@ def test_a_contour_keeps_out_of_the_pixels_it_is_told_to_avoid(gap, angle, brigh
     region = polygon2mask(image.shape, res.contour)
     assert (region & other).sum() <= 1
     assert (region & in_a & ~other).sum() >= 0.97 * (in_a & ~other).sum()
+
+
+def test_a_membrane_labelled_cell_drawn_around_is_the_whole_cell():
+    """Found by probing (session 29): a cell whose membrane is bright around
+    a dim inside, drawn around, read the inside as the object's level and
+    the bright ring as a neighbour to keep out: the contour ended on the
+    ring's inner edge (IoU 0.64). A blob around the object is its rim, not a
+    neighbour."""
+    from scipy import ndimage
+
+    rr, cc = np.mgrid[:128, :128]
+    distance = np.hypot(rr - 64, cc - 64)
+    inside = np.where(distance <= 27, 0.15, 0.1)
+    image = np.where(np.abs(distance - 27) <= 2, 0.9, inside)
+    image = ndimage.gaussian_filter(image, 1) + np.random.default_rng(0).normal(0, 0.03, image.shape)
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    res = segment(image, np.column_stack([64 + 38 * np.sin(t), 64 + 38 * np.cos(t)]))
+    assert res.converged and iou(res.contour, distance <= 29) >= 0.8

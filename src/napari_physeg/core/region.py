@@ -1007,10 +1007,20 @@ def _on_a_plateau(excess, like, depth, seed) -> bool:
 
 def _large_blobs(pieces, n, seed, smallest) -> np.ndarray:
     """One flag per label ``0..n`` of ``pieces``: the blob has at least
-    ``smallest`` px and ``seed`` does not touch it."""
+    ``smallest`` px, ``seed`` does not touch it, and it does not enclose
+    the seed. A neighbour lies beside the object; a bright ring around it
+    (a membrane-labelled cell drawn around: its dim inside read as the
+    object's level) is its rim."""
     large = np.bincount(pieces.ravel(), minlength=n + 1) >= smallest
     large[0] = False
     large[np.unique(pieces[seed])] = False
+    if large.any():
+        gaps, _ = _label(~large[pieces])
+        around_seed = np.isin(gaps, np.unique(gaps[seed & (gaps > 0)]))
+        border = np.unique(np.concatenate([gaps[0], gaps[-1], gaps[:, 0], gaps[:, -1]]))
+        if not np.isin(gaps[around_seed], border).any():  # the seed lies in a hole of the large blobs
+            rim = cv2.dilate(around_seed.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+            large[np.unique(pieces[rim])] = False
     return large
 
 
