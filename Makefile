@@ -27,6 +27,7 @@ bench: setup
 	$(PY) benchmarks/drawings.py
 	$(PY) benchmarks/scale.py --scale 0.5 2 3 --invert --slope
 	$(PY) benchmarks/tracking.py
+	$(PY) benchmarks/tracking_warped.py
 	$(PY) benchmarks/batch.py
 	if [ -n "$$DISPLAY" ]; then $(PY) benchmarks/gui.py; else xvfb-run -a $(PY) benchmarks/gui.py; fi
 

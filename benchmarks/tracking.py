@@ -125,25 +125,37 @@ def _centroid(mask):
     return np.argwhere(mask).mean(0) if mask.any() else np.array([np.nan, np.nan])
 
 
-def run_threshold_laptrack(frames, starts, cutoff=15.0):
-    from laptrack import LapTrack
-    import pandas as pd
+def threshold_regions(frame, min_distance=8):
+    """What a user would do per frame: Gaussian sigma 1, Otsu, holes filled, a watershed of
+    the distance transform from its peaks at least ``min_distance`` px apart; a label image."""
+    smooth = filters.gaussian(frame, 1)
+    fg = ndi.binary_fill_holes(smooth > filters.threshold_otsu(smooth))
+    dist = ndi.distance_transform_edt(fg)
+    peaks = feature.peak_local_max(dist, min_distance=min_distance, labels=measure.label(fg))
+    markers = np.zeros(fg.shape, np.int32)
+    markers[tuple(peaks.T)] = np.arange(1, len(peaks) + 1)
+    return segmentation.watershed(-dist, markers, mask=fg)
 
+
+def laptrack_linked(rows, cutoff):
+    """``rows`` (dicts with frame, row, col, ...) linked by laptrack: frame-to-frame and
+    gap-closing cutoffs of ``cutoff`` px, gaps of up to 2 frames; its DataFrame with track_id."""
+    import pandas as pd
+    from laptrack import LapTrack
+
+    lt = LapTrack(cutoff=cutoff**2, gap_closing_cutoff=cutoff**2, gap_closing_max_frame_count=2)
+    tracked, _, _ = lt.predict_dataframe(pd.DataFrame(rows), coordinate_cols=["row", "col"], frame_col="frame",
+                                         only_coordinate_cols=False)
+    return tracked
+
+
+def run_threshold_laptrack(frames, starts, cutoff=15.0):
     t0 = time.perf_counter()
     rows = []
     for t, frame in enumerate(frames):
-        smooth = filters.gaussian(frame, 1)
-        fg = ndi.binary_fill_holes(smooth > filters.threshold_otsu(smooth))
-        dist = ndi.distance_transform_edt(fg)
-        peaks = feature.peak_local_max(dist, min_distance=8, labels=measure.label(fg))
-        markers = np.zeros(fg.shape, np.int32)
-        markers[tuple(peaks.T)] = np.arange(1, len(peaks) + 1)
-        labels = segmentation.watershed(-dist, markers, mask=fg)
-        for p in measure.regionprops(labels):
+        for p in measure.regionprops(threshold_regions(frame)):
             rows.append(dict(frame=t, row=p.centroid[0], col=p.centroid[1]))
-    df = pd.DataFrame(rows)
-    lt = LapTrack(cutoff=cutoff**2, gap_closing_cutoff=cutoff**2, gap_closing_max_frame_count=2)
-    tracked, _, _ = lt.predict_dataframe(df, coordinate_cols=["row", "col"], frame_col="frame", only_coordinate_cols=False)
+    tracked = laptrack_linked(rows, cutoff)
     elapsed = time.perf_counter() - t0
     centroids = []
     for start in starts:
