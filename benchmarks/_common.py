@@ -35,6 +35,17 @@ def machine() -> str:
     return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}"
 
 
+def report():
+    """``(lines, out)``: ``out(s)`` prints ``s`` at once and keeps it in ``lines`` (for ``write_section``)."""
+    lines = []
+
+    def out(s=""):
+        print(s, flush=True)
+        lines.append(s)
+
+    return lines, out
+
+
 def write_section(name: str, lines, heading: str, doc: str = "benchmarks.md") -> Path:
     """Put ``lines`` into ``docs/<doc>`` between ``<!-- name:start -->`` and
     ``<!-- name:end -->``, replacing what was there, or append them under

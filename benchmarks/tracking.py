@@ -62,7 +62,7 @@ from scipy import ndimage as ndi  # noqa: E402
 from skimage import feature, filters, measure, segmentation  # noqa: E402
 
 import real_data  # noqa: E402
-from _common import machine, write_section  # noqa: E402
+from _common import machine, report, write_section  # noqa: E402
 from napari_physeg import data  # noqa: E402
 from napari_physeg.core import TRACKED, track  # noqa: E402
 from napari_physeg.core.contour import outward_normals, polygon_mask, remove_loops, resample, signed_area  # noqa: E402
@@ -454,11 +454,7 @@ def main(argv=None):
                     help="time ours and threshold + laptrack as the best of this many runs (MCV chain: one run)")
     args = ap.parse_args(argv)
     t_start = time.perf_counter()
-    lines = []
-
-    def out(s=""):
-        print(s, flush=True)
-        lines.append(s)
+    lines, out = report()
 
     frames, truth, ids, inits = ctc()
     starts = [truth[k][0] for k in ids]

@@ -93,7 +93,7 @@ from skimage import measure  # noqa: E402
 
 import real_data  # noqa: E402
 import tracking  # noqa: E402
-from _common import machine, write_section  # noqa: E402
+from _common import machine, report, write_section  # noqa: E402
 from napari_physeg.core import LEFT, LOST, TRACKED  # noqa: E402
 from napari_physeg.core.contour import polygon_mask  # noqa: E402
 
@@ -466,11 +466,7 @@ def main(argv=None):
                     help="write the table into docs/benchmarks.md and the figure into docs/images")
     args = ap.parse_args(argv)
     t_start = time.perf_counter()
-    lines = []
-
-    def out(s=""):
-        print(s, flush=True)
-        lines.append(s)
+    lines, out = report()
 
     names = QUICK_MOVIES if args.quick else tuple(MOVIES)
     results = {name: run_movie(name, QUICK_FRAMES if args.quick else None) for name in names}
