@@ -794,3 +794,21 @@ def test_a_long_run_keeps_the_gui_live_and_keeps_the_good_shapes(viewer_widget, 
     (out,) = output_layers(viewer)
     assert list(out.features["shape"]) == [0]
     assert len(errors) == 1 and "shape 1" in errors[0]
+
+
+def test_a_failure_names_the_image_it_was_run_on(viewer_widget, wait_done, errors):
+    """Found by probing (session 29): with the chosen image removed, the
+    image selector falls back to another layer (magicgui), and the run's
+    error ("image is constant") spoke of an image the user never chose."""
+    viewer, widget = viewer_widget
+    chosen = viewer.add_image(data.ellipse((96, 96)).image, name="cells")
+    viewer.add_image(np.zeros((96, 96)), name="blank")
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    viewer.add_shapes([np.column_stack([48 + 30 * np.sin(t), 48 + 30 * np.cos(t)])], shape_type="polygon",
+                      name="drawn")
+    widget.reset_choices()
+    widget._image.value, widget._shapes.value = chosen, viewer.layers["drawn"]
+    viewer.layers.remove(chosen)
+    widget.run()
+    wait_done(widget)
+    assert len(errors) == 1 and "on 'blank'" in errors[0] and "constant" in errors[0]

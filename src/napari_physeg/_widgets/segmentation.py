@@ -428,6 +428,8 @@ def _failure_message(index, err, job) -> str:
     if index is not None:
         k = job.shape_indices[index] if job is not None else index
         which = f" of shape {k}"
+    if job is not None:  # the image may not be the one the user chose (theirs was removed)
+        which += f" on {job.image_name!r}"
     if isinstance(err, DivergenceError):
         return f"Segmentation{which} diverged: {err}"
     if isinstance(err, ValueError):
