@@ -530,11 +530,13 @@ class SimulationWidget(WorkerWidget):
             show_warning(f"the simulation did not come to rest within max steps ({res.steps}); raise 'max steps'")
         crossing = crossing_frames(res)
         if crossing:
-            frames = ", ".join(map(str, crossing))
-            show_warning(f"frame(s) {frames} cross themselves: the {method!r} matching pairs nodes out of their "
-                         "order along the contours. Use a matching made with method 'order'" if method != "order" else
-                         f"frame(s) {frames} cross themselves: nodes overtake their neighbours on the way (the "
-                         "'order' matching keeps their order on a and on b, not in between)")
+            if method == "order":
+                why = ("nodes overtake their neighbours on the way (the 'order' matching keeps their order on a "
+                       "and on b, not in between)")
+            else:
+                why = (f"the {method!r} matching pairs nodes out of their order along the contours. Use a matching "
+                       "made with method 'order'")
+            show_warning(f"frame(s) {', '.join(map(str, crossing))} cross themselves: {why}")
 
     def _on_errored(self, err: Exception):
         # simulate_contours catches the core's errors itself; this is a last resort.

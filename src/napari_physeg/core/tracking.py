@@ -576,9 +576,9 @@ def _segment_frame(run: _Run, image, shared, t: int, step: int):
     # contours on this frame once done, else on the frame before.
     owner = np.full(image.shape, -1, dtype=np.int32)
     order = _segmenting_order(run, t, step)
-    drift = _field_drift(run, t, step)
+    run.drift = _field_drift(run, t, step)
     for j in reversed(order):  # where claims overlap, the object done first has them
-        _paint(owner, _claim_before(run, j, t, step, drift), j)
+        _paint(owner, _claim_before(run, j, t, step), j)
     run.moved = []
     boxes = np.array([np.r_[c.min(0), c.max(0)] for c in run.inits]) if t == run.start else None
     for n, k in enumerate(order):
@@ -631,19 +631,20 @@ class _Run:
     seen: list
     moved: list = field(default_factory=list)  # see _common_motion: of the objects done on the current frame
     stage: np.ndarray = field(default_factory=lambda: np.zeros(2))  # see _stage_shift: of the current frame
+    drift: np.ndarray = field(default_factory=lambda: np.zeros(2))  # see _field_drift: of the current frame
 
 
-def _claim_before(run: _Run, k: int, t: int, step: int, drift=0.0) -> np.ndarray | None:
+def _claim_before(run: _Run, k: int, t: int, step: int) -> np.ndarray | None:
     """Object ``k``'s pixels on frame ``t`` as far as known before it is done:
     its drawing on the start frame, else its contour on the frame before
-    moved by the ``drift`` of the whole field (see _field_drift). Claimed
-    where it was as the field drifted, a neighbour done first took the band
-    it moved into, more of it frame after frame: of two touching nuclei, one
-    ended on the other's place."""
+    moved by the whole field's drift onto this frame (``run.drift``, see
+    _field_drift). Claimed where it was as the field drifted, a neighbour
+    done first took the band it moved into, more of it frame after frame: of
+    two touching nuclei, one ended on the other's place."""
     if t == run.start:
         return run.inits[k]
     before = run.contours[k][t - step]
-    return None if before is None else before + drift
+    return None if before is None else before + run.drift
 
 
 def _field_drift(run: _Run, t: int, step: int) -> np.ndarray:
@@ -842,7 +843,7 @@ def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int, other
             trial = owner.copy()
             trial[trial == i] = -1
             if handed is None:  # as if i came after j: its pixels those of the frame before
-                _paint(trial, _claim_before(run, i, t, step, _field_drift(run, t, step)), i, only_free=True)
+                _paint(trial, _claim_before(run, i, t, step), i, only_free=True)
             _settle(run, image, shared, trial, t, j, step, handed)
             _settle(run, image, shared, trial, t, i, step)
             run.moved = list(moved)
