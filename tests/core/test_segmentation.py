@@ -628,6 +628,28 @@ def test_a_contour_along_the_image_s_sides_leaked_only_if_the_drawing_did_not_re
     assert not _took_the_whole_image(np.array([[-0.5, -0.5], [-0.5, 89.5], [40, 89.5], [40, -0.5]]), click, (80, 90))
 
 
+@pytest.mark.parametrize("radius", [59.0, 60.0])
+@pytest.mark.parametrize("drawing", ["circle", "box"])
+def test_a_round_object_filling_the_view_drawn_around_beyond_it_leaves_the_dark_corners(drawing, radius):
+    """A round object that fills the view (a fundus: within it, or just cut
+    by its sides), the four corners dark, drawn around beyond the image as
+    one does for an object that fills the field: the corners are
+    background, not holes of the object open to the image's side, and the
+    contour leaves the image's frame for the object's rim."""
+    rr, cc = np.mgrid[:120, :120]
+    disk = (rr - 59.5) ** 2 + (cc - 59.5) ** 2 <= radius**2
+    image = np.where(disk, 0.7, 0.05) + 0.02 * np.random.default_rng(3).standard_normal(disk.shape)
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    init = (np.column_stack([59.5 + 90 * np.sin(t), 59.5 + 90 * np.cos(t)]) if drawing == "circle"
+            else np.array([[-12.0, -12.0], [-12.0, 131.0], [131.0, 131.0], [131.0, -12.0]]))
+    with pytest.warns(UserWarning, match="outside the image"):
+        res = segment(image, init)
+    assert res.converged and res.polarity == 1
+    assert iou(res.contour, disk) > 0.97
+    corners = np.array([[0, 0], [0, 119], [119, 0], [119, 119]])
+    assert np.min(np.hypot(*(res.contour[:, None] - corners[None]).T)) > 10
+
+
 def test_object_cut_by_the_image_border_among_bright_neighbours():
     """A circle drawn around a nucleus that the image's lower side cuts, half
     of it beyond the image, with bright neighbours all around: the nodes

@@ -441,7 +441,10 @@ def test_generator_and_lazy_frames(movie):
 
 
 @pytest.mark.parametrize("frames, inits, kwargs, message", [
-    (np.zeros((10, 10)), _circle((5, 5), 3), {}, "(T, H, W)"),
+    (np.zeros((10, 10)), _circle((5, 5), 3), {}, r"\(T, H, W\).*use segment\(\)"),
+    # A (T, C, H, W) or colour TIFF stack: told which axis to drop, not to use segment().
+    (np.zeros((3, 2, 32, 32)), _circle((16, 16), 5), {}, r"frames\[:, 0\]"),
+    (np.zeros((3, 32, 32, 3)), _circle((16, 16), 5), {}, r"colour frames.*frames\[\.\.\., 0\]"),
     (np.zeros((3, 32, 32)), [], {}, "inits is empty"),
     (np.zeros((3, 32, 32)), _circle((100, 100), 3), {}, "wholly outside"),
     # A drawing segment() refuses is refused up front, not reported as an object lost on frame 0.

@@ -263,7 +263,7 @@ def _check_frames(frames):
         shape = frames.shape
     if len(shape) != 3:
         raise ValueError(f"frames must be a (T, H, W) stack of 2D frames, got shape {tuple(shape)}; "
-                         "for one image use segment()")
+                         f"{_frames_advice(tuple(shape))}")
     dtype = np.dtype(getattr(frames, "dtype", np.float64))
     if dtype.kind == "c":
         raise ValueError(f"frames have complex dtype {dtype}: pass real frames, e.g. np.abs(frames) or frames.real")
@@ -272,6 +272,17 @@ def _check_frames(frames):
     if shape[0] < 1 or min(shape[1:]) < 3:
         raise ValueError(f"frames of shape {tuple(shape)} hold no image to track in")
     return frames, int(shape[0]), tuple(int(s) for s in shape[1:])
+
+
+def _frames_advice(shape: tuple) -> str:
+    """What to pass instead of frames of ``shape`` (not 3D)."""
+    if len(shape) == 2:
+        return "for one image use segment()"
+    if len(shape) == 4 and shape[-1] in (3, 4):
+        return "for colour frames pass one channel, e.g. frames[..., 0], or grey frames"
+    if len(shape) == 4:  # (T, C, H, W) or (T, Z, H, W), as TIFF stacks come
+        return "pass one channel or z plane of each frame, e.g. frames[:, 0], or a projection, frames.max(axis=1)"
+    return "pass one (T, H, W) movie at a time"
 
 
 def _check_inits(inits, frame_shape):
