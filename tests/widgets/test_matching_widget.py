@@ -182,20 +182,24 @@ def _oval(turn_degrees, seed):
 
 def test_in_place_keeps_a_near_round_cell_from_turning_half_a_turn(viewer_widget, wait_done, notes):
     """An oval turned 3 degrees, as on the next frame or z slice (found by
-    probing, session 27): the invariant matching cannot tell 3 degrees from
-    183 and took the latter; in place, each node keeps near where it was."""
+    probing, session 27): its shape is the same turned 183 degrees, so the
+    invariant matching may take either (it took the latter until session
+    30); in place, each node keeps near where it was."""
     viewer, widget = viewer_widget
     viewer.add_shapes([_oval(0, 0), _oval(3, 100)], shape_type="polygon", name="ovals")
     widget.reset_choices()
     identity = np.arange(64)
-    for in_place, right in ((False, 0.0), (True, 1.0)):
+    for in_place in (False, True):
         widget._in_place.value = in_place
         widget.run()
         wait_done(widget)
         assert notes["error"] == []
         m = matching_layers(viewer)[-1].metadata["matching"]
         off = np.abs(m.partner - identity) % 64
-        assert np.mean(np.minimum(off, 64 - off) <= 2) == right
+        near = np.mean(np.minimum(off, 64 - off) <= 2)
+        half_turn = np.mean(np.abs(np.minimum(off, 64 - off) - 32) <= 2)
+        # In place: where it was. Invariant: one of the two turns, whole.
+        assert near == 1.0 if in_place else max(near, half_turn) == 1.0
 
 
 def test_two_shapes_of_one_layer_with_a_transform(viewer_widget, wait_done, notes, poses):

@@ -13,9 +13,12 @@ Pipeline of :func:`match`:
 2. **Sign correction** (mandatory): an eigenvector is defined only up to its
    sign, independently in the two shapes. For each mode the sign of ``b``'s
    feature is chosen that minimises the symmetric nearest-neighbour distance
-   between the two shapes' clouds of ``(u, v)`` rows. When a shape's principal
-   axes are ill defined (second moments within 20 %), the frame of ``b`` is
-   also searched in steps of 45 degrees.
+   between the two shapes' clouds of ``(u, v)`` rows. Two modes of nearly
+   equal frequency (a near-round shape has such pairs) are only defined up to
+   a mix of the two: for such a pair the rotation or reflection of ``b``'s
+   two modes is chosen the same way, every 15 degrees. When a shape's
+   principal axes are ill defined (second moments within 20 %), the frame of
+   ``b`` is also searched in steps of 45 degrees.
 3. **Affinity** (eq. 12): ``Z_ij = sum_k |u_a,ik - u_b,jk|^2 + |v_a,ik - v_b,jk|^2``
    (0 is a perfect match), returned as :attr:`Matching.affinity`.
 4. **Matching cost** ``C = modal_weight * Z / n_modes + curvature_weight * Kc
@@ -52,6 +55,7 @@ stage is in ``docs/benchmarks.md`` (section "Matching"). Coordinates are
 from __future__ import annotations
 
 import inspect
+import itertools
 import warnings
 from dataclasses import dataclass, field
 
@@ -64,7 +68,7 @@ from .contour import resample, segment_lengths, signed_area
 from .inner_distance import inner_distance_context
 from .materials import Material
 from ._validation import check_contour
-from .modes import MAX_AUTO_MODES, ModalBasis, _modal_raw, select_modes, truncate
+from .modes import DEGENERACY_TOLERANCE, MAX_AUTO_MODES, ModalBasis, _modal_raw, select_modes, truncate
 
 __all__ = [
     "Matching",
@@ -123,6 +127,19 @@ _GLOBAL_NEIGHBOURHOOD = 0.25
 _NEIGHBOURHOOD_TERMS = 9
 #: Anisotropy (minor / major second moment) above which the frame of b is searched.
 _ISOTROPIC = 0.8
+#: Mixings of a near-degenerate pair of modes tried (see _pair_mixings): a
+#: rotation and a reflection every 15 degrees (every 10 was no better).
+_MIX_ANGLES = 24
+#: The modes' signs and mixes fitted along the shape's own path replace
+#: those read from the modes' clouds only when the coarse search's
+#: objective with them is at most this share of that with the clouds' (see
+#: _matching_cost): coins matched half a turn off gave 0.2-0.3; hands whose
+#: clouds were right, 0.91-0.92, where the fit, which follows the shape's
+#: path, lost up to 0.026 of the nodes.
+_CLEARLY_CHEAPER = 0.8
+#: The clouds of modal feature rows are compared on at most this many rows
+#: of each contour (see _group_best, _mode_correction).
+_JOINT_ROWS = 256
 
 
 class MatchingCancelled(RuntimeError):
@@ -164,7 +181,9 @@ class Matching:
     n_modes : int
         Number of modes in the affinity.
     signs : ndarray of float, shape (n_modes,)
-        Sign applied to each mode of ``b`` by the sign correction.
+        Sign applied to each mode of ``b`` by the sign correction (for the
+        two modes of a near-degenerate pair, which it mixes, the sign of each
+        one's own share in its mix).
     frame_rotation : float
         Extra rotation (radians) applied to ``b``'s modal vectors when its
         principal axes are ill defined (0 otherwise).
@@ -320,21 +339,129 @@ def _cloud_distance(A: np.ndarray, B: np.ndarray, ta: cKDTree, tb: cKDTree) -> f
     return float(tb.query(A)[0].mean() + ta.query(B)[0].mean())
 
 
-def _sign_correction(fa: np.ndarray, fb: np.ndarray):
-    """Per-mode sign of ``fb`` minimising the symmetric nearest-neighbour
-    distance between the two clouds of ``(u, v)`` rows; returns the signs and
-    the summed distance."""
-    k = fa.shape[1]
-    signs = np.ones(k)
-    score = 0.0
-    for j in range(k):
-        A, B = fa[:, j, :], fb[:, j, :]
-        ta, tb = cKDTree(A), cKDTree(B)
-        plus = _cloud_distance(A, B, ta, tb)
-        minus = float(tb.query(-A)[0].mean() + ta.query(-B)[0].mean())
-        signs[j] = 1.0 if plus <= minus else -1.0
-        score += min(plus, minus)
-    return signs, score
+def _mode_groups(basis_a: ModalBasis, basis_b: ModalBasis, k: int) -> list[tuple[int, ...]]:
+    """The first ``k`` modes as single modes and near-degenerate pairs.
+
+    Modes ``j`` and ``j + 1`` form a pair when their gap, in either
+    spectrum, is below DEGENERACY_TOLERANCE times its mean gap (as
+    :func:`~.modes.select_modes` reads it): each is then an arbitrary
+    mixture of the two, which two resamplings of one near-round shape mix
+    differently."""
+    def gaps(basis):
+        g = np.diff(basis.spectrum)
+        return g < DEGENERACY_TOLERANCE * max(float(g.mean()), 1e-300)
+
+    close = gaps(basis_a)[: k - 1] | gaps(basis_b)[: k - 1]
+    groups, j = [], 0
+    while j < k:
+        width = 2 if j + 1 < k and close[j] else 1
+        groups.append(tuple(range(j, j + width)))
+        j += width
+    return groups
+
+
+def _pair_mixings() -> np.ndarray:
+    """The (2, 2) mixings tried for a near-degenerate pair (see
+    _mode_correction): rotations and reflections every 360 / _MIX_ANGLES
+    degrees; row ``i`` gives the new mode ``i`` as a mix of the old two."""
+    angles = 2 * np.pi * np.arange(_MIX_ANGLES) / _MIX_ANGLES
+    c, s = np.cos(angles), np.sin(angles)
+    rotations = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], 1)
+    return np.concatenate([rotations, rotations * np.array([1.0, -1.0])[None, :, None]])
+
+
+def _group_best(fa: np.ndarray, fb: np.ndarray, cols: list[int]) -> np.ndarray:
+    """The correction of ``b``'s modes ``cols`` (a single mode's sign, or a
+    pair's mixing, see _pair_mixings) that leaves the two clouds of their
+    feature rows closest (symmetric nearest-neighbour distance), on at most
+    _JOINT_ROWS rows of each."""
+    fa, fb = fa[:: max(1, len(fa) // _JOINT_ROWS)], fb[:: max(1, len(fb) // _JOINT_ROWS)]
+    A = fa[:, cols].reshape(len(fa), -1)
+    tree_a = cKDTree(A)
+    best = None
+    for q in (_pair_mixings() if len(cols) == 2 else np.array([[[1.0]], [[-1.0]]])):
+        B = np.einsum("pq,mqd->mpd", q, fb[:, cols]).reshape(len(fb), -1)
+        distance = _cloud_distance(A, B, tree_a, cKDTree(B))
+        if best is None or distance < best[0] - 1e-12:
+            best = (distance, q)
+    return best[1]
+
+
+def _mode_correction(fa: np.ndarray, fb: np.ndarray, groups, frames=(0.0,)):
+    """``b``'s modal features turned toward ``a``'s without knowing which
+    nodes correspond: (corrected features, each mode's sign, frame rotation).
+
+    In each of ``frames`` (rotations of ``b``'s frame), each single mode's
+    sign and each near-degenerate pair's mixing is chosen by the clouds of
+    its own feature rows (see _group_best); then each mode's half turn (its
+    sign) is flipped while that brings the clouds of whole feature rows
+    closer: modes chosen one at a time need not agree on one
+    correspondence (a mode of a shape nearly symmetric under a half turn has
+    a nearly symmetric cloud, and its sign is chosen by chance). The frame
+    whose whole rows come closest is kept. A pair's modes report the sign
+    of their own share in their mix.
+    """
+    flat_a = fa.reshape(len(fa), -1)[:: max(1, len(fa) // _JOINT_ROWS)]
+    tree_a = cKDTree(flat_a)
+
+    def joint(features):
+        flat_b = features.reshape(len(features), -1)[:: max(1, len(features) // _JOINT_ROWS)]
+        return _cloud_distance(flat_a, flat_b, tree_a, cKDTree(flat_b))
+
+    best = None
+    for theta in frames:
+        corrected = _rotate(fb, theta) if theta else fb.copy()
+        signs = np.ones(fa.shape[1])
+        for group in groups:
+            cols = list(group)
+            q = _group_best(fa, corrected, cols)
+            corrected[:, cols] = np.einsum("pq,mqd->mpd", q, corrected[:, cols])
+            signs[cols] = np.where(np.diag(q) < 0, -1.0, 1.0)
+        distance = joint(corrected)
+        for _ in range(len(groups)):  # each pass flips at least one group, or ends
+            flipped = False
+            for group in groups:
+                cols = list(group)
+                corrected[:, cols] *= -1
+                trial = joint(corrected)
+                if trial < distance - 1e-12:
+                    distance, flipped = trial, True
+                    signs[cols] *= -1
+                else:
+                    corrected[:, cols] *= -1
+            if not flipped:
+                break
+        if best is None or distance < best[0] - 1e-12:
+            best = (distance, corrected, signs, theta)
+    return best[1:]
+
+
+def _fitted_along(fa: np.ndarray, fb: np.ndarray, basis_a: ModalBasis, basis_b: ModalBasis, groups,
+                  partner: np.ndarray):
+    """``b``'s modal features turned toward ``a``'s along a correspondence
+    (``partner[i]``: the node of ``b`` paired with node ``i`` of ``a``, or
+    -1), as (corrected features, each mode's sign, frame rotation; see
+    _mode_correction).
+
+    The rotation of ``b``'s canonical frame that brings the paired nodes
+    closest is found first (the frames of near-round shapes are ill
+    defined), then each single mode's sign and each pair's rotation or
+    reflection that brings the paired feature rows closest (orthogonal
+    Procrustes, both)."""
+    ok = partner >= 0
+    u, _, vt = np.linalg.svd(basis_a.nodes[ok].T @ basis_b.nodes[partner[ok]])
+    turn = u @ np.diag([1.0, np.linalg.det(u @ vt)]) @ vt  # a proper rotation: both run the same way
+    theta = float(np.arctan2(turn[1, 0], turn[0, 0]))
+    turned = _rotate(fb, theta)
+    corrected = turned.copy()
+    signs = np.ones(fa.shape[1])
+    for group in groups:
+        cols = list(group)
+        u, _, vt = np.linalg.svd(np.einsum("npd,nqd->pq", fa[ok][:, cols], turned[partner[ok]][:, cols]))
+        q = u @ vt
+        corrected[:, cols] = np.einsum("pq,mqd->mpd", q, turned[:, cols])
+        signs[cols] = np.where(np.diag(q) < 0, -1.0, 1.0)
+    return corrected, signs, theta
 
 
 def _rotate(f: np.ndarray, theta: float) -> np.ndarray:
@@ -342,19 +469,9 @@ def _rotate(f: np.ndarray, theta: float) -> np.ndarray:
     return f @ np.array([[c, s], [-s, c]])
 
 
-def _correct(fa: np.ndarray, fb: np.ndarray, search_frame: bool):
-    """Sign correction, with a search over rotations of ``b``'s frame by
-    multiples of 45 degrees when ``search_frame`` (a half turn is a sign)."""
-    angles = [0.0, np.pi / 4, np.pi / 2, 3 * np.pi / 4] if search_frame else [0.0]
-    best = None
-    for theta in angles:
-        fr = _rotate(fb, theta) if theta else fb
-        signs, score = _sign_correction(fa, fr)
-        if best is None or score < best[2] - 1e-12:
-            best = (theta, signs, score)
-    theta, signs, _ = best
-    fr = _rotate(fb, theta) if theta else fb
-    return fr * signs[None, :, None], signs, theta
+#: Rotations of ``b``'s frame tried when the principal axes are ill defined
+#: (a half turn is a sign, see _mode_correction).
+_FRAME_ROTATIONS = (0.0, np.pi / 4, np.pi / 2, 3 * np.pi / 4)
 
 
 def _pairwise_sq(fa: np.ndarray, fb: np.ndarray) -> np.ndarray:
@@ -400,10 +517,9 @@ def modal_affinity(basis_a: ModalBasis, basis_b: ModalBasis, n_modes: int | None
         raise ValueError(f"n_modes must be between 1 and {kmax}, got {n_modes!r}")
     fa, fb = _features(basis_a, k), _features(basis_b, k)
     if sign_correction:
-        signs = _sign_correction(fa, fb)[0]
+        fb, signs, _ = _mode_correction(fa, fb, _mode_groups(basis_a, basis_b, k))
     else:
         signs = np.ones(k)
-    fb = fb * signs[None, :, None]
     return _pairwise_sq(fa.reshape(len(fa), -1), fb.reshape(len(fb), -1)), signs
 
 
@@ -582,9 +698,10 @@ def _order_search(C, t_a, t_b, starts, arc_weight, penalty, gap, window):
     return best
 
 
-def _iter_search(method, C, t_a, t_b, *, arc_weight, n_starts, gap, penalty, start=None):
+def _iter_search(method, C, t_a, t_b, *, arc_weight, n_starts, gap, penalty, start=None, coarse=None):
     """One pass of the chosen search on cost ``C``: a generator that yields
-    the fraction of the pass done and returns (partners, total)."""
+    the fraction of the pass done and returns (partners, total). ``coarse``:
+    the coarse order search of ``C``, if already run (see _coarse_search)."""
     na, nb = C.shape
     if method == "local":
         part = _local(C)
@@ -595,7 +712,7 @@ def _iter_search(method, C, t_a, t_b, *, arc_weight, n_starts, gap, penalty, sta
         if start is not None:
             return (yield from _order_search(C, t_a, t_b, [start], arc_weight, penalty, gap, window))
         share = 0.3  # of the progress: the coarse DPs are small
-        found = yield from _scale_fractions(_iter_every_start(C, penalty, gap), 0.0, share)
+        found = coarse or (yield from _scale_fractions(_iter_every_start(C, penalty, gap), 0.0, share))
         # Each of the best windows searched again at full resolution, with a
         # narrow free start (+-2 % of b's nodes) about its start node: the DP
         # keeps one start per cell, so a narrow window loses less to it.
@@ -1130,36 +1247,105 @@ def _scaled(run, lo: float, hi: float, phase: str):
 
 def _matching_cost(job: _Job, t_a: np.ndarray, t_b: np.ndarray):
     """The cost matrix of the searches and the modal affinity (eq. 12) it
-    includes, with what :class:`Matching` reports of them."""
+    includes, with what :class:`Matching` reports of them, and the coarse
+    order search of that cost if it was run (see _coarse_search).
+
+    Of the hypotheses on the modes' signs and mixes (see _mode_hypotheses),
+    the one whose cost the coarse order-preserving search follows most
+    cheaply is kept: along the right correspondence the modes agree with
+    the shape's own terms, along a wrong one they cannot."""
     A, B = job.A, job.B
     na, nb = len(A), len(B)
     # Modal features with a cut common to both spectra, sign-corrected.
     basis_a, basis_b, k = _joint_bases(A, B, job.n_modes, job.model_nodes, job.sigma_factor, job.material)
     fa, fb = _features(basis_a, k), _features(basis_b, k)
-    if job.sign_correction:
-        search_frame = max(basis_a.anisotropy, basis_b.anisotropy) > _ISOTROPIC
-        fb, signs, theta = _correct(fa, fb, search_frame)
-    else:
-        signs, theta = np.ones(k), 0.0
-    Z = _pairwise_sq(fa.reshape(na, -1), fb.reshape(nb, -1))
-    C = job.modal_weight * Z / k
+    shape_cost = _shape_cost(job, A, B, t_a, t_b)
+    hypotheses = _mode_hypotheses(job, fa, fb, basis_a, basis_b, k, shape_cost)
+    scored = []
+    for corrected, signs, theta in hypotheses:
+        Z = _pairwise_sq(fa.reshape(na, -1), corrected.reshape(nb, -1))
+        C = _with_displacement(job, job.modal_weight * Z / k + shape_cost, A, B)
+        coarse = _coarse_search(job, C) if len(hypotheses) > 1 else None
+        # The modes' own reading (the paper's) is kept unless another is clearly cheaper.
+        total = (coarse[0][0] if coarse else 0.0) / (_CLEARLY_CHEAPER if scored else 1.0)
+        scored.append((total, coarse, C, Z, signs, theta))
+    _, coarse, C, Z, signs, theta = min(scored, key=lambda item: item[0])
+    if job.neighbourhood > 0:
+        C, coarse = _neighbourhood_cost(C, t_a, t_b, job.neighbourhood), None
+    return C, Z, k, signs, theta, basis_a, basis_b, coarse
+
+
+def _mode_hypotheses(job: _Job, fa: np.ndarray, fb: np.ndarray, basis_a: ModalBasis, basis_b: ModalBasis, k: int,
+                     shape_cost) -> list:
+    """Hypotheses on ``b``'s modes' signs and mixes, each (corrected
+    features, each mode's sign, frame rotation): from the modes' clouds
+    alone (see _mode_correction, over rotations of ``b``'s frame when its
+    principal axes are ill defined), and, when the cost has the shape's own
+    terms (curvature and inner-distance context, which need no sign),
+    fitted along the path they give (see _fitted_along). The clouds alone
+    matched exact copies of near-round coins and nuclei half a turn off:
+    their modes' clouds are nearly symmetric."""
+    if not job.sign_correction:
+        return [(fb, np.ones(k), 0.0)]
+    groups = _mode_groups(basis_a, basis_b, k)
+    isotropic = max(basis_a.anisotropy, basis_b.anisotropy) > _ISOTROPIC
+    hypotheses = [_mode_correction(fa, fb, groups, _FRAME_ROTATIONS if isotropic else (0.0,))]
+    if job.modal_weight > 0 and np.ndim(shape_cost) == 2:
+        # The displacement term scaled as for the cost with the modes: a
+        # round shape's curvature and context are flat, and scaled to them
+        # alone it vanished.
+        modal = _pairwise_sq(fa.reshape(len(fa), -1), hypotheses[0][0].reshape(len(fb), -1)) / k
+        scale = float(np.median((job.modal_weight * modal + shape_cost).min(axis=1)))
+        path = _coarse_partners(_coarse_search(job, _with_displacement(job, shape_cost, job.A, job.B, scale)), len(fa))
+        hypotheses.append(_fitted_along(fa, fb, basis_a, basis_b, groups, path))
+    return hypotheses
+
+
+def _with_displacement(job: _Job, C: np.ndarray, A: np.ndarray, B: np.ndarray, scale: float | None = None):
+    """``C`` plus the displacement term (two contours in one frame of
+    reference) in units of ``scale``, by default ``C``'s typical best pairs."""
+    if job.displacement_weight == 0:
+        return C
+    scale = float(np.median(C.min(axis=1))) if scale is None else scale
+    spacing = float(segment_lengths(A).mean())
+    return C + job.displacement_weight * scale * _pairwise_sq(A, B) / spacing**2
+
+
+def _shape_cost(job: _Job, A: np.ndarray, B: np.ndarray, t_a: np.ndarray, t_b: np.ndarray):
+    """The curvature and inner-distance context terms of the matching cost (0 without them)."""
+    na, nb = len(A), len(B)
+    cost = 0.0
     if job.curvature_weight > 0:
         scales = tuple(sorted({max(sc, 1.0 / min(na, nb)) for sc in _CURVATURE_SCALES}))
         ka = curvature_signature(A, scales)
         kb = curvature_signature(B, scales)
-        C = C + job.curvature_weight * _pairwise_sq(ka, kb) / ka.shape[1]
+        cost = cost + job.curvature_weight * _pairwise_sq(ka, kb) / ka.shape[1]
     if job.context_weight > 0:
         # 100 samples even on coarser contours: measured, 67 samples (the
         # nodes of the paper's hands) halved the time but lost 0.002 mean
         # accuracy on the articulated families.
-        C = C + job.context_weight * _pairwise_sq(_context_at_nodes(A, t_a, _CONTEXT_SAMPLES),
-                                                  _context_at_nodes(B, t_b, _CONTEXT_SAMPLES))
-    if job.displacement_weight > 0:
-        spacing = float(segment_lengths(A).mean())
-        C = C + job.displacement_weight * float(np.median(C.min(axis=1))) * _pairwise_sq(A, B) / spacing**2
-    if job.neighbourhood > 0:
-        C = _neighbourhood_cost(C, t_a, t_b, job.neighbourhood)
-    return C, Z, k, signs, theta, basis_a, basis_b
+        cost = cost + job.context_weight * _pairwise_sq(_context_at_nodes(A, t_a, _CONTEXT_SAMPLES),
+                                                        _context_at_nodes(B, t_b, _CONTEXT_SAMPLES))
+    return cost
+
+
+def _order_penalty(job: _Job, C: np.ndarray) -> float:
+    """The order search's penalty for a repeated or skipped node, scaled to ``C``."""
+    return job.order_penalty * float(np.median(C.min(axis=1))) + 1e-6 * float(np.median(C))
+
+
+def _coarse_search(job: _Job, C: np.ndarray) -> list:
+    """The order-preserving search around every start on ``C`` coarsened
+    (see _iter_every_start), its best path first: its objective says how
+    cheaply a correspondence follows ``C``."""
+    return drain(_iter_every_start(C, _order_penalty(job, C), job.gap))
+
+
+def _coarse_partners(found: list, n_a: int) -> np.ndarray:
+    """The best path of :func:`_coarse_search` as each node of ``a``'s partner (-1: none)."""
+    _, part, step = found[0]
+    step_a = max(1, -(-n_a // _COARSE_NODES))
+    return np.repeat(np.where(part >= 0, part * step, -1), step_a)[:n_a]
 
 
 def _neighbourhood_cost(C: np.ndarray, t_a: np.ndarray, t_b: np.ndarray, width: float) -> np.ndarray:
@@ -1203,7 +1389,7 @@ def _run(job: _Job):
     t_a, _ = _arc_positions(A)
     t_b, _ = _arc_positions(B)
 
-    C, Z, k, signs, theta, basis_a, basis_b = _matching_cost(job, t_a, t_b)
+    C, Z, k, signs, theta, basis_a, basis_b, coarse = _matching_cost(job, t_a, t_b)
     detail = job.detail
     if detail is None:
         detail = (method == "order" and min(na, nb) >= _DETAIL_MIN_NODES
@@ -1219,14 +1405,14 @@ def _run(job: _Job):
     empty = np.full(na, -1, dtype=np.intp)
     if (yield MatchingProgress(float(work[0]), "features")):
         return result(empty, np.inf, C, "cancelled")
-    penalty = job.order_penalty * float(np.median(C.min(axis=1))) + 1e-6 * float(np.median(C))
+    penalty = _order_penalty(job, C)
     opts = dict(arc_weight=job.arclength_weight, n_starts=job.n_starts, gap=job.gap, penalty=penalty)
     # Two contours in one frame of reference (displacement_weight > 0, e.g.
     # consecutive frames of a movie): a's first node starts near its nearest
     # node of b, so the search around every start is not needed.
     near = int(np.argmin(_pairwise_sq(A[:1], B)[0])) if job.displacement_weight > 0 else None
-    found, stopped = yield from _scaled(_iter_search(method, C, t_a, t_b, start=near, **opts), work[0], work[1],
-                                        "search")
+    found, stopped = yield from _scaled(_iter_search(method, C, t_a, t_b, start=near, coarse=coarse, **opts),
+                                        work[0], work[1], "search")
     if stopped:
         return result(empty, np.inf, C, "cancelled")
     part, total = found
