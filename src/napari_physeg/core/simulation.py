@@ -20,6 +20,15 @@ contour comes to rest where the targets' pull balances the elastic force of its
 deformation: on ``b`` for a soft material or a strong ``q`` (rubber with the
 paper's ``q = 30000 N/m``), short of it for a stiff one (copper). The frames
 are taken at even intervals of the path travelled.
+
+A rigid move costs a body no elastic energy, but the element has no
+rigid-body zero modes (``docs/physics.md`` section 4): moved or turned as a
+whole it resists as if bent. So the rigid part of the move (the rotation and
+shift that bring ``a`` closest to its targets) is taken out first: the
+element deforms toward the targets as seen from a frame that follows that
+rigid move, which carries it along as a free body held by the springs would
+move (see :class:`_RigidCarry`). A contour simulated into a shifted or
+turned copy of itself then ends on it, its frames turned and moved copies.
 """
 
 from __future__ import annotations
@@ -313,9 +322,12 @@ def _run(a, b, matching, options):
     given, centre = a, a.mean(axis=0)
     a, b = a - centre, b - centre
     targets = node_targets(a, b, pairs, affinity)
-    model = _Model(a, targets, q=q, material=material, sigma_factor=sigma_factor, damping_ratio=damping_ratio)
+    carry = _RigidCarry.fit(a, targets, damping_ratio)
+    model = _Model(a, carry.seen_from_a(targets), q=q, material=material, sigma_factor=sigma_factor,
+                   damping_ratio=damping_ratio)
+    carry.omega = model.lowest_frequency
     t_model = time.perf_counter()
-    path, steps, stop_reason = yield from _evolve(a, model, max_steps, tol, centre)
+    path, steps, stop_reason = yield from _evolve(a, model, carry, max_steps, tol, centre)
     frames, times = _even_frames(path, model.dt, n_frames)
     frames += centre
     frames[0] = given  # exactly
@@ -326,7 +338,7 @@ def _run(a, b, matching, options):
         times=times,
         steps=steps,
         converged=stop_reason == "converged",
-        rest=model.at_rest + centre,
+        rest=carry.moved(model.at_rest, np.inf) + centre,
         timings={"model": t_model - t_start, "evolution": t_end - t_model, "total": t_end - t_start},
         stop_reason=stop_reason,
     )
@@ -353,6 +365,7 @@ class _Model:
             # Resolve the slowest motion with ~40 steps per period; both
             # schemes are unconditionally stable for the fast ones.
             self.dt = 2.0 * np.pi / lo / 40.0
+            self.lowest_frequency = float(lo)
             if m <= DENSE_NODES:
                 # Small models: exact mode superposition (the load is
                 # constant) costs two small products per step.
@@ -387,27 +400,92 @@ def _singular(reason) -> ValueError:
     )
 
 
-def _evolve(a, model: _Model, max_steps: int, tol: float, centre: np.ndarray):
-    """Time steps until at rest (within ``tol`` of the equilibrium), stopped
-    or ``max_steps``; yields :class:`SimulationProgress` (shapes moved back by
-    ``centre``), returns the path, the steps taken and the stop reason."""
+def _evolve(a, model: _Model, carry: _RigidCarry, max_steps: int, tol: float, centre: np.ndarray):
+    """Time steps until at rest (within ``tol`` of the equilibrium, the
+    rigid move's remainder counted in), stopped or ``max_steps``; yields
+    :class:`SimulationProgress` (shapes moved back by ``centre``), returns
+    the path, the steps taken and the stop reason."""
     path = [a.copy()]
     stop_reason, steps = "max_steps", 0
     for steps in range(1, int(max_steps) + 1):
         try:
-            X = a + model.step()
+            deformed = a + model.step()
         except DivergenceError as err:  # pragma: no cover - implicit springs make this unreachable
             raise DivergenceError(f"{err} at step {steps}") from None
-        if not np.all(np.isfinite(X)):
+        if not np.all(np.isfinite(deformed)):
             raise DivergenceError(f"the simulation diverged at step {steps}")
+        X = carry.moved(deformed, steps * model.dt)
         path.append(X)
         if (yield SimulationProgress(steps, X + centre)):
             stop_reason = "cancelled"
             break
-        if np.abs(model.at_rest - X).max() < tol:
+        if np.abs(model.at_rest - deformed).max() + carry.left(steps * model.dt) < tol:
             stop_reason = "converged"
             break
     return np.asarray(path), steps, stop_reason
+
+
+@dataclass
+class _RigidCarry:
+    """The rigid part of the move from ``a`` to its targets (a turn by
+    ``angle`` about ``a``'s centroid, the origin, then a shift), and how far
+    along it the body is at each time: as a free body held by the springs,
+    whose rigid motion no elastic force resists, at the held body's lowest
+    natural frequency ``omega`` and the damping ratio the run was asked for."""
+
+    angle: float
+    shift: np.ndarray
+    damping_ratio: float
+    reach: float  # px: how far the rigid move takes the farthest node
+    omega: float = 1.0
+
+    @classmethod
+    def fit(cls, a: np.ndarray, targets: np.ndarray, damping_ratio: float) -> _RigidCarry:
+        """The turn and shift that bring ``a`` (centred) closest to ``targets``
+        (least squares, no reflection: the two run the same way)."""
+        shift = targets.mean(axis=0)
+        u, _, vt = np.linalg.svd((targets - shift).T @ a)
+        turn = u @ np.diag([1.0, np.linalg.det(u @ vt)]) @ vt
+        angle = float(np.arctan2(turn[1, 0], turn[0, 0]))
+        # The farthest a node of a, or of the shape it deforms to, lies from the turn's centre.
+        radius = max(float(np.hypot(*a.T).max()), float(np.hypot(*(targets - shift).T).max()))
+        return cls(angle, shift, float(damping_ratio), abs(angle) * radius + float(np.hypot(*shift)))
+
+    def seen_from_a(self, points: np.ndarray) -> np.ndarray:
+        """``points`` with the whole rigid move undone: where the element must deform to."""
+        return (points - self.shift) @ _turn(self.angle)
+
+    def moved(self, points: np.ndarray, t: float) -> np.ndarray:
+        """``points`` carried the share of the rigid move done at time ``t``."""
+        done = 1.0 - self._remaining(t)
+        return points @ _turn(done * self.angle).T + done * self.shift
+
+    def left(self, t: float) -> float:
+        """How far (px) the rigid move still has to take the farthest node at time ``t``, at most."""
+        return self.reach * abs(self._remaining(t, envelope=True))
+
+    def _remaining(self, t: float, envelope: bool = False) -> float:
+        """The share of the rigid move left at time ``t``: the step response
+        of a damped oscillator (``envelope``: its bound, for an underdamped one)."""
+        if not np.isfinite(t):
+            return 0.0
+        w, z = self.omega * t, self.damping_ratio
+        if abs(z - 1.0) < 1e-9:
+            return (1.0 + w) * np.exp(-w)
+        if z > 1.0:
+            root = np.sqrt(z * z - 1.0)
+            fast, slow = -(z + root), -(z - root)
+            return (fast * np.exp(slow * w) - slow * np.exp(fast * w)) / (fast - slow)
+        root = np.sqrt(1.0 - z * z)
+        if envelope:
+            return np.exp(-z * w) / root
+        return np.exp(-z * w) * (np.cos(root * w) + z / root * np.sin(root * w))
+
+
+def _turn(angle: float) -> np.ndarray:
+    """The rotation by ``angle`` of (row, col) column vectors."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s], [s, c]])
 
 
 def _even_frames(path: np.ndarray, dt: float, n_frames: int):
