@@ -169,6 +169,21 @@ def test_bad_input():
         simulate(a, b, SimpleNamespace(pairs=np.zeros((0, 2), int), affinity=m.affinity))
 
 
+@pytest.mark.parametrize("option, value", [
+    ("q", "30000"), ("q", np.nan), ("n_frames", None), ("n_frames", 2.7), ("max_steps", np.nan),
+    ("max_steps", 0), ("max_steps", -5), ("tol", -1.0), ("tol", np.nan), ("tol", 0.0),
+    ("sigma_factor", 100.0), ("sigma_factor", 0.0), ("damping_ratio", -0.5), ("damping_ratio", True),
+])
+def test_a_bad_option_is_named_before_any_work(option, value):
+    """Each bad value raises a ValueError naming its option (a text q was a
+    TypeError from numpy; n_frames=2.7 was cut to 2; max_steps=0 returned a
+    as every frame; tol=-1 never came to rest; sigma_factor=100 blamed the
+    contour's nodes)."""
+    a, b, truth = data.hand_pair(30, 30)
+    with pytest.raises(ValueError, match=f"^{option}"):
+        simulate(a, b, _truth_matching(a, b, truth), **{option: value})
+
+
 @pytest.mark.parametrize("poses", [("open", "closed"), ("open", "spread")])
 def test_local_matching_simulates_like_a_full_matching(poses):
     """The paper's figs. 10-11 with real matchings: local search leaves nodes

@@ -1,5 +1,6 @@
 """One validation of the contours given to :func:`~.segmentation.segment`,
-:func:`~.matching.match` and :func:`~.simulation.simulate`.
+:func:`~.matching.match` and :func:`~.simulation.simulate`, and of their
+numeric options.
 
 A contour is an ``(N, 2)`` array of ``(row, col)`` nodes, closed implicitly,
 each node given once. Nothing is dropped silently: results are indexed by the
@@ -16,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["check_contour", "node_array", "NEAR_DUPLICATE"]
+__all__ = ["check_contour", "check_count", "check_number", "node_array", "NEAR_DUPLICATE"]
 
 #: Two nodes closer than this fraction of the mean node spacing count as one
 #: repeated node: the element's interpolation matrix becomes numerically
@@ -119,3 +120,33 @@ def _check_repeats(centred: np.ndarray, name: str) -> None:
             f"{name} has {kind} (nodes {shown} coincide, within {NEAR_DUPLICATE:g} of the node spacing); "
             "pass each node once"
         )
+
+
+def check_number(value, name: str, *, minimum: float = 0.0, inclusive: bool = True,
+                 maximum: float = np.inf) -> float:
+    """``value`` as a float, or a ValueError naming ``name``: a finite number
+    (numpy's too; not a flag or a text) at least ``minimum`` (above it when
+    not ``inclusive``) and at most ``maximum``."""
+    try:
+        number = np.nan if isinstance(value, (bool, np.bool_, str, bytes)) else float(value)
+    except (TypeError, ValueError):
+        number = np.nan
+    low_ok = number >= minimum if inclusive else number > minimum
+    if not (np.isfinite(number) and low_ok and number <= maximum):
+        bound = f"{'at least' if inclusive else 'above'} {minimum:g}"
+        if np.isfinite(maximum):
+            bound += f" and at most {maximum:g}"
+        raise ValueError(f"{name} must be a number {bound}, got {value!r}")
+    return number
+
+
+def check_count(value, name: str, minimum: int, *, allow_none: bool = False) -> int | None:
+    """``value`` as an int, or a ValueError naming ``name``: an integer
+    (numpy's too; not a flag, nor a float that would be cut) of at least
+    ``minimum``, or None when ``allow_none``."""
+    if value is None and allow_none:
+        return None
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < minimum:
+        tail = " or None" if allow_none else ""
+        raise ValueError(f"{name} must be an integer >= {minimum}{tail}, got {value!r}")
+    return int(value)

@@ -42,7 +42,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
 from ._drain import drain
-from ._validation import check_contour
+from ._validation import check_contour, check_count, check_number
 from .contour import segment_lengths
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import (
@@ -294,14 +294,16 @@ def _prepare(a, b, matching, *, q, material, n_frames, sigma_factor, damping_rat
     a = check_contour(a, "a")
     b = check_contour(b, "b")
     material = get_material(material)
-    if not (np.isfinite(q) and q > 0):
-        raise ValueError(f"q must be a positive number, got {q!r}")
-    if int(n_frames) < 2:
-        raise ValueError(f"n_frames must be at least 2 (first and last), got {n_frames!r}")
+    options = dict(
+        q=check_number(q, "q", inclusive=False), material=material,
+        n_frames=check_count(n_frames, "n_frames (first and last included)", 2),
+        # As for segment(): sigma at most twice the node spacing (0.75-1.5 is the useful range).
+        sigma_factor=check_number(sigma_factor, "sigma_factor", inclusive=False, maximum=2.0),
+        damping_ratio=check_number(damping_ratio, "damping_ratio", inclusive=False),
+        max_steps=check_count(max_steps, "max_steps", 1), tol=check_number(tol, "tol", inclusive=False))
     if matching is not None:
         _check_matching(matching, len(a), len(b))
-    return a, b, matching, dict(q=float(q), material=material, n_frames=int(n_frames), sigma_factor=sigma_factor,
-                                damping_ratio=damping_ratio, max_steps=int(max_steps), tol=tol)
+    return a, b, matching, options
 
 
 def _run(a, b, matching, options):
