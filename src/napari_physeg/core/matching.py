@@ -67,7 +67,7 @@ from ._drain import drain
 from .contour import resample, segment_lengths, signed_area
 from .inner_distance import inner_distance_context
 from .materials import Material
-from ._validation import check_contour
+from ._validation import check_contour, check_count, check_number
 from .modes import DEGENERACY_TOLERANCE, MAX_AUTO_MODES, ModalBasis, _modal_raw, select_modes, truncate
 
 __all__ = [
@@ -866,25 +866,6 @@ def _check_method(method) -> str:
     return method
 
 
-def _check_weight(value, name: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a non-negative number, got {value!r}") from None
-    if not (np.isfinite(v) and v >= 0):
-        raise ValueError(f"{name} must be a non-negative number, got {value!r}")
-    return v
-
-
-def _check_count(value, name: str, minimum: int, allow_none: bool) -> int | None:
-    if value is None and allow_none:
-        return None
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        tail = " or None" if allow_none else ""
-        raise ValueError(f"{name} must be an integer >= {minimum}{tail}, got {value!r}")
-    return int(value)
-
-
 def _joint_bases(A, B, n_modes, model_nodes, sigma_factor, material):
     """Modal bases of both shapes, truncated to a mode count that cuts neither
     spectrum through a near-degenerate pair (when such a count exists)."""
@@ -1164,7 +1145,7 @@ def _warn_if_mirrored(a: np.ndarray, b: np.ndarray) -> None:
 def _checked_neighbourhood(value, method: str) -> float:
     if value is None:
         return _GLOBAL_NEIGHBOURHOOD if method == "global" else 0.0
-    value = _check_weight(value, "neighbourhood")
+    value = check_number(value, "neighbourhood")
     if value > 1:
         raise ValueError(f"neighbourhood must be a fraction of the perimeter between 0 and 1, got {value!r}")
     return value
@@ -1177,8 +1158,7 @@ def _prepare(a, b, *, method, n_modes, model_nodes, sigma_factor, material, curv
     method = _check_method(method)
     a = check_contour(a, "a")
     b = check_contour(b, "b")
-    if _check_weight(sigma_factor, "sigma_factor") == 0:
-        raise ValueError(f"sigma_factor must be a positive number, got {sigma_factor!r}")
+    check_number(sigma_factor, "sigma_factor", inclusive=False)
     if detail is not None and not isinstance(detail, (bool, np.bool_)):
         raise ValueError(f"detail must be True, False or None, got {detail!r}")
     if detail and method != "order":
@@ -1187,7 +1167,7 @@ def _prepare(a, b, *, method, n_modes, model_nodes, sigma_factor, material, curv
     pa, pb = _canonical_order(a), _canonical_order(b)
     # Centred (each on its own centroid, or both on a's when their relative
     # position matters): features of far-off contours keep their precision.
-    displacement_weight = _check_weight(displacement_weight, "displacement_weight")
+    displacement_weight = check_number(displacement_weight, "displacement_weight")
     # Two contours in one frame of reference are one object a moment apart
     # (tracking): never reflected, and the check would cost a tenth of a frame.
     if displacement_weight == 0:
@@ -1196,20 +1176,20 @@ def _prepare(a, b, *, method, n_modes, model_nodes, sigma_factor, material, curv
     centre_b = centre_a if displacement_weight > 0 else b.mean(axis=0)
     return _Job(
         A=a[pa] - centre_a, B=b[pb] - centre_b, pa=pa, pb=pb, method=method,
-        n_modes=_check_count(n_modes, "n_modes", 1, True),
-        model_nodes=_check_count(model_nodes, "model_nodes", 8, True),
+        n_modes=check_count(n_modes, "n_modes", 1, allow_none=True),
+        model_nodes=check_count(model_nodes, "model_nodes", 8, allow_none=True),
         sigma_factor=float(sigma_factor), material=material,
-        curvature_weight=_check_weight(curvature_weight, "curvature_weight"),
-        arclength_weight=_check_weight(arclength_weight, "arclength_weight"),
+        curvature_weight=check_number(curvature_weight, "curvature_weight"),
+        arclength_weight=check_number(arclength_weight, "arclength_weight"),
         displacement_weight=displacement_weight,
-        context_weight=_check_weight(context_weight, "context_weight"),
-        modal_weight=_check_weight(modal_weight, "modal_weight"),
+        context_weight=check_number(context_weight, "context_weight"),
+        modal_weight=check_number(modal_weight, "modal_weight"),
         neighbourhood=_checked_neighbourhood(neighbourhood, method),
         refine=method == "order" if refine is None else bool(refine),
         detail=detail, sign_correction=bool(sign_correction),
-        order_penalty=_check_weight(order_penalty, "order_penalty"),
-        n_starts=_check_count(n_starts, "n_starts", 1, False),
-        gap=np.inf if gap_cost is None else _check_weight(gap_cost, "gap_cost"),
+        order_penalty=check_number(order_penalty, "order_penalty"),
+        n_starts=check_count(n_starts, "n_starts", 1),
+        gap=np.inf if gap_cost is None else check_number(gap_cost, "gap_cost"),
     )
 
 
