@@ -266,7 +266,7 @@ def test_generator_without_qt():
     m = match(a, b)
     outcome = run_to_completion(simulate_contours(a, b, m, {"material": "copper", "q": 1e6}))
     assert outcome.ok and outcome.matching is m and not outcome.matching_computed
-    gen = simulate_contours(a, b, m, {"max_steps": 100000, "tol": 0.0}, preview_interval=0.0)
+    gen = simulate_contours(a, b, m, {"max_steps": 100000, "tol": 1e-12}, preview_interval=0.0)
     next(gen)
     gen.close()  # what happens when napari aborts the worker: the helper stops too
     assert not helper_threads()
