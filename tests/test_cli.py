@@ -232,6 +232,19 @@ def test_segment_refuses_bad_input_before_any_work(scene, capsys, no_work, case)
     assert {p.name: p.read_bytes() for p in tmp.iterdir() if p.is_file()} == before  # nothing written
 
 
+@pytest.mark.parametrize("mask", ["o.csv", "./sub/../o.csv"])
+def test_segment_refuses_a_mask_at_the_out_path_before_any_work(scene, capsys, no_work, monkeypatch, mask):
+    # --out does not exist yet: the label image replaced the contours CSV, exit 0.
+    obj, image, init, tmp = scene
+    (tmp / "sub").mkdir()
+    before = sorted(p.name for p in tmp.iterdir())
+    monkeypatch.chdir(tmp)
+    assert main(["segment", str(image), "--init", str(init), "--out", "o.csv", "--mask", mask]) == 2
+    err = capsys.readouterr().err
+    assert "is the same file as --out" in err and len(err.strip().splitlines()) == 1
+    assert sorted(p.name for p in tmp.iterdir()) == before  # nothing written
+
+
 @pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="root may write to a read-only folder")
 def test_an_unwritable_out_is_refused_before_any_work(scene, capsys, no_work):
     obj, image, init, tmp = scene

@@ -189,6 +189,14 @@ def _check_input(path: Path, what: str) -> None:
         raise ValueError(f"{what} {path} does not exist")
 
 
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether paths ``a`` and ``b`` name one file: the same path once resolved (either may not
+    exist yet), or, both existing, the same file under two names (a hard link)."""
+    if a.resolve() == b.resolve():
+        return True
+    return a.exists() and b.exists() and a.samefile(b)
+
+
 def _check_output(path: Path, args, inputs, *, folder: bool = False) -> None:
     """Refuse an output that is an input, that exists (without --overwrite) or
     that cannot be written: before any work, not after it."""
@@ -221,7 +229,11 @@ def _segment(args) -> int:
     shapes, leading = _read_contours(args.init, leading=True)
     _check_output(args.out, args, [args.image, args.init])
     if args.mask:
-        _check_output(args.mask, args, [args.image, args.init, args.out])
+        # --out need not exist yet, so _check_output's test against inputs cannot see this clash.
+        if _same_file(args.mask, args.out):
+            raise ValueError(f"--mask {args.mask} is the same file as --out: give the label image another name "
+                             "(e.g. labels.tif)")
+        _check_output(args.mask, args, [args.image, args.init])
     options = _segment_options(args)
     with open_stack(args.image, channel=args.channel) as stack:
         jobs, is_stack = _segment_jobs(args, len(stack), leading, len(shapes))
