@@ -361,6 +361,28 @@ def test_batch_refuses_bad_frames_and_inputs_before_any_work(movies, monkeypatch
     assert sorted(p.name for p in tmp.iterdir()) == before
 
 
+@pytest.mark.parametrize("where", ["results/well0.tif-0123abcd/t00000/contours.csv", "summary.csv"])
+def test_batch_never_replaces_an_input_in_its_out_folder_even_with_overwrite(movies, monkeypatch, capsys, where):
+    # --overwrite deleted out/results, a contour drawn from an earlier result with it.
+    paths, init, tmp = movies
+
+    def no_cluster(*args, **kwargs):
+        raise AssertionError("a cluster was started")
+
+    monkeypatch.setattr(batch, "_client", no_cluster)
+    out = tmp / "out"
+    drawn = out / where
+    drawn.parent.mkdir(parents=True)
+    drawn.write_bytes(init.read_bytes())
+    (out / "batch.json").write_text("{}")  # an earlier run's folder
+    assert main(["batch", "segment", str(paths[0]), "--init", str(drawn), "--out", str(out), "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert f"the input {drawn} lies where the batch writes its results" in err and len(err.strip().splitlines()) == 1
+    with pytest.raises(ValueError, match="would be replaced"):  # from Python too
+        batch.track_files(paths, drawn, out, overwrite=True)
+    assert drawn.read_bytes() == init.read_bytes() and (out / "batch.json").read_text() == "{}"
+
+
 def test_batch_without_dask_distributed_says_what_to_install(movies, monkeypatch, capsys):
     paths, init, tmp = movies
     monkeypatch.setitem(__import__("sys").modules, "distributed", None)  # import distributed -> ImportError

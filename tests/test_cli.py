@@ -271,6 +271,19 @@ def test_track_refuses_a_non_empty_out_without_overwrite(movie_files, capsys, no
     assert (tmp / "tracked" / "contours.csv").read_text() == "mine"
 
 
+@pytest.mark.parametrize("name", ["contours.csv", "tracks.csv"])
+def test_track_never_replaces_an_input_in_its_out_folder_even_with_overwrite(movie_files, capsys, no_work, name):
+    # e.g. --out . next to the drawing saved as contours.csv: the tracking replaced it, exit 0.
+    movie, stack, init, tmp = movie_files
+    (tmp / "tracked").mkdir()
+    drawn = tmp / "tracked" / name
+    drawn.write_bytes(init.read_bytes())
+    assert main(["track", str(stack), "--init", str(drawn), "--out", str(tmp / "tracked"), "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert f"would replace the input {drawn}" in err and len(err.strip().splitlines()) == 1
+    assert drawn.read_bytes() == init.read_bytes() and [p.name for p in (tmp / "tracked").iterdir()] == [name]
+
+
 # --------------------------------------------------------------------------
 # Stacks, zarr, frames; match and simulate
 # --------------------------------------------------------------------------

@@ -46,9 +46,10 @@ from pathlib import Path
 import numpy as np
 
 from .io import (TIFF_SUFFIXES, atomic_path, check_frames, is_zarr, open_stack, parse_frames, read_shapes_csv,
-                 write_shapes_csv, write_table)
+                 same_file, write_shapes_csv, write_table)
 
-__all__ = ["segment_files", "track_files", "track_file", "check_writable", "default_workers", "segment_options_for"]
+__all__ = ["segment_files", "track_files", "track_file", "check_writable", "check_inputs_kept", "default_workers",
+           "segment_options_for", "TRACK_FILES"]
 
 #: Status of a row whose task (or object) failed; the ``error`` column says why.
 FAILED = "failed"
@@ -62,6 +63,8 @@ _SETTINGS = "batch.json"
 _SUMMARY = "summary"
 _SOURCE = "input.json"  # the input's size and modification time when the task read it
 _SEP = " | "  # between the messages of the warnings column
+#: The files :func:`track_file` writes in its folder (the .parquet with pyarrow only).
+TRACK_FILES = ("contours.csv", "tracks.csv", "tracks.parquet")
 
 
 def default_workers() -> int:
@@ -287,7 +290,7 @@ def track_file(path, inits, folder, *, frames: str | None = None, start: int | N
                 shapes.append(c)
                 leading.append((chosen[t],))
     folder.mkdir(parents=True, exist_ok=True)
-    written = [folder / "contours.csv"]
+    written = [folder / TRACK_FILES[0]]
     if shapes:
         write_shapes_csv(written[0], shapes, leading=leading)
     table = tr.table()
@@ -555,12 +558,13 @@ def _checked_run(inputs, inits, out):
             same = "is given twice" if seen[_name(p)] == p else f"is the same file as {seen[_name(p)]}"
             raise ValueError(f"the input {p} {same}: give each file once")
         seen[_name(p)] = p
+    out = Path(out).absolute()
+    check_inputs_kept(out, paths + ([inits] if isinstance(inits, (str, Path)) else []))
     if isinstance(inits, (str, Path)):
         inits = read_shapes_csv(inits)
     inits = tuple(as_contour(c, name=f"contour {k}").tolist() for k, c in enumerate(inits))
     if not inits:
         raise ValueError("no initial contour given")
-    out = Path(out).absolute()
     check_writable(out, folder=True)
     return paths, inits, out
 
@@ -580,6 +584,24 @@ def _check_scheduler(scheduler) -> None:
     if scheduler:
         with _client(None, scheduler, None):
             pass
+
+
+def check_inputs_kept(out, inputs) -> None:
+    """Raise ValueError if a batch in ``out`` would write over one of ``inputs`` (files or zarr
+    folders): ``out`` itself, its settings and summary files, anything under ``out/results``
+    (results are replaced when their input changes, and deleted with ``overwrite``)."""
+    out = Path(out)
+    written = [out / name for name in (_SETTINGS, f"{_SUMMARY}.csv", f"{_SUMMARY}.parquet")]
+    results = (out / _RESULTS).resolve()
+    for source in (Path(s) for s in inputs if s is not None):
+        if not source.exists():
+            continue
+        where = source.resolve()
+        if out.is_dir() and same_file(source, out):  # a file: check_writable says it is not a folder
+            raise ValueError(f"the output folder {out} is also an input: write the results elsewhere")
+        if any(same_file(source, w) for w in written) or where == results or results in where.parents:
+            raise ValueError(f"the input {source} lies where the batch writes its results in {out}, and would "
+                             "be replaced: move it, or choose another output folder")
 
 
 def check_writable(path: Path, *, folder: bool = False) -> None:

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .io import open_stack, parse_frames, read_shapes_csv, write_shapes_csv
+from .io import open_stack, parse_frames, read_shapes_csv, same_file, write_shapes_csv
 
 PROG = "napari-physeg"
 
@@ -189,22 +189,22 @@ def _check_input(path: Path, what: str) -> None:
         raise ValueError(f"{what} {path} does not exist")
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    """Whether paths ``a`` and ``b`` name one file: the same path once resolved (either may not
-    exist yet), or, both existing, the same file under two names (a hard link)."""
-    if a.resolve() == b.resolve():
-        return True
-    return a.exists() and b.exists() and a.samefile(b)
-
-
-def _check_output(path: Path, args, inputs, *, folder: bool = False) -> None:
+def _check_output(path: Path, args, inputs, *, folder: bool = False, writes=()) -> None:
     """Refuse an output that is an input, that exists (without --overwrite) or
-    that cannot be written: before any work, not after it."""
+    that cannot be written: before any work, not after it. ``writes``: the files
+    written in the folder ``path``, none of which may be an input either (even
+    with --overwrite: the input would be lost)."""
     from .batch import check_writable
 
-    for source in inputs:
-        if source is not None and Path(source).exists() and path.resolve() == Path(source).resolve():
+    for source in (Path(s) for s in inputs if s is not None):
+        if not source.exists():
+            continue
+        if same_file(path, source):
             raise ValueError(f"--out {path} is also an input: write the result elsewhere")
+        clash = next((path / name for name in writes if same_file(path / name, source)), None)
+        if clash is not None:
+            raise ValueError(f"--out {path} would replace the input {source} (the result's {clash.name} is "
+                             "written there): choose another --out folder, or move the input")
     exists = path.exists() and (not folder or any(path.iterdir()))
     if exists and not args.overwrite:
         raise ValueError(f"{path} exists: pass --overwrite to replace it, or choose another --out")
@@ -230,7 +230,7 @@ def _segment(args) -> int:
     _check_output(args.out, args, [args.image, args.init])
     if args.mask:
         # --out need not exist yet, so _check_output's test against inputs cannot see this clash.
-        if _same_file(args.mask, args.out):
+        if same_file(args.mask, args.out):
             raise ValueError(f"--mask {args.mask} is the same file as --out: give the label image another name "
                              "(e.g. labels.tif)")
         _check_output(args.mask, args, [args.image, args.init])
@@ -389,12 +389,12 @@ def _start_frame(args, leading):
 
 
 def _track(args) -> int:
-    from .batch import check_track, track_file
+    from .batch import TRACK_FILES, check_track, track_file
     from .core import LOST
 
     _check_input(args.stack, "stack")
     inits, leading = _read_contours(args.init, leading=True)
-    _check_output(args.out, args, [args.stack, args.init], folder=True)
+    _check_output(args.out, args, [args.stack, args.init], folder=True, writes=TRACK_FILES)
     options = _segment_options(args)
     start = _start_frame(args, leading)
     with open_stack(args.stack, channel=args.channel) as stack:  # the frames and start, before any work
@@ -421,6 +421,7 @@ def _batch(args) -> int:
     for path in args.inputs:
         _check_input(path, "input")
     shapes, leading = _read_contours(args.init, leading=True)
+    batch.check_inputs_kept(args.out, [*args.inputs, args.init])
     options = _segment_options(args)
     common = dict(channel=args.channel, node_spacing=args.node_spacing, workers=args.workers,
                   scheduler=args.scheduler, overwrite=args.overwrite, progress=not args.quiet, frames=args.frames)

@@ -27,7 +27,7 @@ import numpy as np
 from ._widgets._layers import CLOSED_SHAPE_TYPES, shape_to_polygon
 
 __all__ = ["read_shapes_csv", "write_shapes_csv", "open_stack", "parse_frames", "check_frames", "write_table",
-           "atomic_path", "is_zarr", "TIFF_SUFFIXES"]
+           "atomic_path", "is_zarr", "same_file", "TIFF_SUFFIXES"]
 
 #: File name endings read with tifffile (lazily, one page per chunk).
 TIFF_SUFFIXES = (".tif", ".tiff", ".btf", ".tf8", ".tf2")
@@ -173,6 +173,15 @@ def write_table(table, path) -> list[Path]:
     with atomic_path(written[1]) as tmp:
         table.to_parquet(tmp, index=False)
     return written
+
+
+def same_file(a, b) -> bool:
+    """Whether paths ``a`` and ``b`` name one file: the same path once resolved (either may not
+    exist yet), or, both existing, one file under two names (a hard link)."""
+    a, b = Path(a), Path(b)
+    if a.resolve() == b.resolve():
+        return True
+    return a.exists() and b.exists() and a.samefile(b)
 
 
 def is_zarr(path: Path) -> bool:
