@@ -113,6 +113,29 @@ def test_track_refuses_contours_drawn_on_several_frames(movie_files, capsys):
     assert "--start" in capsys.readouterr().err
 
 
+def test_segment_keeps_the_contours_that_converged_when_others_fail(tmp_path, capsys):
+    # Shape 1 is drawn on the background (it collapses), frame 1 is blank: every contour was lost, exit 2.
+    tifffile = pytest.importorskip("tifffile")
+    rng = np.random.default_rng(1)
+    yy, xx = np.mgrid[:96, :96]
+    image = (((yy - 35) ** 2 + (xx - 35) ** 2 < 12 ** 2) * 150 + 30 + rng.normal(0, 3, yy.shape)).clip(0, 255)
+    tifffile.imwrite(tmp_path / "movie.tif", np.stack([image, np.full_like(image, 30)]).astype(np.uint8))
+    a = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    init = write_shapes_csv(tmp_path / "init.csv", [np.c_[35 + 18 * np.sin(a), 35 + 18 * np.cos(a)],
+                                                     np.c_[72 + 8 * np.sin(a), 72 + 8 * np.cos(a)]])
+    out = tmp_path / "out.csv"
+    assert main(["segment", str(tmp_path / "movie.tif"), "--frames", "0:2", "--init", str(init), "--out", str(out),
+                 "--polarity", "bright"]) == 1
+    captured = capsys.readouterr()
+    failed = [line for line in captured.err.splitlines() if " failed: " in line]
+    assert [line.split(" failed: ")[0] for line in failed] == [
+        "napari-physeg: frame 0, shape 1", "napari-physeg: frame 1, shape 0", "napari-physeg: frame 1, shape 1"]
+    assert "collapsed to a point" in failed[0] and "constant" in failed[1]
+    assert "frame 0, shape 0: " in captured.out and "1 of 4 contours" in captured.out
+    (contour,), (lead,) = read_shapes_csv(out, leading=True)
+    assert lead == (0.0,) and np.hypot(*(contour - 35).T).mean() == pytest.approx(12, abs=1.5)
+
+
 # --------------------------------------------------------------------------
 # napari's shapes CSV: every shape type
 # --------------------------------------------------------------------------

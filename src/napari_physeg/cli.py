@@ -38,7 +38,8 @@ Contours are napari's shapes CSV (File > Save Selected Layer: columns index,
 shape-type, vertex-index, axis-0, axis-1, ...; polygons, rectangles, paths and
 ellipses) or a plain 'row,col' table. Exit status: 0 on success, 2 for bad
 input (one line saying what to fix; nothing is written), 1 when a run did not
-converge or diverged (track, batch track: an object was lost; batch: a task failed).
+converge or diverged (segment: a contour failed, named on stderr, the others
+written; track, batch track: an object was lost; batch: a task failed).
 """
 
 
@@ -222,8 +223,7 @@ def _read_contours(path: Path, what: str = "--init", leading: bool = False):
 
 
 def _segment(args) -> int:
-    from .core import segment
-    from .batch import check_contours, segment_options_for
+    from .batch import check_contours
 
     _check_input(args.image, "image")
     shapes, leading = _read_contours(args.init, leading=True)
@@ -238,25 +238,53 @@ def _segment(args) -> int:
     with open_stack(args.image, channel=args.channel) as stack:
         jobs, is_stack = _segment_jobs(args, len(stack), leading, len(shapes))
         check_contours(shapes, stack.shape[1:], args.init)
-        results, frames, status = [], [], 0
-        for t in sorted({t for t, _ in jobs}):
-            image = np.asarray(stack[t], dtype=np.float64)  # one frame at a time
-            for _, k in (job for job in jobs if job[0] == t):
-                res = segment(image, shapes[k], **segment_options_for(shapes[k], options, args.node_spacing))
-                state = "converged" if res.converged else f"stopped ({res.stop_reason})"
-                where = f"frame {t}, " if is_stack else ""
-                print(f"{where}shape {k}: {len(res.contour)} nodes, {res.steps} steps, {state}, "
-                      f"{res.timings['total'] * 1e3:.0f} ms")
-                results.append(res.contour)
-                frames.append((t,))
-                status = status or (0 if res.converged else 1)
+        done, failed = _run_segment_jobs(stack, jobs, shapes, options, args.node_spacing, is_stack)
         shape = (len(stack), *stack.shape[1:]) if is_stack else tuple(stack.shape[1:])
+    if not done:
+        print(f"{PROG}: no contour was segmented: nothing written", file=sys.stderr)
+        return 1
+    results, frames = [res.contour for _, _, res in done], [(t,) for t, _, _ in done]
     write_shapes_csv(args.out, results, leading=frames if is_stack else None)
-    print(f"wrote {args.out}")
+    left_out = f" ({len(done)} of {len(jobs)} contours, without the {failed} that failed)" if failed else ""
+    print(f"wrote {args.out}{left_out}")
     if args.mask:
         _write_mask(args.mask, results, frames, shape)
         print(f"wrote {args.mask}")
-    return status
+    return 1 if failed or not all(res.converged for _, _, res in done) else 0
+
+
+def _run_segment_jobs(stack, jobs, shapes, options, node_spacing, is_stack):
+    """Segment shape ``k`` on frame ``t`` for each ``(t, k)`` of ``jobs``, a frame read at a time.
+
+    A shape that fails (it collapsed, diverged, the frame is blank) is named on stderr and the
+    others go on, as in a batch task: one bad drawing must not lose the rest.
+
+    Returns
+    -------
+    done : list of (int, int, SegmentationResult)
+        ``(t, k, result)`` of the shapes segmented, in frame order.
+    failed : int
+        The number of jobs that failed.
+    """
+    from .batch import segment_options_for
+    from .core import segment
+
+    done, failed = [], 0
+    for t in sorted({t for t, _ in jobs}):
+        image = np.asarray(stack[t], dtype=np.float64)  # one frame at a time
+        for k in (k for frame, k in jobs if frame == t):
+            where = f"frame {t}, " if is_stack else ""
+            try:
+                res = segment(image, shapes[k], **segment_options_for(shapes[k], options, node_spacing))
+            except (ValueError, RuntimeError) as err:  # ValueError: collapsed, blank frame; RuntimeError: diverged
+                print(f"{PROG}: {where}shape {k} failed: {' '.join(str(err).split())}", file=sys.stderr, flush=True)
+                failed += 1
+                continue
+            state = "converged" if res.converged else f"stopped ({res.stop_reason})"
+            print(f"{where}shape {k}: {len(res.contour)} nodes, {res.steps} steps, {state}, "
+                  f"{res.timings['total'] * 1e3:.0f} ms")
+            done.append((t, k, res))
+    return done, failed
 
 
 def _segment_jobs(args, n_frames: int, leading, n_shapes: int):
