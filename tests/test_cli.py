@@ -45,6 +45,17 @@ def test_shapes_csv_round_trip_matches_napari_columns(tmp_path):
     assert len(back) == 2 and all(np.array_equal(a, b) for a, b in zip(shapes, back))
 
 
+def test_a_shapes_csv_with_a_byte_order_mark_is_read_shape_by_shape(tmp_path):
+    # Saved by Excel as "CSV UTF-8": the BOM made the header '\ufeffindex', one contour of every vertex.
+    shapes = [np.array([[1.5, 2.25], [3.0, 4.0], [5.0, 1.0]]), np.array([[0.0, 0.0], [0.0, 9.0], [9.0, 0.0]])]
+    text = write_shapes_csv(tmp_path / "s.csv", shapes).read_text()
+    (tmp_path / "bom.csv").write_text(text, encoding="utf-8-sig")
+    back = read_shapes_csv(tmp_path / "bom.csv")
+    assert len(back) == 2 and all(np.array_equal(a, b) for a, b in zip(shapes, back))
+    (tmp_path / "plain-bom.csv").write_text("row,col\n1,2\n3,4\n5,1\n", encoding="utf-8-sig")
+    assert np.array_equal(read_shapes_csv(tmp_path / "plain-bom.csv")[0], [[1, 2], [3, 4], [5, 1]])
+
+
 def test_nd_shapes_keep_the_last_two_axes_and_plain_tables_work(tmp_path):
     p = tmp_path / "nd.csv"
     p.write_text("index,shape-type,vertex-index,axis-0,axis-1,axis-2\n"

@@ -62,7 +62,9 @@ def read_shapes_csv(path, *, leading: bool = False):
         columns that cannot be read.
     """
     path = Path(path)
-    with path.open(newline="") as fh:
+    # utf-8-sig: Excel's "CSV UTF-8" (and many Windows editors) start the file with a byte-order mark,
+    # which would otherwise be part of the first header cell ('\ufeffindex': read as a 'row,col' table).
+    with path.open(newline="", encoding="utf-8-sig") as fh:
         rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
     if not rows:
         raise ValueError(f"{path} is empty: expected napari's shapes CSV or 'row,col' lines")
