@@ -335,7 +335,38 @@ def test_segment_a_stack_on_chosen_frames(movie_files):
         found = polygon_mask(contour, movie.masks[int(t)].shape)
         assert (found & movie.masks[int(t)]).sum() / (found | movie.masks[int(t)]).sum() > 0.97
     labels = io.imread(tmp / "labels.tif")
-    assert labels.shape == movie.frames.shape and labels[0].max() == 0 and labels[3].max() == 2
+    assert labels.shape == movie.frames.shape and labels[0].max() == 0
+    assert [sorted(np.unique(labels[t])) for t in (1, 3, 5)] == [[0, 1]] * 3  # shape 0 is label 1 on every frame
+
+
+def test_mask_labels_shape_k_as_k_plus_1_on_every_frame_and_when_another_failed(tmp_path, monkeypatch):
+    # The labels counted (frame, shape) results: frame 0 held 1, 2, frame 1 held 3, 4, ...
+    import napari_physeg.core as core
+
+    tifffile = pytest.importorskip("tifffile")
+    frames = np.zeros((3, 40, 60), np.uint8)
+    frames[1] = 1  # tells frame 1 to the fake segment
+    tifffile.imwrite(tmp_path / "movie.tif", frames, photometric="minisblack")
+    boxes = [np.array([[5.0, 5.0], [5.0, 15.0], [15.0, 15.0], [15.0, 5.0]]) + [0, c] for c in (0, 20, 40)]
+    init = write_shapes_csv(tmp_path / "init.csv", boxes)
+
+    @functools.wraps(core.segment)
+    def fake(image, contour, **options):  # the contour itself; shape 1 fails on frame 1
+        if np.asarray(contour)[0, 1] == 25.0 and image[0, 0] == 1:
+            raise ValueError("the contour collapsed to a point")
+        return type("Result", (), dict(contour=np.asarray(contour), converged=True, steps=1, stop_reason="rest",
+                                       timings={"total": 0.0}))
+
+    monkeypatch.setattr(core, "segment", fake)
+    assert main(["segment", str(tmp_path / "movie.tif"), "--frames", "0:3", "--init", str(init),
+                 "--out", str(tmp_path / "o.csv"), "--mask", str(tmp_path / "labels.tif")]) == 1
+    with tifffile.TiffFile(tmp_path / "labels.tif") as tif:  # 3 frames: a stack, not a planar RGB image
+        labels = tif.asarray()
+        assert "S" not in tif.series[0].axes and labels.shape == (3, 40, 60)
+    assert [labels[t, 10, [10, 30, 50]].tolist() for t in range(3)] == [[1, 2, 3], [1, 0, 3], [1, 2, 3]]
+    assert main(["segment", str(tmp_path / "movie.tif"), "--frames", "0:3", "--init", str(init),
+                 "--out", str(tmp_path / "p.csv"), "--mask", str(tmp_path / "labels.png")]) == 2
+    assert not (tmp_path / "p.csv").exists()
 
 
 def test_track_a_zarr_stack_on_a_range_of_frames(movie_files):

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .io import open_stack, parse_frames, read_shapes_csv, same_file, write_shapes_csv
+from .io import TIFF_SUFFIXES, open_stack, parse_frames, read_shapes_csv, same_file, write_shapes_csv
 
 PROG = "napari-physeg"
 
@@ -238,6 +238,9 @@ def _segment(args) -> int:
     with open_stack(args.image, channel=args.channel) as stack:
         jobs, is_stack = _segment_jobs(args, len(stack), leading, len(shapes))
         check_contours(shapes, stack.shape[1:], args.init)
+        if args.mask and is_stack and args.mask.suffix.lower() not in TIFF_SUFFIXES:
+            raise ValueError(f"--mask {args.mask}: the labels of a stack are a stack, which only a TIFF holds: "
+                             "name it .tif")
         done, failed = _run_segment_jobs(stack, jobs, shapes, options, args.node_spacing, is_stack)
         shape = (len(stack), *stack.shape[1:]) if is_stack else tuple(stack.shape[1:])
     if not done:
@@ -248,7 +251,7 @@ def _segment(args) -> int:
     left_out = f" ({len(done)} of {len(jobs)} contours, without the {failed} that failed)" if failed else ""
     print(f"wrote {args.out}{left_out}")
     if args.mask:
-        _write_mask(args.mask, results, frames, shape)
+        _write_mask(args.mask, [(t, k, res.contour) for t, k, res in done], shape)
         print(f"wrote {args.mask}")
     return 1 if failed or not all(res.converged for _, _, res in done) else 0
 
@@ -304,18 +307,25 @@ def _segment_jobs(args, n_frames: int, leading, n_shapes: int):
     return [(0, k) for k in range(n_shapes)], False
 
 
-def _write_mask(path: Path, contours, frames, shape) -> None:
+def _write_mask(path: Path, contours, shape) -> None:
+    """Write a label image of ``shape`` (2D, or frames x rows x cols): each ``(t, k, contour)`` filled
+    with label ``k + 1`` on frame ``t``. Labelled by the shape's index, not the result's rank, so an
+    object keeps its label on every frame (and when another shape failed)."""
+    import tifffile
     from skimage import io
 
     from .core.contour import polygon_mask
     from .io import atomic_path
 
     labels = np.zeros(shape, dtype=np.uint16)
-    for k, (c, (t,)) in enumerate(zip(contours, frames), start=1):
+    for t, k, c in contours:
         plane = labels[t] if labels.ndim == 3 else labels
-        plane[polygon_mask(c, plane.shape)] = k
+        plane[polygon_mask(c, plane.shape)] = k + 1
     with atomic_path(path) as tmp:
-        io.imsave(tmp, labels, check_contrast=False)
+        if path.suffix.lower() in TIFF_SUFFIXES:  # minisblack: a stack of 3 or 4 frames is no RGB(A) image
+            tifffile.imwrite(tmp, labels, photometric="minisblack")
+        else:
+            io.imsave(tmp, labels, check_contrast=False)
 
 
 # --------------------------------------------------------------------------
@@ -518,8 +528,8 @@ def _add_segment(sub):
             "as axis-0, on a stack)")
     _frames_option(p, "frames of a stack to segment every contour on")
     _channel_option(p)
-    p.add_argument("--mask", type=Path, help="also write a label image (label k for shape k; a stack of labels "
-                   "for a stack)")
+    p.add_argument("--mask", type=Path, help="also write a label image: label k+1 for shape k of --init (0 is "
+                   "the background), on every frame of a stack of labels for a stack")
     _add_segment_options(p)
     p.set_defaults(run=_segment)
 
