@@ -383,6 +383,34 @@ def test_track_a_zarr_stack_on_a_range_of_frames(movie_files):
     assert sorted(set(table["frame"])) == [1, 2, 3, 4] and (table["status"] == "tracked").all()
 
 
+def test_a_frame_that_cannot_be_read_mid_run_is_named_on_a_line_of_its_own(tmp_path, capsys):
+    # The decoder's bare message was glued to the progress bar: "... 2/4 object-framesnapari-physeg: error: Zstd".
+    zarr = pytest.importorskip("zarr")
+    yy, xx = np.mgrid[:48, :48]
+    frame = (((yy - 24) ** 2 + (xx - 24) ** 2 < 10 ** 2) * 200 + 20).astype(np.uint8)
+    z = zarr.open(str(tmp_path / "movie.zarr"), mode="w", shape=(4, 48, 48), chunks=(1, 48, 48), dtype="u1")
+    z[:] = np.stack([frame] * 4)
+    root = tmp_path / "movie.zarr"
+    (chunk,) = [p for p in root.rglob("*") if p.relative_to(root).as_posix().startswith(("c/2/0/", "2."))]  # v3, v2
+    chunk.write_bytes(b"\x07" * 50)  # frame 2's chunk, corrupt
+    a = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    init = write_shapes_csv(tmp_path / "init.csv", [np.c_[24 + 14 * np.sin(a), 24 + 14 * np.cos(a)]])
+    assert main(["track", str(tmp_path / "movie.zarr"), "--init", str(init), "--out", str(tmp_path / "t")]) == 2
+    lines = capsys.readouterr().err.split("\n")
+    errors = [line for line in lines if "error:" in line]
+    assert len(errors) == 1 and errors[0].startswith(f"napari-physeg: error: could not read frame 2 of {tmp_path}")
+    assert "object-frames" in "".join(lines[:lines.index(errors[0])])  # the bar was drawn before it
+
+
+def test_a_tiff_cut_short_is_refused_before_any_work(movie_files, capsys, no_work):
+    movie, stack, init, tmp = movie_files
+    cut = tmp / "cut.tif"
+    cut.write_bytes(stack.read_bytes()[:stack.stat().st_size // 2])  # an interrupted copy
+    assert main(["track", str(cut), "--init", str(init), "--out", str(tmp / "tracked")]) == 2
+    err = capsys.readouterr().err
+    assert f"{cut} is cut short" in err and "copy it again" in err and not (tmp / "tracked").exists()
+
+
 def test_match_of_contours_in_x_y_and_row_col_says_so_on_one_line(tmp_path, capsys):
     a = data.hand_outline("open", n_nodes=67)
     hands = write_shapes_csv(tmp_path / "hands.csv", [a, a[:, ::-1]])

@@ -412,12 +412,19 @@ class _ProgressBar:
             print(file=sys.stderr)
 
 
+def _new_line() -> str:
+    """A line break if a progress bar is drawn on stderr's current line (a message then starts a line
+    of its own, not glued to the bar), else nothing."""
+    if not _ProgressBar.mid_line:
+        return ""
+    _ProgressBar.mid_line = False
+    return "\n"
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """A warning as one line of the program's (not Python's file, line and source), on a line
     of its own when a progress bar is being drawn."""
-    if _ProgressBar.mid_line:
-        print(file=sys.stderr)
-    print(f"{PROG}: warning: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+    print(f"{_new_line()}{PROG}: warning: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
 
 
 def _start_frame(args, leading):
@@ -662,10 +669,10 @@ def main(argv=None) -> int:
             return args.run(args)
     except (ValueError, OSError) as err:  # bad input, or a file that cannot be read or written
         text = " ".join(str(err).split())
-        print(f"{PROG}: error: {text}", file=sys.stderr)
+        print(f"{_new_line()}{PROG}: error: {text}", file=sys.stderr)
         return 2
     except RuntimeError as err:  # DivergenceError
-        print(f"{PROG}: {' '.join(str(err).split())}", file=sys.stderr)
+        print(f"{_new_line()}{PROG}: {' '.join(str(err).split())}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         resume = " (run the same command again to resume)" if args.command == "batch" else ""

@@ -227,13 +227,18 @@ def open_stack(path, *, channel: int | None = None):
         try:
             if is_zarr(path):
                 _need("zarr", path)
-                stack = da.from_zarr(str(path))
+                import zarr
+
+                stack = _named_reads(zarr.open_array(str(path), mode="r"), path)
                 samples = False
             elif path.suffix.lower() in TIFF_SUFFIXES:
                 import tifffile
 
                 with tifffile.TiffFile(path) as tif:
                     samples = tif.series[0].axes.endswith("S")
+                    cut = _cut_short(tif.series[0], path)
+                if cut:
+                    raise _Refused(cut)
                 try:
                     import zarr
                 except ImportError:  # without zarr: a memory map if the file allows, else read whole
@@ -241,13 +246,15 @@ def open_stack(path, *, channel: int | None = None):
                 else:
                     store = tifffile.imread(path, aszarr=True)
                     closers.append(store.close)
-                    stack = da.from_zarr(zarr.open(store, mode="r"))
+                    stack = _named_reads(zarr.open(store, mode="r"), path)
             else:
                 from skimage import io
 
                 image = io.imread(path)
                 samples = image.ndim == 3 and image.shape[-1] in (3, 4)
                 stack = da.from_array(image, chunks=image.shape)
+        except _Refused:
+            raise
         except Exception as err:  # unreadable or corrupt: one plain sentence
             raise ValueError(f"could not read {path}: {type(err).__name__}: {err}") from None
         # Frames are read here, in this process: the store is not for sending
@@ -257,6 +264,59 @@ def open_stack(path, *, channel: int | None = None):
     finally:
         for close in closers:
             close()
+
+
+class _NamedReads:
+    """An array whose failed reads name the file and the frames: a frame is read deep in a run
+    (tracking frame after frame), where a decoder's bare message says neither."""
+
+    def __init__(self, array, path):
+        self.array, self.path = array, path
+        self.shape, self.dtype, self.ndim = tuple(array.shape), array.dtype, len(array.shape)
+
+    def __getitem__(self, key):
+        try:
+            return np.asarray(self.array[key])
+        except Exception as err:  # noqa: BLE001 - any decoder's or store's error: one plain sentence
+            raise ValueError(f"could not read {self._frames(key)}{self.path}: {type(err).__name__}: "
+                             f"{' '.join(str(err).split())}") from None
+
+    def _frames(self, key) -> str:
+        """'frame 2 of ' for a read of frame 2 (dask asks for a chunk, or one frame), '' for a 2D image."""
+        first = key[0] if isinstance(key, tuple) and key else key
+        if self.ndim < 3 or not isinstance(first, (int, np.integer, slice)):
+            return ""
+        frames = range(self.shape[0])[first]
+        if isinstance(frames, int):
+            return f"frame {frames} of "
+        return "" if not frames else (f"frame {frames[0]} of " if len(frames) == 1 else
+                                      f"frames {frames[0]} to {frames[-1]} of ")
+
+
+def _named_reads(array, path):
+    """A zarr array (a zarr store, or a TIFF through tifffile's zarr store) as a dask array of its
+    chunks whose reads, when they fail, name the file and the frame (see _NamedReads)."""
+    import dask.array as da
+
+    return da.from_array(_NamedReads(array, path), chunks=array.chunks, asarray=False,
+                         name=f"napari-physeg-{uuid.uuid4().hex}")
+
+
+class _Refused(ValueError):
+    """A file open_stack refuses with its own message (not wrapped as 'could not read')."""
+
+
+def _cut_short(series, path) -> str | None:
+    """Why a TIFF is cut short (an interrupted copy, a full disk), or None: its frames' bytes run
+    past the end of the file. Told from the header, before any frame is read; only an uncompressed
+    series stored in one piece says where its data end (tifffile's dataoffset), others fail on the
+    frame that is missing."""
+    end = series.dataoffset + series.nbytes if series.dataoffset is not None else 0
+    size = Path(path).stat().st_size
+    if end <= size:
+        return None
+    return (f"{path} is cut short: its {' x '.join(map(str, series.shape))} pixels need {end} bytes, the file "
+            f"holds {size} (an interrupted copy, a full disk?): copy it again")
 
 
 def _need(module: str, path) -> None:
