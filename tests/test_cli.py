@@ -556,6 +556,38 @@ def test_options_reach_segment_by_name_and_the_rest_keep_its_defaults(scene, mon
                        "weights": {"edges": 0.5, "distance": 0.5}, "sigma_factor": 1.2, "max_steps": 400}
 
 
+@pytest.mark.parametrize("command", ["segment", "track", "batch track"])
+def test_more_nodes_than_segment_keeps_are_refused_before_any_work(movie_files, capsys, no_work, command):
+    # --n-nodes 100000 (or --node-spacing 0.01) ran for hours: the core keeps at most 1000 as a contour grows.
+    movie, stack, init, tmp = movie_files
+    out = tmp / ("o.csv" if command == "segment" else "out")
+    assert main([*command.split(), str(stack), "--init", str(init), "--out", str(out), "--n-nodes", "100000"]) == 2
+    err = capsys.readouterr().err
+    assert "'100000' must be <= 1000 (segment's node budget" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_a_sub_pixel_node_spacing_gives_the_core_s_node_budget_with_a_warning(scene, monkeypatch, capsys):
+    import napari_physeg.core as core
+
+    seen, real = [], core.segment
+
+    @functools.wraps(real)
+    def spy(image, init, **options):
+        seen.append(options["n_nodes"])
+        assert options["n_nodes"] <= 1000, "this run would take hours"
+        return real(image, init, **options)
+
+    monkeypatch.setattr(core, "segment", spy)
+    obj, image, init, tmp = scene
+    assert main(["segment", str(image), "--init", str(init), "--out", str(tmp / "a.csv"), "--node-spacing", "3"]) == 0
+    assert seen[-1] < 1000 and "warning" not in capsys.readouterr().err  # the normal range: as before
+    assert main(["segment", str(image), "--init", str(init), "--out", str(tmp / "b.csv"), "--node-spacing",
+                 "0.01"]) == 0
+    warned = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+    assert seen[-1] == 1000 and len(warned) == 1 and "a node spacing of 0.01 px gives a contour" in warned[0]
+
+
 def test_a_material_without_stiffness_leaves_the_r_to_segment(scene, monkeypatch):
     # segment() picks the r that suits the material (copper: the paper's 1e6), as the widget shows it.
     import napari_physeg.core as core
