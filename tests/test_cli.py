@@ -296,6 +296,26 @@ def test_no_traceback_from_the_installed_command(scene):
     assert not (tmp / "out").exists()
 
 
+@pytest.mark.parametrize("command, swap, message", [
+    ("segment", {"--init": "{stack}"}, "cannot read {stack} as a CSV: it is not text (is it the image?)"),
+    ("track", {"--out": "{tmp}/a-file"}, "{tmp}/a-file exists and is a file: choose another output"),
+    ("track", {"--init": "{tmp}/a-folder"}, "--init {tmp}/a-folder is a folder, not a CSV file"),
+    ("segment", {"--out": "{tmp}/a-folder"}, "{tmp}/a-folder exists and is a folder: choose another output"),
+    ("segment", {"stack": "{tmp}/a-folder"}, "image {tmp}/a-folder is a folder, not an image or a zarr store"),
+])
+def test_a_wrong_kind_of_file_is_named_and_explained(movie_files, capsys, no_work, command, swap, message):
+    # Seen: "'utf-8' codec can't decode byte 0xff", "[Errno 20] Not a directory", "[Errno 21] Is a directory".
+    movie, stack, init, tmp = movie_files
+    (tmp / "a-file").write_text("")
+    (tmp / "a-folder").mkdir()
+    names = dict(stack=stack, tmp=tmp)
+    given = {"stack": str(stack), "--init": str(init), "--out": str(tmp / "o"),
+             **{k: v.format(**names) for k, v in swap.items()}}
+    assert main([command, given.pop("stack"), "--frames", "0", *[a for kv in given.items() for a in kv]]) == 2
+    err = capsys.readouterr().err
+    assert message.format(**names) in err and len(err.strip().splitlines()) == 1 and "Errno" not in err
+
+
 def test_track_refuses_a_non_empty_out_without_overwrite(movie_files, capsys, no_work):
     movie, stack, init, tmp = movie_files
     (tmp / "tracked").mkdir()

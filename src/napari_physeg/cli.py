@@ -195,9 +195,17 @@ def _add_io(p, *, out_help: str, init: bool = True) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace existing output (never an input file)")
 
 
-def _check_input(path: Path, what: str) -> None:
+def _check_input(path: Path, what: str, *, image: bool = False) -> None:
+    """Refuse an input that is missing, or a folder where a file is expected (an image may be a
+    zarr store): a plain sentence, not open()'s [Errno 21]."""
+    from .io import is_zarr
+
     if not path.exists():
         raise ValueError(f"{what} {path} does not exist")
+    if path.is_dir() and not (image and is_zarr(path)):
+        kind = "an image or a zarr store" if image else "a CSV file"
+        raise ValueError(f"{what} {path} is a folder, not {kind}: give a file in it"
+                         + (f" (e.g. {path / '*.tif'})" if image else ""))
 
 
 def _check_output(path: Path, args, inputs, *, folder: bool = False, writes=()) -> None:
@@ -216,10 +224,11 @@ def _check_output(path: Path, args, inputs, *, folder: bool = False, writes=()) 
         if clash is not None:
             raise ValueError(f"--out {path} would replace the input {source} (the result's {clash.name} is "
                              "written there): choose another --out folder, or move the input")
+    # A file where a folder goes (or the reverse) first: --overwrite would not help.
+    check_writable(path, folder=folder)
     exists = path.exists() and (not folder or any(path.iterdir()))
     if exists and not args.overwrite:
         raise ValueError(f"{path} exists: pass --overwrite to replace it, or choose another --out")
-    check_writable(path, folder=folder)
 
 
 def _read_contours(path: Path, what: str = "--init", leading: bool = False):
@@ -235,7 +244,7 @@ def _read_contours(path: Path, what: str = "--init", leading: bool = False):
 def _segment(args) -> int:
     from .batch import check_contours
 
-    _check_input(args.image, "image")
+    _check_input(args.image, "image", image=True)
     shapes, leading = _read_contours(args.init, leading=True)
     _check_output(args.out, args, [args.image, args.init])
     if args.mask:
@@ -447,7 +456,7 @@ def _track(args) -> int:
     from .batch import TRACK_FILES, check_track, track_file
     from .core import LOST
 
-    _check_input(args.stack, "stack")
+    _check_input(args.stack, "stack", image=True)
     inits, leading = _read_contours(args.init, leading=True)
     _check_output(args.out, args, [args.stack, args.init], folder=True, writes=TRACK_FILES)
     options = _segment_options(args)
@@ -474,7 +483,7 @@ def _batch(args) -> int:
     from . import batch
 
     for path in args.inputs:
-        _check_input(path, "input")
+        _check_input(path, "input", image=True)
     shapes, leading = _read_contours(args.init, leading=True)
     batch.check_inputs_kept(args.out, [*args.inputs, args.init])
     options = _segment_options(args)

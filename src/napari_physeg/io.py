@@ -64,8 +64,12 @@ def read_shapes_csv(path, *, leading: bool = False):
     path = Path(path)
     # utf-8-sig: Excel's "CSV UTF-8" (and many Windows editors) start the file with a byte-order mark,
     # which would otherwise be part of the first header cell ('\ufeffindex': read as a 'row,col' table).
-    with path.open(newline="", encoding="utf-8-sig") as fh:
-        rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
+            rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
+    except (UnicodeDecodeError, csv.Error):  # binary: an image given for the contours, most often
+        raise ValueError(f"cannot read {path} as a CSV: it is not text (is it the image?); contours are "
+                         "napari's shapes CSV or a 'row,col' table") from None
     if not rows:
         raise ValueError(f"{path} is empty: expected napari's shapes CSV or 'row,col' lines")
     header = [c.strip() for c in rows[0]]
