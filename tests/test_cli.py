@@ -657,6 +657,30 @@ def test_channel_of_an_rgb_image_is_still_read(tmp_path):
         assert stack.shape == (1, 20, 30) and int(stack.max()) == 9
 
 
+def test_channel_of_a_hyperstack_and_of_an_rgb_zarr_movie_is_taken(tmp_path, capsys, no_work):
+    # Seen: "tcyx.tif has no channels (a 3 x 2 x 20 x 30 stack): leave out --channel", the same for the zarr.
+    tifffile, zarr = pytest.importorskip("tifffile"), pytest.importorskip("zarr")
+    from napari_physeg.io import open_stack
+
+    tcyx = np.arange(3 * 2 * 20 * 30, dtype=np.uint16).reshape(3, 2, 20, 30)
+    tifffile.imwrite(tmp_path / "tcyx.tif", tcyx, imagej=True, metadata={"axes": "TCYX"})
+    rgb = zarr.open(str(tmp_path / "rgb.zarr"), mode="w", shape=(3, 20, 30, 3), dtype="u2")
+    rgb[:] = np.moveaxis(np.arange(3 * 3 * 20 * 30, dtype=np.uint16).reshape(3, 3, 20, 30), 1, -1)
+    for name, c, expected in (("tcyx.tif", 1, tcyx[:, 1]), ("rgb.zarr", 2, rgb[:][..., 2])):
+        with open_stack(tmp_path / name, channel=c) as stack:
+            np.testing.assert_array_equal(np.asarray(stack), expected)
+    init = write_shapes_csv(tmp_path / "init.csv", [[[5, 5], [5, 15], [15, 10]]])
+    for name, message in (("tcyx.tif", "has 2 channels (axis C of TCYX, shape 3 x 2 x 20 x 30): choose one with "
+                                       "--channel 0 or 1"),
+                          ("rgb.zarr", "has 3 channels (RGB(A) samples, the last axis, shape 3 x 20 x 30 x 3): "
+                                       "choose one with --channel 0, 1 or 2")):
+        assert main(["track", str(tmp_path / name), "--init", str(init), "--out", str(tmp_path / "o")]) == 2
+        assert f"{tmp_path / name} {message}" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="channel 2 is out of range: .* has 2 channels \\(axis C of TCYX\\)"):
+        with open_stack(tmp_path / "tcyx.tif", channel=2):
+            pass
+
+
 def test_track_refuses_a_single_image(scene, capsys, no_work):
     obj, image, init, tmp = scene
     assert main(["track", str(image), "--init", str(init), "--out", str(tmp / "tracked")]) == 2

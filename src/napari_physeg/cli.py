@@ -540,7 +540,8 @@ def _frames_option(p, what):
 
 
 def _channel_option(p):
-    p.add_argument("--channel", type=_number(int, 0), help="channel of an RGB(A) image to use: 0 red, 1 green, 2 blue")
+    p.add_argument("--channel", type=_number(int, 0), help="channel to use: of an RGB(A) image or movie (0 red, "
+                   "1 green, 2 blue), or of the C axis of an ImageJ or OME TIFF hyperstack (e.g. T x C x Y x X)")
 
 
 def _add_segment(sub):

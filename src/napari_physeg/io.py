@@ -207,7 +207,9 @@ def open_stack(path, *, channel: int | None = None):
         array (a ``.zarr`` folder) or another 2D image scikit-image reads
         (PNG, JPEG, ...; read whole). A 2D image is a stack of one frame.
     channel : int, optional
-        Channel of an RGB(A) image (its last axis of 3 or 4 samples).
+        Channel to take: of an RGB(A) image or movie (a last axis of 3 or 4
+        samples), or of a TIFF hyperstack whose axes name one C (ImageJ or
+        OME, e.g. ``TCYX``).
 
     Yields
     ------
@@ -234,12 +236,12 @@ def open_stack(path, *, channel: int | None = None):
                 import zarr
 
                 stack = _named_reads(zarr.open_array(str(path), mode="r"), path)
-                samples = False
+                axes = None  # a zarr array names no axes
             elif path.suffix.lower() in TIFF_SUFFIXES:
                 import tifffile
 
                 with tifffile.TiffFile(path) as tif:
-                    samples = tif.series[0].axes.endswith("S")
+                    axes = tif.series[0].axes
                     cut = _cut_short(tif.series[0], path)
                 if cut:
                     raise _Refused(cut)
@@ -255,7 +257,7 @@ def open_stack(path, *, channel: int | None = None):
                 from skimage import io
 
                 image = io.imread(path)
-                samples = image.ndim == 3 and image.shape[-1] in (3, 4)
+                axes = None
                 stack = da.from_array(image, chunks=image.shape)
         except _Refused:
             raise
@@ -264,7 +266,7 @@ def open_stack(path, *, channel: int | None = None):
         # Frames are read here, in this process: the store is not for sending
         # to a cluster (a distributed Client made default elsewhere would try).
         with dask.config.set(scheduler="synchronous"):
-            yield _as_frames(stack, samples, channel, path)
+            yield _as_frames(stack, axes, channel, path)
     finally:
         for close in closers:
             close()
@@ -340,27 +342,61 @@ def _tiff_without_zarr(path):
         return tifffile.imread(path)
 
 
-def _as_frames(stack, samples: bool, channel, path):
-    """``stack`` as ``(T, H, W)`` with one chunk per frame, the channel chosen."""
+def _as_frames(stack, axes: str | None, channel, path):
+    """``stack`` as ``(T, H, W)`` with one chunk per frame, the channel chosen.
+
+    ``axes`` are the file's own (a TIFF series': ``"TCYX"``, ``"YXS"``, ...), None when it names none.
+    """
+    where = _channel_axis(stack.shape, axes)
+    shape = " x ".join(map(str, stack.shape))
     if channel is not None:
-        # The file says so (TIFF samples), or an image whose last axis is 3 or 4 long: any 3D array
-        # would take a (T, H, W) stack's columns for channels.
-        if not (samples or (stack.ndim == 3 and stack.shape[-1] in (3, 4))):
+        if where is None and stack.ndim <= 3:
             kind = "image" if stack.ndim == 2 else "stack"
-            raise ValueError(f"{path} has no channels (a {' x '.join(map(str, stack.shape))} {kind}): "
-                             "leave out --channel")
-        if not 0 <= channel < stack.shape[-1]:
-            raise ValueError(f"channel {channel} is out of range: {path} has {stack.shape[-1]} channels")
-        stack = stack[..., channel]
-    elif samples:
-        raise ValueError(f"{path} is an RGB(A) image of shape {tuple(stack.shape)}: choose a channel with "
-                         "--channel 0, 1 or 2")
+            raise ValueError(f"{path} has no channels (a {shape} {kind}): leave out --channel")
+        if where is None:
+            raise ValueError(f"{path} has shape ({shape}) and names no channel axis: save one channel per file as "
+                             "(frames, rows, cols), or as an ImageJ hyperstack (axes TCYX)")
+        n = stack.shape[where]
+        if not 0 <= channel < n:
+            raise ValueError(f"channel {channel} is out of range: {path} has {n} channels "
+                             f"({_channel_name(where, axes)}): choose --channel {_choices(n)}")
+        stack = stack[(slice(None),) * where + (channel,)]
+    elif where is not None:
+        raise ValueError(f"{path} has {stack.shape[where]} channels ({_channel_name(where, axes)}, shape {shape}): "
+                         f"choose one with --channel {_choices(stack.shape[where])}")
     if stack.ndim == 2:
         stack = stack[None]
     if stack.ndim != 3:
         raise ValueError(f"{path} has shape {tuple(stack.shape)}: expected a 2D image or a (frames, rows, cols) "
                          "stack; save one channel and one z-plane per file (e.g. in Fiji: Image > Stacks)")
     return stack.rechunk((1, *stack.shape[1:]))
+
+
+def _channel_axis(shape, axes: str | None) -> int | None:
+    """The axis holding channels, or None: the one the file names (a TIFF's S, the samples of an RGB(A)
+    image, or C, the channels of an ImageJ or OME hyperstack), else a last axis of 3 or 4 on an image
+    or a movie (an RGB(A) PNG, a (T, H, W, 3) zarr array: they name no axes)."""
+    if axes and axes.endswith("S"):
+        return len(axes) - 1
+    if axes and "C" in axes:
+        return axes.index("C")
+    if len(shape) in (3, 4) and shape[-1] in (3, 4):
+        return len(shape) - 1
+    return None
+
+
+def _channel_name(where: int, axes: str | None) -> str:
+    """The channel axis in words, for a message: 'axis C of TCYX', 'RGB(A) samples, the last axis'."""
+    if axes and axes[where] == "C":
+        return f"axis C of {axes}"
+    return "RGB(A) samples, the last axis"
+
+
+def _choices(n: int) -> str:
+    """'0 or 1', '0, 1 or 2', '0 to 4': the channels to choose among."""
+    if n > 3:
+        return f"0 to {n - 1}"
+    return ", ".join(map(str, range(n - 1))) + f" or {n - 1}"
 
 
 def parse_frames(spec: str, n_frames: int) -> list[int]:
