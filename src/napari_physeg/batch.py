@@ -681,6 +681,7 @@ def _client(workers, scheduler, client):
     from dask.distributed import Client, LocalCluster
 
     if scheduler:
+        _check_address(scheduler)
         try:
             connected = Client(scheduler, timeout="10s", set_as_default=False)
         except (OSError, ValueError, TypeError) as err:  # refused, timed out, not an address
@@ -701,6 +702,23 @@ def _client(workers, scheduler, client):
             Client(cluster, set_as_default=False) as local:
         local.run(_ignore_interrupt)
         yield local
+
+
+def _check_address(scheduler) -> None:
+    """Raise ValueError for a malformed scheduler address (no port, an unknown scheme), before a
+    Client is made: Client() raises on one half-built, whose __del__ then waited 20 s at exit and
+    printed a traceback."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.comm.registry import get_backend
+
+    try:
+        scheme, location = parse_address(str(scheduler))
+        get_backend(scheme)  # an unknown scheme: ValueError naming the known ones
+        if scheme in ("tcp", "tls", "ws", "wss"):  # host:port (inproc and ucx have their own forms)
+            parse_host_port(location)
+    except ValueError as err:
+        raise ValueError(f"{scheduler!r} is not a dask scheduler address ({_one_line(err)}): give one such as "
+                         "tcp://10.0.0.5:8786 or myhost:8786") from None
 
 
 def _ignore_interrupt() -> None:
