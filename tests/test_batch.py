@@ -208,7 +208,7 @@ def test_stacks_open_lazily_one_frame_per_chunk(tmp_path, movie):
     ([], ["--out", "{tmp}/init.csv"], "is a file"),
     ([], ["--stiffness", "-1"], "stiffness"),
     ([], ["--material", "cheese"], "material"),
-    ([], ["--scheduler", "nonsense"], "could not reach the dask scheduler"),
+    ([], ["--scheduler", "nonsense"], "'nonsense' is not a dask scheduler address (missing port number"),
 ])
 def test_batch_refuses_bad_arguments_before_any_work(movies, capsys, inputs, options, message):
     paths, init, tmp = movies
@@ -219,6 +219,22 @@ def test_batch_refuses_bad_arguments_before_any_work(movies, capsys, inputs, opt
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
     assert sorted(p.name for p in tmp.iterdir()) == before  # nothing written
+
+
+@pytest.mark.parametrize("address", ["myhost", "tcp://myhost:abc", "foo://myhost:8786"])
+def test_a_malformed_scheduler_address_exits_2_at_once_without_a_traceback(movies, address):
+    # Seen: the right line, then 20 s of waiting and a Client.__del__ traceback (a half-built Client).
+    import subprocess
+    import sys
+
+    paths, init, tmp = movies
+    t0 = time.perf_counter()
+    run = subprocess.run([sys.executable, "-m", "napari_physeg.cli", "batch", "track", str(paths[0]), "--init",
+                          str(init), "--out", str(tmp / "out"), "--scheduler", address],
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2 and time.perf_counter() - t0 < 15
+    assert "is not a dask scheduler address" in run.stderr and len(run.stderr.strip().splitlines()) == 1
+    assert not (tmp / "out").exists()
 
 
 def test_a_batch_leaves_dask_on_its_default_scheduler(client, movies):
@@ -359,6 +375,28 @@ def test_batch_refuses_bad_frames_and_inputs_before_any_work(movies, monkeypatch
     err = capsys.readouterr().err
     assert message.format(**names) in err and len(err.strip().splitlines()) == 1
     assert sorted(p.name for p in tmp.iterdir()) == before
+
+
+@pytest.mark.parametrize("where", ["results/well0.tif-0123abcd/t00000/contours.csv", "summary.csv"])
+def test_batch_never_replaces_an_input_in_its_out_folder_even_with_overwrite(movies, monkeypatch, capsys, where):
+    # --overwrite deleted out/results, a contour drawn from an earlier result with it.
+    paths, init, tmp = movies
+
+    def no_cluster(*args, **kwargs):
+        raise AssertionError("a cluster was started")
+
+    monkeypatch.setattr(batch, "_client", no_cluster)
+    out = tmp / "out"
+    drawn = out / where
+    drawn.parent.mkdir(parents=True)
+    drawn.write_bytes(init.read_bytes())
+    (out / "batch.json").write_text("{}")  # an earlier run's folder
+    assert main(["batch", "segment", str(paths[0]), "--init", str(drawn), "--out", str(out), "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert f"the input {drawn} lies where the batch writes its results" in err and len(err.strip().splitlines()) == 1
+    with pytest.raises(ValueError, match="would be replaced"):  # from Python too
+        batch.track_files(paths, drawn, out, overwrite=True)
+    assert drawn.read_bytes() == init.read_bytes() and (out / "batch.json").read_text() == "{}"
 
 
 def test_batch_without_dask_distributed_says_what_to_install(movies, monkeypatch, capsys):

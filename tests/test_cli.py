@@ -45,6 +45,17 @@ def test_shapes_csv_round_trip_matches_napari_columns(tmp_path):
     assert len(back) == 2 and all(np.array_equal(a, b) for a, b in zip(shapes, back))
 
 
+def test_a_shapes_csv_with_a_byte_order_mark_is_read_shape_by_shape(tmp_path):
+    # Saved by Excel as "CSV UTF-8": the BOM made the header '\ufeffindex', one contour of every vertex.
+    shapes = [np.array([[1.5, 2.25], [3.0, 4.0], [5.0, 1.0]]), np.array([[0.0, 0.0], [0.0, 9.0], [9.0, 0.0]])]
+    text = write_shapes_csv(tmp_path / "s.csv", shapes).read_text()
+    (tmp_path / "bom.csv").write_text(text, encoding="utf-8-sig")
+    back = read_shapes_csv(tmp_path / "bom.csv")
+    assert len(back) == 2 and all(np.array_equal(a, b) for a, b in zip(shapes, back))
+    (tmp_path / "plain-bom.csv").write_text("row,col\n1,2\n3,4\n5,1\n", encoding="utf-8-sig")
+    assert np.array_equal(read_shapes_csv(tmp_path / "plain-bom.csv")[0], [[1, 2], [3, 4], [5, 1]])
+
+
 def test_nd_shapes_keep_the_last_two_axes_and_plain_tables_work(tmp_path):
     p = tmp_path / "nd.csv"
     p.write_text("index,shape-type,vertex-index,axis-0,axis-1,axis-2\n"
@@ -111,6 +122,29 @@ def test_track_refuses_contours_drawn_on_several_frames(movie_files, capsys):
     init = write_shapes_csv(tmp / "two.csv", [movie.outlines[0][::6], movie.outlines[3][::6]], leading=[(0,), (3,)])
     assert main(["track", str(stack), "--init", str(init), "--out", str(tmp / "o")]) == 2
     assert "--start" in capsys.readouterr().err
+
+
+def test_segment_keeps_the_contours_that_converged_when_others_fail(tmp_path, capsys):
+    # Shape 1 is drawn on the background (it collapses), frame 1 is blank: every contour was lost, exit 2.
+    tifffile = pytest.importorskip("tifffile")
+    rng = np.random.default_rng(1)
+    yy, xx = np.mgrid[:96, :96]
+    image = (((yy - 35) ** 2 + (xx - 35) ** 2 < 12 ** 2) * 150 + 30 + rng.normal(0, 3, yy.shape)).clip(0, 255)
+    tifffile.imwrite(tmp_path / "movie.tif", np.stack([image, np.full_like(image, 30)]).astype(np.uint8))
+    a = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    init = write_shapes_csv(tmp_path / "init.csv", [np.c_[35 + 18 * np.sin(a), 35 + 18 * np.cos(a)],
+                                                     np.c_[72 + 8 * np.sin(a), 72 + 8 * np.cos(a)]])
+    out = tmp_path / "out.csv"
+    assert main(["segment", str(tmp_path / "movie.tif"), "--frames", "0:2", "--init", str(init), "--out", str(out),
+                 "--polarity", "bright"]) == 1
+    captured = capsys.readouterr()
+    failed = [line for line in captured.err.splitlines() if " failed: " in line]
+    assert [line.split(" failed: ")[0] for line in failed] == [
+        "napari-physeg: frame 0, shape 1", "napari-physeg: frame 1, shape 0", "napari-physeg: frame 1, shape 1"]
+    assert "collapsed to a point" in failed[0] and "constant" in failed[1]
+    assert "frame 0, shape 0: " in captured.out and "1 of 4 contours" in captured.out
+    (contour,), (lead,) = read_shapes_csv(out, leading=True)
+    assert lead == (0.0,) and np.hypot(*(contour - 35).T).mean() == pytest.approx(12, abs=1.5)
 
 
 # --------------------------------------------------------------------------
@@ -232,6 +266,19 @@ def test_segment_refuses_bad_input_before_any_work(scene, capsys, no_work, case)
     assert {p.name: p.read_bytes() for p in tmp.iterdir() if p.is_file()} == before  # nothing written
 
 
+@pytest.mark.parametrize("mask", ["o.csv", "./sub/../o.csv"])
+def test_segment_refuses_a_mask_at_the_out_path_before_any_work(scene, capsys, no_work, monkeypatch, mask):
+    # --out does not exist yet: the label image replaced the contours CSV, exit 0.
+    obj, image, init, tmp = scene
+    (tmp / "sub").mkdir()
+    before = sorted(p.name for p in tmp.iterdir())
+    monkeypatch.chdir(tmp)
+    assert main(["segment", str(image), "--init", str(init), "--out", "o.csv", "--mask", mask]) == 2
+    err = capsys.readouterr().err
+    assert "is the same file as --out" in err and len(err.strip().splitlines()) == 1
+    assert sorted(p.name for p in tmp.iterdir()) == before  # nothing written
+
+
 @pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="root may write to a read-only folder")
 def test_an_unwritable_out_is_refused_before_any_work(scene, capsys, no_work):
     obj, image, init, tmp = scene
@@ -249,6 +296,26 @@ def test_no_traceback_from_the_installed_command(scene):
     assert not (tmp / "out").exists()
 
 
+@pytest.mark.parametrize("command, swap, message", [
+    ("segment", {"--init": "{stack}"}, "cannot read {stack} as a CSV: it is not text (is it the image?)"),
+    ("track", {"--out": "{tmp}/a-file"}, "{tmp}/a-file exists and is a file: choose another output"),
+    ("track", {"--init": "{tmp}/a-folder"}, "--init {tmp}/a-folder is a folder, not a CSV file"),
+    ("segment", {"--out": "{tmp}/a-folder"}, "{tmp}/a-folder exists and is a folder: choose another output"),
+    ("segment", {"stack": "{tmp}/a-folder"}, "image {tmp}/a-folder is a folder, not an image or a zarr store"),
+])
+def test_a_wrong_kind_of_file_is_named_and_explained(movie_files, capsys, no_work, command, swap, message):
+    # Seen: "'utf-8' codec can't decode byte 0xff", "[Errno 20] Not a directory", "[Errno 21] Is a directory".
+    movie, stack, init, tmp = movie_files
+    (tmp / "a-file").write_text("")
+    (tmp / "a-folder").mkdir()
+    names = dict(stack=stack, tmp=tmp)
+    given = {"stack": str(stack), "--init": str(init), "--out": str(tmp / "o"),
+             **{k: v.format(**names) for k, v in swap.items()}}
+    assert main([command, given.pop("stack"), "--frames", "0", *[a for kv in given.items() for a in kv]]) == 2
+    err = capsys.readouterr().err
+    assert message.format(**names) in err and len(err.strip().splitlines()) == 1 and "Errno" not in err
+
+
 def test_track_refuses_a_non_empty_out_without_overwrite(movie_files, capsys, no_work):
     movie, stack, init, tmp = movie_files
     (tmp / "tracked").mkdir()
@@ -256,6 +323,19 @@ def test_track_refuses_a_non_empty_out_without_overwrite(movie_files, capsys, no
     assert main(["track", str(stack), "--init", str(init), "--out", str(tmp / "tracked")]) == 2
     assert "--overwrite" in capsys.readouterr().err
     assert (tmp / "tracked" / "contours.csv").read_text() == "mine"
+
+
+@pytest.mark.parametrize("name", ["contours.csv", "tracks.csv"])
+def test_track_never_replaces_an_input_in_its_out_folder_even_with_overwrite(movie_files, capsys, no_work, name):
+    # e.g. --out . next to the drawing saved as contours.csv: the tracking replaced it, exit 0.
+    movie, stack, init, tmp = movie_files
+    (tmp / "tracked").mkdir()
+    drawn = tmp / "tracked" / name
+    drawn.write_bytes(init.read_bytes())
+    assert main(["track", str(stack), "--init", str(drawn), "--out", str(tmp / "tracked"), "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert f"would replace the input {drawn}" in err and len(err.strip().splitlines()) == 1
+    assert drawn.read_bytes() == init.read_bytes() and [p.name for p in (tmp / "tracked").iterdir()] == [name]
 
 
 # --------------------------------------------------------------------------
@@ -275,7 +355,38 @@ def test_segment_a_stack_on_chosen_frames(movie_files):
         found = polygon_mask(contour, movie.masks[int(t)].shape)
         assert (found & movie.masks[int(t)]).sum() / (found | movie.masks[int(t)]).sum() > 0.97
     labels = io.imread(tmp / "labels.tif")
-    assert labels.shape == movie.frames.shape and labels[0].max() == 0 and labels[3].max() == 2
+    assert labels.shape == movie.frames.shape and labels[0].max() == 0
+    assert [sorted(np.unique(labels[t])) for t in (1, 3, 5)] == [[0, 1]] * 3  # shape 0 is label 1 on every frame
+
+
+def test_mask_labels_shape_k_as_k_plus_1_on_every_frame_and_when_another_failed(tmp_path, monkeypatch):
+    # The labels counted (frame, shape) results: frame 0 held 1, 2, frame 1 held 3, 4, ...
+    import napari_physeg.core as core
+
+    tifffile = pytest.importorskip("tifffile")
+    frames = np.zeros((3, 40, 60), np.uint8)
+    frames[1] = 1  # tells frame 1 to the fake segment
+    tifffile.imwrite(tmp_path / "movie.tif", frames, photometric="minisblack")
+    boxes = [np.array([[5.0, 5.0], [5.0, 15.0], [15.0, 15.0], [15.0, 5.0]]) + [0, c] for c in (0, 20, 40)]
+    init = write_shapes_csv(tmp_path / "init.csv", boxes)
+
+    @functools.wraps(core.segment)
+    def fake(image, contour, **options):  # the contour itself; shape 1 fails on frame 1
+        if np.asarray(contour)[0, 1] == 25.0 and image[0, 0] == 1:
+            raise ValueError("the contour collapsed to a point")
+        return type("Result", (), dict(contour=np.asarray(contour), converged=True, steps=1, stop_reason="rest",
+                                       timings={"total": 0.0}))
+
+    monkeypatch.setattr(core, "segment", fake)
+    assert main(["segment", str(tmp_path / "movie.tif"), "--frames", "0:3", "--init", str(init),
+                 "--out", str(tmp_path / "o.csv"), "--mask", str(tmp_path / "labels.tif")]) == 1
+    with tifffile.TiffFile(tmp_path / "labels.tif") as tif:  # 3 frames: a stack, not a planar RGB image
+        labels = tif.asarray()
+        assert "S" not in tif.series[0].axes and labels.shape == (3, 40, 60)
+    assert [labels[t, 10, [10, 30, 50]].tolist() for t in range(3)] == [[1, 2, 3], [1, 0, 3], [1, 2, 3]]
+    assert main(["segment", str(tmp_path / "movie.tif"), "--frames", "0:3", "--init", str(init),
+                 "--out", str(tmp_path / "p.csv"), "--mask", str(tmp_path / "labels.png")]) == 2
+    assert not (tmp_path / "p.csv").exists()
 
 
 def test_track_a_zarr_stack_on_a_range_of_frames(movie_files):
@@ -290,6 +401,34 @@ def test_track_a_zarr_stack_on_a_range_of_frames(movie_files):
     assert [f[0] for f in frames] == [1, 2, 3, 4]  # the stack's own frame numbers
     table = __import__("pandas").read_csv(out / "tracks.csv")
     assert sorted(set(table["frame"])) == [1, 2, 3, 4] and (table["status"] == "tracked").all()
+
+
+def test_a_frame_that_cannot_be_read_mid_run_is_named_on_a_line_of_its_own(tmp_path, capsys):
+    # The decoder's bare message was glued to the progress bar: "... 2/4 object-framesnapari-physeg: error: Zstd".
+    zarr = pytest.importorskip("zarr")
+    yy, xx = np.mgrid[:48, :48]
+    frame = (((yy - 24) ** 2 + (xx - 24) ** 2 < 10 ** 2) * 200 + 20).astype(np.uint8)
+    z = zarr.open(str(tmp_path / "movie.zarr"), mode="w", shape=(4, 48, 48), chunks=(1, 48, 48), dtype="u1")
+    z[:] = np.stack([frame] * 4)
+    root = tmp_path / "movie.zarr"
+    (chunk,) = [p for p in root.rglob("*") if p.relative_to(root).as_posix().startswith(("c/2/0/", "2."))]  # v3, v2
+    chunk.write_bytes(b"\x07" * 50)  # frame 2's chunk, corrupt
+    a = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    init = write_shapes_csv(tmp_path / "init.csv", [np.c_[24 + 14 * np.sin(a), 24 + 14 * np.cos(a)]])
+    assert main(["track", str(tmp_path / "movie.zarr"), "--init", str(init), "--out", str(tmp_path / "t")]) == 2
+    lines = capsys.readouterr().err.split("\n")
+    errors = [line for line in lines if "error:" in line]
+    assert len(errors) == 1 and errors[0].startswith(f"napari-physeg: error: could not read frame 2 of {tmp_path}")
+    assert "object-frames" in "".join(lines[:lines.index(errors[0])])  # the bar was drawn before it
+
+
+def test_a_tiff_cut_short_is_refused_before_any_work(movie_files, capsys, no_work):
+    movie, stack, init, tmp = movie_files
+    cut = tmp / "cut.tif"
+    cut.write_bytes(stack.read_bytes()[:stack.stat().st_size // 2])  # an interrupted copy
+    assert main(["track", str(cut), "--init", str(init), "--out", str(tmp / "tracked")]) == 2
+    err = capsys.readouterr().err
+    assert f"{cut} is cut short" in err and "copy it again" in err and not (tmp / "tracked").exists()
 
 
 def test_match_of_contours_in_x_y_and_row_col_says_so_on_one_line(tmp_path, capsys):
@@ -437,6 +576,38 @@ def test_options_reach_segment_by_name_and_the_rest_keep_its_defaults(scene, mon
                        "weights": {"edges": 0.5, "distance": 0.5}, "sigma_factor": 1.2, "max_steps": 400}
 
 
+@pytest.mark.parametrize("command", ["segment", "track", "batch track"])
+def test_more_nodes_than_segment_keeps_are_refused_before_any_work(movie_files, capsys, no_work, command):
+    # --n-nodes 100000 (or --node-spacing 0.01) ran for hours: the core keeps at most 1000 as a contour grows.
+    movie, stack, init, tmp = movie_files
+    out = tmp / ("o.csv" if command == "segment" else "out")
+    assert main([*command.split(), str(stack), "--init", str(init), "--out", str(out), "--n-nodes", "100000"]) == 2
+    err = capsys.readouterr().err
+    assert "'100000' must be <= 1000 (segment's node budget" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_a_sub_pixel_node_spacing_gives_the_core_s_node_budget_with_a_warning(scene, monkeypatch, capsys):
+    import napari_physeg.core as core
+
+    seen, real = [], core.segment
+
+    @functools.wraps(real)
+    def spy(image, init, **options):
+        seen.append(options["n_nodes"])
+        assert options["n_nodes"] <= 1000, "this run would take hours"
+        return real(image, init, **options)
+
+    monkeypatch.setattr(core, "segment", spy)
+    obj, image, init, tmp = scene
+    assert main(["segment", str(image), "--init", str(init), "--out", str(tmp / "a.csv"), "--node-spacing", "3"]) == 0
+    assert seen[-1] < 1000 and "warning" not in capsys.readouterr().err  # the normal range: as before
+    assert main(["segment", str(image), "--init", str(init), "--out", str(tmp / "b.csv"), "--node-spacing",
+                 "0.01"]) == 0
+    warned = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+    assert seen[-1] == 1000 and len(warned) == 1 and "a node spacing of 0.01 px gives a contour" in warned[0]
+
+
 def test_a_material_without_stiffness_leaves_the_r_to_segment(scene, monkeypatch):
     # segment() picks the r that suits the material (copper: the paper's 1e6), as the widget shows it.
     import napari_physeg.core as core
@@ -484,6 +655,30 @@ def test_channel_of_an_rgb_image_is_still_read(tmp_path):
     io.imsave(tmp_path / "rgb.png", rgb, check_contrast=False)
     with open_stack(tmp_path / "rgb.png", channel=1) as stack:
         assert stack.shape == (1, 20, 30) and int(stack.max()) == 9
+
+
+def test_channel_of_a_hyperstack_and_of_an_rgb_zarr_movie_is_taken(tmp_path, capsys, no_work):
+    # Seen: "tcyx.tif has no channels (a 3 x 2 x 20 x 30 stack): leave out --channel", the same for the zarr.
+    tifffile, zarr = pytest.importorskip("tifffile"), pytest.importorskip("zarr")
+    from napari_physeg.io import open_stack
+
+    tcyx = np.arange(3 * 2 * 20 * 30, dtype=np.uint16).reshape(3, 2, 20, 30)
+    tifffile.imwrite(tmp_path / "tcyx.tif", tcyx, imagej=True, metadata={"axes": "TCYX"})
+    rgb = zarr.open(str(tmp_path / "rgb.zarr"), mode="w", shape=(3, 20, 30, 3), dtype="u2")
+    rgb[:] = np.moveaxis(np.arange(3 * 3 * 20 * 30, dtype=np.uint16).reshape(3, 3, 20, 30), 1, -1)
+    for name, c, expected in (("tcyx.tif", 1, tcyx[:, 1]), ("rgb.zarr", 2, rgb[:][..., 2])):
+        with open_stack(tmp_path / name, channel=c) as stack:
+            np.testing.assert_array_equal(np.asarray(stack), expected)
+    init = write_shapes_csv(tmp_path / "init.csv", [[[5, 5], [5, 15], [15, 10]]])
+    for name, message in (("tcyx.tif", "has 2 channels (axis C of TCYX, shape 3 x 2 x 20 x 30): choose one with "
+                                       "--channel 0 or 1"),
+                          ("rgb.zarr", "has 3 channels (RGB(A) samples, the last axis, shape 3 x 20 x 30 x 3): "
+                                       "choose one with --channel 0, 1 or 2")):
+        assert main(["track", str(tmp_path / name), "--init", str(init), "--out", str(tmp_path / "o")]) == 2
+        assert f"{tmp_path / name} {message}" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="channel 2 is out of range: .* has 2 channels \\(axis C of TCYX\\)"):
+        with open_stack(tmp_path / "tcyx.tif", channel=2):
+            pass
 
 
 def test_track_refuses_a_single_image(scene, capsys, no_work):

@@ -46,9 +46,10 @@ from pathlib import Path
 import numpy as np
 
 from .io import (TIFF_SUFFIXES, atomic_path, check_frames, is_zarr, open_stack, parse_frames, read_shapes_csv,
-                 write_shapes_csv, write_table)
+                 same_file, write_shapes_csv, write_table)
 
-__all__ = ["segment_files", "track_files", "track_file", "check_writable", "default_workers", "segment_options_for"]
+__all__ = ["segment_files", "track_files", "track_file", "check_writable", "check_inputs_kept", "default_workers",
+           "segment_options_for", "TRACK_FILES"]
 
 #: Status of a row whose task (or object) failed; the ``error`` column says why.
 FAILED = "failed"
@@ -62,6 +63,8 @@ _SETTINGS = "batch.json"
 _SUMMARY = "summary"
 _SOURCE = "input.json"  # the input's size and modification time when the task read it
 _SEP = " | "  # between the messages of the warnings column
+#: The files :func:`track_file` writes in its folder (the .parquet with pyarrow only).
+TRACK_FILES = ("contours.csv", "tracks.csv", "tracks.parquet")
 
 
 def default_workers() -> int:
@@ -75,12 +78,23 @@ def default_workers() -> int:
 def segment_options_for(contour, options: dict, node_spacing: float | None) -> dict:
     """``options`` of :func:`~napari_physeg.core.segment` for one contour:
     ``node_spacing`` (px) becomes its node count, as in the widgets
-    (:func:`~napari_physeg.core.contour.nodes_for_spacing`)."""
-    from .core.contour import nodes_for_spacing
+    (:func:`~napari_physeg.core.contour.nodes_for_spacing`), at most
+    ``MAX_DEFAULT_NODES`` (with a warning): the most :func:`~napari_physeg.core.segment`
+    keeps as a contour grows, and what it uses for a large contour by default."""
+    from .core.contour import nodes_for_spacing, perimeter
+    from .core.segmentation import MAX_DEFAULT_NODES
 
     if node_spacing is None:
         return dict(options)
-    return {**options, "n_nodes": nodes_for_spacing(np.asarray(contour, float), node_spacing)}
+    contour = np.asarray(contour, float)
+    n_nodes = nodes_for_spacing(contour, node_spacing)
+    if n_nodes > MAX_DEFAULT_NODES:  # a sub-pixel typo (0.01 for 1) ran for hours
+        length = perimeter(contour)
+        warnings.warn(f"a node spacing of {node_spacing:g} px gives a contour {length:.0f} px around {n_nodes} "
+                      f"nodes: it gets {MAX_DEFAULT_NODES} ({length / MAX_DEFAULT_NODES:.2g} px apart), the most "
+                      "segment keeps; 2-5 px is typical", UserWarning, stacklevel=2)
+        n_nodes = MAX_DEFAULT_NODES
+    return {**options, "n_nodes": n_nodes}
 
 
 # --------------------------------------------------------------------------
@@ -287,7 +301,7 @@ def track_file(path, inits, folder, *, frames: str | None = None, start: int | N
                 shapes.append(c)
                 leading.append((chosen[t],))
     folder.mkdir(parents=True, exist_ok=True)
-    written = [folder / "contours.csv"]
+    written = [folder / TRACK_FILES[0]]
     if shapes:
         write_shapes_csv(written[0], shapes, leading=leading)
     table = tr.table()
@@ -555,12 +569,13 @@ def _checked_run(inputs, inits, out):
             same = "is given twice" if seen[_name(p)] == p else f"is the same file as {seen[_name(p)]}"
             raise ValueError(f"the input {p} {same}: give each file once")
         seen[_name(p)] = p
+    out = Path(out).absolute()
+    check_inputs_kept(out, paths + ([inits] if isinstance(inits, (str, Path)) else []))
     if isinstance(inits, (str, Path)):
         inits = read_shapes_csv(inits)
     inits = tuple(as_contour(c, name=f"contour {k}").tolist() for k, c in enumerate(inits))
     if not inits:
         raise ValueError("no initial contour given")
-    out = Path(out).absolute()
     check_writable(out, folder=True)
     return paths, inits, out
 
@@ -580,6 +595,24 @@ def _check_scheduler(scheduler) -> None:
     if scheduler:
         with _client(None, scheduler, None):
             pass
+
+
+def check_inputs_kept(out, inputs) -> None:
+    """Raise ValueError if a batch in ``out`` would write over one of ``inputs`` (files or zarr
+    folders): ``out`` itself, its settings and summary files, anything under ``out/results``
+    (results are replaced when their input changes, and deleted with ``overwrite``)."""
+    out = Path(out)
+    written = [out / name for name in (_SETTINGS, f"{_SUMMARY}.csv", f"{_SUMMARY}.parquet")]
+    results = (out / _RESULTS).resolve()
+    for source in (Path(s) for s in inputs if s is not None):
+        if not source.exists():
+            continue
+        where = source.resolve()
+        if out.is_dir() and same_file(source, out):  # a file: check_writable says it is not a folder
+            raise ValueError(f"the output folder {out} is also an input: write the results elsewhere")
+        if any(same_file(source, w) for w in written) or where == results or results in where.parents:
+            raise ValueError(f"the input {source} lies where the batch writes its results in {out}, and would "
+                             "be replaced: move it, or choose another output folder")
 
 
 def check_writable(path: Path, *, folder: bool = False) -> None:
@@ -648,6 +681,7 @@ def _client(workers, scheduler, client):
     from dask.distributed import Client, LocalCluster
 
     if scheduler:
+        _check_address(scheduler)
         try:
             connected = Client(scheduler, timeout="10s", set_as_default=False)
         except (OSError, ValueError, TypeError) as err:  # refused, timed out, not an address
@@ -668,6 +702,23 @@ def _client(workers, scheduler, client):
             Client(cluster, set_as_default=False) as local:
         local.run(_ignore_interrupt)
         yield local
+
+
+def _check_address(scheduler) -> None:
+    """Raise ValueError for a malformed scheduler address (no port, an unknown scheme), before a
+    Client is made: Client() raises on one half-built, whose __del__ then waited 20 s at exit and
+    printed a traceback."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.comm.registry import get_backend
+
+    try:
+        scheme, location = parse_address(str(scheduler))
+        get_backend(scheme)  # an unknown scheme: ValueError naming the known ones
+        if scheme in ("tcp", "tls", "ws", "wss"):  # host:port (inproc and ucx have their own forms)
+            parse_host_port(location)
+    except ValueError as err:
+        raise ValueError(f"{scheduler!r} is not a dask scheduler address ({_one_line(err)}): give one such as "
+                         "tcp://10.0.0.5:8786 or myhost:8786") from None
 
 
 def _ignore_interrupt() -> None:

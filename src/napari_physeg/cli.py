@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .io import open_stack, parse_frames, read_shapes_csv, write_shapes_csv
+from .io import TIFF_SUFFIXES, open_stack, parse_frames, read_shapes_csv, same_file, write_shapes_csv
 
 PROG = "napari-physeg"
 
@@ -38,7 +38,8 @@ Contours are napari's shapes CSV (File > Save Selected Layer: columns index,
 shape-type, vertex-index, axis-0, axis-1, ...; polygons, rectangles, paths and
 ellipses) or a plain 'row,col' table. Exit status: 0 on success, 2 for bad
 input (one line saying what to fix; nothing is written), 1 when a run did not
-converge or diverged (track, batch track: an object was lost; batch: a task failed).
+converge or diverged (segment: a contour failed, named on stderr, the others
+written; track, batch track: an object was lost; batch: a task failed).
 """
 
 
@@ -55,7 +56,8 @@ def _defaults(func) -> dict:
             if p.default is not inspect.Parameter.empty}
 
 
-def _number(kind, low=None, low_open=False):
+def _number(kind, low=None, low_open=False, high=None, why=""):
+    """An argparse type: a number of ``kind`` above ``low`` and at most ``high`` (``why``: the reason for it)."""
     def parse(text):
         try:
             value = kind(text)
@@ -63,6 +65,8 @@ def _number(kind, low=None, low_open=False):
             raise argparse.ArgumentTypeError(f"{text!r} is not a {'whole ' if kind is int else ''}number") from None
         if low is not None and (value <= low if low_open else value < low) or not np.isfinite(value):
             raise argparse.ArgumentTypeError(f"{text!r} must be {'>' if low_open else '>='} {low}")
+        if high is not None and value > high:
+            raise argparse.ArgumentTypeError(f"{text!r} must be <= {high}{why}")
         return value
     return parse
 
@@ -91,6 +95,7 @@ def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> 
     from .core import MATERIALS, segment
     from .core.forces import DEFAULT_WEIGHTS
     from .core.materials import suggested_stiffness
+    from .core.segmentation import MAX_DEFAULT_NODES
 
     d = _defaults(segment)
     g = p.add_argument_group("contour model (the Segmentation widget's options; defaults are segment()'s)")
@@ -110,12 +115,18 @@ def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> 
                    f"{d['material']}, 1e6 for copper, see core.materials.SUGGESTED_STIFFNESS); too low and the "
                    "contour barely moves, far too high and it may diverge")
     nodes = g.add_mutually_exclusive_group()
+    # segment() keeps a contour's spacing up to MAX_DEFAULT_NODES nodes, then coarsens it: more nodes
+    # only slow every step (~n^2.6: 4000 nodes took 13 s on a 30-px object, a 0.01-px spacing hours).
+    budget = f"segment's node budget: it keeps a contour's spacing up to {MAX_DEFAULT_NODES} nodes"
     if spacing:
         nodes.add_argument("--node-spacing", type=_number(float, 0, True), metavar="PX",
                            help="distance between nodes in pixels, typically 2-5, kept as the contour grows or "
-                           "shrinks; smaller follows finer detail but is slower (default: one node per ~3 px)")
-    nodes.add_argument("--n-nodes", type=_number(int, 3), metavar="N",
-                       help="number of nodes of each initial contour instead, typically 50-500")
+                           "shrinks; smaller follows finer detail but is slower (default: one node per ~3 px); a "
+                           f"spacing that would give a contour more than {MAX_DEFAULT_NODES} nodes gives it "
+                           f"{MAX_DEFAULT_NODES}, with a warning ({budget})")
+    nodes.add_argument("--n-nodes", type=_number(int, 3, high=MAX_DEFAULT_NODES, why=f" ({budget})"), metavar="N",
+                       help=f"number of nodes of each initial contour instead, typically 50-500, at most "
+                       f"{MAX_DEFAULT_NODES} ({budget})")
     g.add_argument("--sigma-factor", type=_number(float, 0, True), metavar="F",
                    help=f"width of the interaction between nodes relative to the node spacing, 0.75-1.5 (max 2); "
                    f"larger: smoother, stiffer contour; default {d['sigma_factor']:g}")
@@ -184,23 +195,40 @@ def _add_io(p, *, out_help: str, init: bool = True) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace existing output (never an input file)")
 
 
-def _check_input(path: Path, what: str) -> None:
+def _check_input(path: Path, what: str, *, image: bool = False) -> None:
+    """Refuse an input that is missing, or a folder where a file is expected (an image may be a
+    zarr store): a plain sentence, not open()'s [Errno 21]."""
+    from .io import is_zarr
+
     if not path.exists():
         raise ValueError(f"{what} {path} does not exist")
+    if path.is_dir() and not (image and is_zarr(path)):
+        kind = "an image or a zarr store" if image else "a CSV file"
+        raise ValueError(f"{what} {path} is a folder, not {kind}: give a file in it"
+                         + (f" (e.g. {path / '*.tif'})" if image else ""))
 
 
-def _check_output(path: Path, args, inputs, *, folder: bool = False) -> None:
+def _check_output(path: Path, args, inputs, *, folder: bool = False, writes=()) -> None:
     """Refuse an output that is an input, that exists (without --overwrite) or
-    that cannot be written: before any work, not after it."""
+    that cannot be written: before any work, not after it. ``writes``: the files
+    written in the folder ``path``, none of which may be an input either (even
+    with --overwrite: the input would be lost)."""
     from .batch import check_writable
 
-    for source in inputs:
-        if source is not None and Path(source).exists() and path.resolve() == Path(source).resolve():
+    for source in (Path(s) for s in inputs if s is not None):
+        if not source.exists():
+            continue
+        if same_file(path, source):
             raise ValueError(f"--out {path} is also an input: write the result elsewhere")
+        clash = next((path / name for name in writes if same_file(path / name, source)), None)
+        if clash is not None:
+            raise ValueError(f"--out {path} would replace the input {source} (the result's {clash.name} is "
+                             "written there): choose another --out folder, or move the input")
+    # A file where a folder goes (or the reverse) first: --overwrite would not help.
+    check_writable(path, folder=folder)
     exists = path.exists() and (not folder or any(path.iterdir()))
     if exists and not args.overwrite:
         raise ValueError(f"{path} exists: pass --overwrite to replace it, or choose another --out")
-    check_writable(path, folder=folder)
 
 
 def _read_contours(path: Path, what: str = "--init", leading: bool = False):
@@ -214,37 +242,71 @@ def _read_contours(path: Path, what: str = "--init", leading: bool = False):
 
 
 def _segment(args) -> int:
-    from .core import segment
-    from .batch import check_contours, segment_options_for
+    from .batch import check_contours
 
-    _check_input(args.image, "image")
+    _check_input(args.image, "image", image=True)
     shapes, leading = _read_contours(args.init, leading=True)
     _check_output(args.out, args, [args.image, args.init])
     if args.mask:
-        _check_output(args.mask, args, [args.image, args.init, args.out])
+        # --out need not exist yet, so _check_output's test against inputs cannot see this clash.
+        if same_file(args.mask, args.out):
+            raise ValueError(f"--mask {args.mask} is the same file as --out: give the label image another name "
+                             "(e.g. labels.tif)")
+        _check_output(args.mask, args, [args.image, args.init])
     options = _segment_options(args)
     with open_stack(args.image, channel=args.channel) as stack:
         jobs, is_stack = _segment_jobs(args, len(stack), leading, len(shapes))
         check_contours(shapes, stack.shape[1:], args.init)
-        results, frames, status = [], [], 0
-        for t in sorted({t for t, _ in jobs}):
-            image = np.asarray(stack[t], dtype=np.float64)  # one frame at a time
-            for _, k in (job for job in jobs if job[0] == t):
-                res = segment(image, shapes[k], **segment_options_for(shapes[k], options, args.node_spacing))
-                state = "converged" if res.converged else f"stopped ({res.stop_reason})"
-                where = f"frame {t}, " if is_stack else ""
-                print(f"{where}shape {k}: {len(res.contour)} nodes, {res.steps} steps, {state}, "
-                      f"{res.timings['total'] * 1e3:.0f} ms")
-                results.append(res.contour)
-                frames.append((t,))
-                status = status or (0 if res.converged else 1)
+        if args.mask and is_stack and args.mask.suffix.lower() not in TIFF_SUFFIXES:
+            raise ValueError(f"--mask {args.mask}: the labels of a stack are a stack, which only a TIFF holds: "
+                             "name it .tif")
+        done, failed = _run_segment_jobs(stack, jobs, shapes, options, args.node_spacing, is_stack)
         shape = (len(stack), *stack.shape[1:]) if is_stack else tuple(stack.shape[1:])
+    if not done:
+        print(f"{PROG}: no contour was segmented: nothing written", file=sys.stderr)
+        return 1
+    results, frames = [res.contour for _, _, res in done], [(t,) for t, _, _ in done]
     write_shapes_csv(args.out, results, leading=frames if is_stack else None)
-    print(f"wrote {args.out}")
+    left_out = f" ({len(done)} of {len(jobs)} contours, without the {failed} that failed)" if failed else ""
+    print(f"wrote {args.out}{left_out}")
     if args.mask:
-        _write_mask(args.mask, results, frames, shape)
+        _write_mask(args.mask, [(t, k, res.contour) for t, k, res in done], shape)
         print(f"wrote {args.mask}")
-    return status
+    return 1 if failed or not all(res.converged for _, _, res in done) else 0
+
+
+def _run_segment_jobs(stack, jobs, shapes, options, node_spacing, is_stack):
+    """Segment shape ``k`` on frame ``t`` for each ``(t, k)`` of ``jobs``, a frame read at a time.
+
+    A shape that fails (it collapsed, diverged, the frame is blank) is named on stderr and the
+    others go on, as in a batch task: one bad drawing must not lose the rest.
+
+    Returns
+    -------
+    done : list of (int, int, SegmentationResult)
+        ``(t, k, result)`` of the shapes segmented, in frame order.
+    failed : int
+        The number of jobs that failed.
+    """
+    from .batch import segment_options_for
+    from .core import segment
+
+    done, failed = [], 0
+    for t in sorted({t for t, _ in jobs}):
+        image = np.asarray(stack[t], dtype=np.float64)  # one frame at a time
+        for k in (k for frame, k in jobs if frame == t):
+            where = f"frame {t}, " if is_stack else ""
+            try:
+                res = segment(image, shapes[k], **segment_options_for(shapes[k], options, node_spacing))
+            except (ValueError, RuntimeError) as err:  # ValueError: collapsed, blank frame; RuntimeError: diverged
+                print(f"{PROG}: {where}shape {k} failed: {' '.join(str(err).split())}", file=sys.stderr, flush=True)
+                failed += 1
+                continue
+            state = "converged" if res.converged else f"stopped ({res.stop_reason})"
+            print(f"{where}shape {k}: {len(res.contour)} nodes, {res.steps} steps, {state}, "
+                  f"{res.timings['total'] * 1e3:.0f} ms")
+            done.append((t, k, res))
+    return done, failed
 
 
 def _segment_jobs(args, n_frames: int, leading, n_shapes: int):
@@ -264,18 +326,25 @@ def _segment_jobs(args, n_frames: int, leading, n_shapes: int):
     return [(0, k) for k in range(n_shapes)], False
 
 
-def _write_mask(path: Path, contours, frames, shape) -> None:
+def _write_mask(path: Path, contours, shape) -> None:
+    """Write a label image of ``shape`` (2D, or frames x rows x cols): each ``(t, k, contour)`` filled
+    with label ``k + 1`` on frame ``t``. Labelled by the shape's index, not the result's rank, so an
+    object keeps its label on every frame (and when another shape failed)."""
+    import tifffile
     from skimage import io
 
     from .core.contour import polygon_mask
     from .io import atomic_path
 
     labels = np.zeros(shape, dtype=np.uint16)
-    for k, (c, (t,)) in enumerate(zip(contours, frames), start=1):
+    for t, k, c in contours:
         plane = labels[t] if labels.ndim == 3 else labels
-        plane[polygon_mask(c, plane.shape)] = k
+        plane[polygon_mask(c, plane.shape)] = k + 1
     with atomic_path(path) as tmp:
-        io.imsave(tmp, labels, check_contrast=False)
+        if path.suffix.lower() in TIFF_SUFFIXES:  # minisblack: a stack of 3 or 4 frames is no RGB(A) image
+            tifffile.imwrite(tmp, labels, photometric="minisblack")
+        else:
+            io.imsave(tmp, labels, check_contrast=False)
 
 
 # --------------------------------------------------------------------------
@@ -362,12 +431,19 @@ class _ProgressBar:
             print(file=sys.stderr)
 
 
+def _new_line() -> str:
+    """A line break if a progress bar is drawn on stderr's current line (a message then starts a line
+    of its own, not glued to the bar), else nothing."""
+    if not _ProgressBar.mid_line:
+        return ""
+    _ProgressBar.mid_line = False
+    return "\n"
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """A warning as one line of the program's (not Python's file, line and source), on a line
     of its own when a progress bar is being drawn."""
-    if _ProgressBar.mid_line:
-        print(file=sys.stderr)
-    print(f"{PROG}: warning: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+    print(f"{_new_line()}{PROG}: warning: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
 
 
 def _start_frame(args, leading):
@@ -377,12 +453,12 @@ def _start_frame(args, leading):
 
 
 def _track(args) -> int:
-    from .batch import check_track, track_file
+    from .batch import TRACK_FILES, check_track, track_file
     from .core import LOST
 
-    _check_input(args.stack, "stack")
+    _check_input(args.stack, "stack", image=True)
     inits, leading = _read_contours(args.init, leading=True)
-    _check_output(args.out, args, [args.stack, args.init], folder=True)
+    _check_output(args.out, args, [args.stack, args.init], folder=True, writes=TRACK_FILES)
     options = _segment_options(args)
     start = _start_frame(args, leading)
     with open_stack(args.stack, channel=args.channel) as stack:  # the frames and start, before any work
@@ -407,8 +483,9 @@ def _batch(args) -> int:
     from . import batch
 
     for path in args.inputs:
-        _check_input(path, "input")
+        _check_input(path, "input", image=True)
     shapes, leading = _read_contours(args.init, leading=True)
+    batch.check_inputs_kept(args.out, [*args.inputs, args.init])
     options = _segment_options(args)
     common = dict(channel=args.channel, node_spacing=args.node_spacing, workers=args.workers,
                   scheduler=args.scheduler, overwrite=args.overwrite, progress=not args.quiet, frames=args.frames)
@@ -463,7 +540,8 @@ def _frames_option(p, what):
 
 
 def _channel_option(p):
-    p.add_argument("--channel", type=_number(int, 0), help="channel of an RGB(A) image to use: 0 red, 1 green, 2 blue")
+    p.add_argument("--channel", type=_number(int, 0), help="channel to use: of an RGB(A) image or movie (0 red, "
+                   "1 green, 2 blue), or of the C axis of an ImageJ or OME TIFF hyperstack (e.g. T x C x Y x X)")
 
 
 def _add_segment(sub):
@@ -477,8 +555,8 @@ def _add_segment(sub):
             "as axis-0, on a stack)")
     _frames_option(p, "frames of a stack to segment every contour on")
     _channel_option(p)
-    p.add_argument("--mask", type=Path, help="also write a label image (label k for shape k; a stack of labels "
-                   "for a stack)")
+    p.add_argument("--mask", type=Path, help="also write a label image: label k+1 for shape k of --init (0 is "
+                   "the background), on every frame of a stack of labels for a stack")
     _add_segment_options(p)
     p.set_defaults(run=_segment)
 
@@ -611,10 +689,10 @@ def main(argv=None) -> int:
             return args.run(args)
     except (ValueError, OSError) as err:  # bad input, or a file that cannot be read or written
         text = " ".join(str(err).split())
-        print(f"{PROG}: error: {text}", file=sys.stderr)
+        print(f"{_new_line()}{PROG}: error: {text}", file=sys.stderr)
         return 2
     except RuntimeError as err:  # DivergenceError
-        print(f"{PROG}: {' '.join(str(err).split())}", file=sys.stderr)
+        print(f"{_new_line()}{PROG}: {' '.join(str(err).split())}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         resume = " (run the same command again to resume)" if args.command == "batch" else ""

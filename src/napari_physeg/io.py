@@ -27,7 +27,7 @@ import numpy as np
 from ._widgets._layers import CLOSED_SHAPE_TYPES, shape_to_polygon
 
 __all__ = ["read_shapes_csv", "write_shapes_csv", "open_stack", "parse_frames", "check_frames", "write_table",
-           "atomic_path", "is_zarr", "TIFF_SUFFIXES"]
+           "atomic_path", "is_zarr", "same_file", "TIFF_SUFFIXES"]
 
 #: File name endings read with tifffile (lazily, one page per chunk).
 TIFF_SUFFIXES = (".tif", ".tiff", ".btf", ".tf8", ".tf2")
@@ -62,8 +62,14 @@ def read_shapes_csv(path, *, leading: bool = False):
         columns that cannot be read.
     """
     path = Path(path)
-    with path.open(newline="") as fh:
-        rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
+    # utf-8-sig: Excel's "CSV UTF-8" (and many Windows editors) start the file with a byte-order mark,
+    # which would otherwise be part of the first header cell ('\ufeffindex': read as a 'row,col' table).
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
+            rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
+    except (UnicodeDecodeError, csv.Error):  # binary: an image given for the contours, most often
+        raise ValueError(f"cannot read {path} as a CSV: it is not text (is it the image?); contours are "
+                         "napari's shapes CSV or a 'row,col' table") from None
     if not rows:
         raise ValueError(f"{path} is empty: expected napari's shapes CSV or 'row,col' lines")
     header = [c.strip() for c in rows[0]]
@@ -175,6 +181,15 @@ def write_table(table, path) -> list[Path]:
     return written
 
 
+def same_file(a, b) -> bool:
+    """Whether paths ``a`` and ``b`` name one file: the same path once resolved (either may not
+    exist yet), or, both existing, one file under two names (a hard link)."""
+    a, b = Path(a), Path(b)
+    if a.resolve() == b.resolve():
+        return True
+    return a.exists() and b.exists() and a.samefile(b)
+
+
 def is_zarr(path: Path) -> bool:
     """Whether ``path`` is a zarr store (a ``.zarr`` folder, or one with zarr metadata)."""
     return path.suffix == ".zarr" or (path.is_dir() and any((path / n).exists() for n in
@@ -192,7 +207,9 @@ def open_stack(path, *, channel: int | None = None):
         array (a ``.zarr`` folder) or another 2D image scikit-image reads
         (PNG, JPEG, ...; read whole). A 2D image is a stack of one frame.
     channel : int, optional
-        Channel of an RGB(A) image (its last axis of 3 or 4 samples).
+        Channel to take: of an RGB(A) image or movie (a last axis of 3 or 4
+        samples), or of a TIFF hyperstack whose axes name one C (ImageJ or
+        OME, e.g. ``TCYX``).
 
     Yields
     ------
@@ -216,13 +233,18 @@ def open_stack(path, *, channel: int | None = None):
         try:
             if is_zarr(path):
                 _need("zarr", path)
-                stack = da.from_zarr(str(path))
-                samples = False
+                import zarr
+
+                stack = _named_reads(zarr.open_array(str(path), mode="r"), path)
+                axes = None  # a zarr array names no axes
             elif path.suffix.lower() in TIFF_SUFFIXES:
                 import tifffile
 
                 with tifffile.TiffFile(path) as tif:
-                    samples = tif.series[0].axes.endswith("S")
+                    axes = tif.series[0].axes
+                    cut = _cut_short(tif.series[0], path)
+                if cut:
+                    raise _Refused(cut)
                 try:
                     import zarr
                 except ImportError:  # without zarr: a memory map if the file allows, else read whole
@@ -230,22 +252,77 @@ def open_stack(path, *, channel: int | None = None):
                 else:
                     store = tifffile.imread(path, aszarr=True)
                     closers.append(store.close)
-                    stack = da.from_zarr(zarr.open(store, mode="r"))
+                    stack = _named_reads(zarr.open(store, mode="r"), path)
             else:
                 from skimage import io
 
                 image = io.imread(path)
-                samples = image.ndim == 3 and image.shape[-1] in (3, 4)
+                axes = None
                 stack = da.from_array(image, chunks=image.shape)
+        except _Refused:
+            raise
         except Exception as err:  # unreadable or corrupt: one plain sentence
             raise ValueError(f"could not read {path}: {type(err).__name__}: {err}") from None
         # Frames are read here, in this process: the store is not for sending
         # to a cluster (a distributed Client made default elsewhere would try).
         with dask.config.set(scheduler="synchronous"):
-            yield _as_frames(stack, samples, channel, path)
+            yield _as_frames(stack, axes, channel, path)
     finally:
         for close in closers:
             close()
+
+
+class _NamedReads:
+    """An array whose failed reads name the file and the frames: a frame is read deep in a run
+    (tracking frame after frame), where a decoder's bare message says neither."""
+
+    def __init__(self, array, path):
+        self.array, self.path = array, path
+        self.shape, self.dtype, self.ndim = tuple(array.shape), array.dtype, len(array.shape)
+
+    def __getitem__(self, key):
+        try:
+            return np.asarray(self.array[key])
+        except Exception as err:  # noqa: BLE001 - any decoder's or store's error: one plain sentence
+            raise ValueError(f"could not read {self._frames(key)}{self.path}: {type(err).__name__}: "
+                             f"{' '.join(str(err).split())}") from None
+
+    def _frames(self, key) -> str:
+        """'frame 2 of ' for a read of frame 2 (dask asks for a chunk, or one frame), '' for a 2D image."""
+        first = key[0] if isinstance(key, tuple) and key else key
+        if self.ndim < 3 or not isinstance(first, (int, np.integer, slice)):
+            return ""
+        frames = range(self.shape[0])[first]
+        if isinstance(frames, int):
+            return f"frame {frames} of "
+        return "" if not frames else (f"frame {frames[0]} of " if len(frames) == 1 else
+                                      f"frames {frames[0]} to {frames[-1]} of ")
+
+
+def _named_reads(array, path):
+    """A zarr array (a zarr store, or a TIFF through tifffile's zarr store) as a dask array of its
+    chunks whose reads, when they fail, name the file and the frame (see _NamedReads)."""
+    import dask.array as da
+
+    return da.from_array(_NamedReads(array, path), chunks=array.chunks, asarray=False,
+                         name=f"napari-physeg-{uuid.uuid4().hex}")
+
+
+class _Refused(ValueError):
+    """A file open_stack refuses with its own message (not wrapped as 'could not read')."""
+
+
+def _cut_short(series, path) -> str | None:
+    """Why a TIFF is cut short (an interrupted copy, a full disk), or None: its frames' bytes run
+    past the end of the file. Told from the header, before any frame is read; only an uncompressed
+    series stored in one piece says where its data end (tifffile's dataoffset), others fail on the
+    frame that is missing."""
+    end = series.dataoffset + series.nbytes if series.dataoffset is not None else 0
+    size = Path(path).stat().st_size
+    if end <= size:
+        return None
+    return (f"{path} is cut short: its {' x '.join(map(str, series.shape))} pixels need {end} bytes, the file "
+            f"holds {size} (an interrupted copy, a full disk?): copy it again")
 
 
 def _need(module: str, path) -> None:
@@ -265,27 +342,61 @@ def _tiff_without_zarr(path):
         return tifffile.imread(path)
 
 
-def _as_frames(stack, samples: bool, channel, path):
-    """``stack`` as ``(T, H, W)`` with one chunk per frame, the channel chosen."""
+def _as_frames(stack, axes: str | None, channel, path):
+    """``stack`` as ``(T, H, W)`` with one chunk per frame, the channel chosen.
+
+    ``axes`` are the file's own (a TIFF series': ``"TCYX"``, ``"YXS"``, ...), None when it names none.
+    """
+    where = _channel_axis(stack.shape, axes)
+    shape = " x ".join(map(str, stack.shape))
     if channel is not None:
-        # The file says so (TIFF samples), or an image whose last axis is 3 or 4 long: any 3D array
-        # would take a (T, H, W) stack's columns for channels.
-        if not (samples or (stack.ndim == 3 and stack.shape[-1] in (3, 4))):
+        if where is None and stack.ndim <= 3:
             kind = "image" if stack.ndim == 2 else "stack"
-            raise ValueError(f"{path} has no channels (a {' x '.join(map(str, stack.shape))} {kind}): "
-                             "leave out --channel")
-        if not 0 <= channel < stack.shape[-1]:
-            raise ValueError(f"channel {channel} is out of range: {path} has {stack.shape[-1]} channels")
-        stack = stack[..., channel]
-    elif samples:
-        raise ValueError(f"{path} is an RGB(A) image of shape {tuple(stack.shape)}: choose a channel with "
-                         "--channel 0, 1 or 2")
+            raise ValueError(f"{path} has no channels (a {shape} {kind}): leave out --channel")
+        if where is None:
+            raise ValueError(f"{path} has shape ({shape}) and names no channel axis: save one channel per file as "
+                             "(frames, rows, cols), or as an ImageJ hyperstack (axes TCYX)")
+        n = stack.shape[where]
+        if not 0 <= channel < n:
+            raise ValueError(f"channel {channel} is out of range: {path} has {n} channels "
+                             f"({_channel_name(where, axes)}): choose --channel {_choices(n)}")
+        stack = stack[(slice(None),) * where + (channel,)]
+    elif where is not None:
+        raise ValueError(f"{path} has {stack.shape[where]} channels ({_channel_name(where, axes)}, shape {shape}): "
+                         f"choose one with --channel {_choices(stack.shape[where])}")
     if stack.ndim == 2:
         stack = stack[None]
     if stack.ndim != 3:
         raise ValueError(f"{path} has shape {tuple(stack.shape)}: expected a 2D image or a (frames, rows, cols) "
                          "stack; save one channel and one z-plane per file (e.g. in Fiji: Image > Stacks)")
     return stack.rechunk((1, *stack.shape[1:]))
+
+
+def _channel_axis(shape, axes: str | None) -> int | None:
+    """The axis holding channels, or None: the one the file names (a TIFF's S, the samples of an RGB(A)
+    image, or C, the channels of an ImageJ or OME hyperstack), else a last axis of 3 or 4 on an image
+    or a movie (an RGB(A) PNG, a (T, H, W, 3) zarr array: they name no axes)."""
+    if axes and axes.endswith("S"):
+        return len(axes) - 1
+    if axes and "C" in axes:
+        return axes.index("C")
+    if len(shape) in (3, 4) and shape[-1] in (3, 4):
+        return len(shape) - 1
+    return None
+
+
+def _channel_name(where: int, axes: str | None) -> str:
+    """The channel axis in words, for a message: 'axis C of TCYX', 'RGB(A) samples, the last axis'."""
+    if axes and axes[where] == "C":
+        return f"axis C of {axes}"
+    return "RGB(A) samples, the last axis"
+
+
+def _choices(n: int) -> str:
+    """'0 or 1', '0, 1 or 2', '0 to 4': the channels to choose among."""
+    if n > 3:
+        return f"0 to {n - 1}"
+    return ", ".join(map(str, range(n - 1))) + f" or {n - 1}"
 
 
 def parse_frames(spec: str, n_frames: int) -> list[int]:
