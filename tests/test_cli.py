@@ -577,35 +577,29 @@ def test_options_reach_segment_by_name_and_the_rest_keep_its_defaults(scene, mon
 
 
 @pytest.mark.parametrize("command", ["segment", "track", "batch track"])
-def test_more_nodes_than_segment_keeps_are_refused_before_any_work(movie_files, capsys, no_work, command):
-    # --n-nodes 100000 (or --node-spacing 0.01) ran for hours: the core keeps at most 1000 as a contour grows.
+@pytest.mark.parametrize("option, value, said", [("--n-nodes", "100000", "'100000' must be <= 5000"),
+                                                 ("--node-spacing", "0.01", "'0.01' must be >= 0.5")])
+def test_more_nodes_than_segment_takes_are_refused_before_any_work(movie_files, capsys, no_work, command, option,
+                                                                   value, said):
+    # --n-nodes 100000 (or --node-spacing 0.01) ran for hours: the core takes at most 5000 nodes, the
+    # widgets a spacing of 0.5 px or more.
     movie, stack, init, tmp = movie_files
     out = tmp / ("o.csv" if command == "segment" else "out")
-    assert main([*command.split(), str(stack), "--init", str(init), "--out", str(out), "--n-nodes", "100000"]) == 2
+    assert main([*command.split(), str(stack), "--init", str(init), "--out", str(out), option, value]) == 2
     err = capsys.readouterr().err
-    assert "'100000' must be <= 1000 (segment's node budget" in err and len(err.strip().splitlines()) == 1
+    assert said in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
 
 
-def test_a_sub_pixel_node_spacing_gives_the_core_s_node_budget_with_a_warning(scene, monkeypatch, capsys):
-    import napari_physeg.core as core
+def test_a_spacing_that_gives_a_large_contour_too_many_nodes_gives_it_the_most_segment_takes():
+    from napari_physeg.batch import segment_options_for
+    from napari_physeg.core.segmentation import MAX_NODES
 
-    seen, real = [], core.segment
-
-    @functools.wraps(real)
-    def spy(image, init, **options):
-        seen.append(options["n_nodes"])
-        assert options["n_nodes"] <= 1000, "this run would take hours"
-        return real(image, init, **options)
-
-    monkeypatch.setattr(core, "segment", spy)
-    obj, image, init, tmp = scene
-    assert main(["segment", str(image), "--init", str(init), "--out", str(tmp / "a.csv"), "--node-spacing", "3"]) == 0
-    assert seen[-1] < 1000 and "warning" not in capsys.readouterr().err  # the normal range: as before
-    assert main(["segment", str(image), "--init", str(init), "--out", str(tmp / "b.csv"), "--node-spacing",
-                 "0.01"]) == 0
-    warned = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
-    assert seen[-1] == 1000 and len(warned) == 1 and "a node spacing of 0.01 px gives a contour" in warned[0]
+    t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+    big = 2000.0 * np.column_stack([np.sin(t), np.cos(t)])  # 12,566 px around
+    assert segment_options_for(big[:100] / 20, {}, 3.0)["n_nodes"] < MAX_NODES  # the normal range: as before
+    with pytest.warns(UserWarning, match="a node spacing of 0.5 px gives a contour 12566 px around"):
+        assert segment_options_for(big, {}, 0.5)["n_nodes"] == MAX_NODES
 
 
 def test_a_material_without_stiffness_leaves_the_r_to_segment(scene, monkeypatch):

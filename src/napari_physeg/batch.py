@@ -79,21 +79,20 @@ def segment_options_for(contour, options: dict, node_spacing: float | None) -> d
     """``options`` of :func:`~napari_physeg.core.segment` for one contour:
     ``node_spacing`` (px) becomes its node count, as in the widgets
     (:func:`~napari_physeg.core.contour.nodes_for_spacing`), at most
-    ``MAX_DEFAULT_NODES`` (with a warning): the most :func:`~napari_physeg.core.segment`
-    keeps as a contour grows, and what it uses for a large contour by default."""
+    ``MAX_NODES`` (with a warning): the most :func:`~napari_physeg.core.segment` takes."""
     from .core.contour import nodes_for_spacing, perimeter
-    from .core.segmentation import MAX_DEFAULT_NODES
+    from .core.segmentation import MAX_NODES
 
     if node_spacing is None:
         return dict(options)
     contour = np.asarray(contour, float)
     n_nodes = nodes_for_spacing(contour, node_spacing)
-    if n_nodes > MAX_DEFAULT_NODES:  # a sub-pixel typo (0.01 for 1) ran for hours
+    if n_nodes > MAX_NODES:  # a sub-pixel typo (0.01 for 1) ran for hours
         length = perimeter(contour)
         warnings.warn(f"a node spacing of {node_spacing:g} px gives a contour {length:.0f} px around {n_nodes} "
-                      f"nodes: it gets {MAX_DEFAULT_NODES} ({length / MAX_DEFAULT_NODES:.2g} px apart), the most "
+                      f"nodes: it gets {MAX_NODES} ({length / MAX_NODES:.2g} px apart), the most "
                       "segment keeps; 2-5 px is typical", UserWarning, stacklevel=2)
-        n_nodes = MAX_DEFAULT_NODES
+        n_nodes = MAX_NODES
     return {**options, "n_nodes": n_nodes}
 
 

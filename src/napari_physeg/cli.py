@@ -57,14 +57,14 @@ def _defaults(func) -> dict:
 
 
 def _number(kind, low=None, low_open=False, high=None, why=""):
-    """An argparse type: a number of ``kind`` above ``low`` and at most ``high`` (``why``: the reason for it)."""
+    """An argparse type: a number of ``kind`` above ``low`` and at most ``high`` (``why``: the reason for them)."""
     def parse(text):
         try:
             value = kind(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{text!r} is not a {'whole ' if kind is int else ''}number") from None
         if low is not None and (value <= low if low_open else value < low) or not np.isfinite(value):
-            raise argparse.ArgumentTypeError(f"{text!r} must be {'>' if low_open else '>='} {low}")
+            raise argparse.ArgumentTypeError(f"{text!r} must be {'>' if low_open else '>='} {low:g}{why}")
         if high is not None and value > high:
             raise argparse.ArgumentTypeError(f"{text!r} must be <= {high}{why}")
         return value
@@ -95,7 +95,7 @@ def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> 
     from .core import MATERIALS, segment
     from .core.forces import DEFAULT_WEIGHTS
     from .core.materials import suggested_stiffness
-    from .core.segmentation import MAX_DEFAULT_NODES
+    from .core.segmentation import MAX_NODES, MIN_NODE_SPACING
 
     d = _defaults(segment)
     g = p.add_argument_group("contour model (the Segmentation widget's options; defaults are segment()'s)")
@@ -115,18 +115,18 @@ def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> 
                    f"{d['material']}, 1e6 for copper, see core.materials.SUGGESTED_STIFFNESS); too low and the "
                    "contour barely moves, far too high and it may diverge")
     nodes = g.add_mutually_exclusive_group()
-    # segment() keeps a contour's spacing up to MAX_DEFAULT_NODES nodes, then coarsens it: more nodes
-    # only slow every step (~n^2.6: 4000 nodes took 13 s on a 30-px object, a 0.01-px spacing hours).
-    budget = f"segment's node budget: it keeps a contour's spacing up to {MAX_DEFAULT_NODES} nodes"
+    # segment() takes at most MAX_NODES (5000) nodes: every step costs ~n^2.6 (4000 nodes took 13 s on
+    # a 30-px object, a 0.01-px spacing typed for 1 never ended). As in the widgets.
     if spacing:
-        nodes.add_argument("--node-spacing", type=_number(float, 0, True), metavar="PX",
-                           help="distance between nodes in pixels, typically 2-5, kept as the contour grows or "
-                           "shrinks; smaller follows finer detail but is slower (default: one node per ~3 px); a "
-                           f"spacing that would give a contour more than {MAX_DEFAULT_NODES} nodes gives it "
-                           f"{MAX_DEFAULT_NODES}, with a warning ({budget})")
-    nodes.add_argument("--n-nodes", type=_number(int, 3, high=MAX_DEFAULT_NODES, why=f" ({budget})"), metavar="N",
-                       help=f"number of nodes of each initial contour instead, typically 50-500, at most "
-                       f"{MAX_DEFAULT_NODES} ({budget})")
+        nodes.add_argument("--node-spacing", type=_number(float, MIN_NODE_SPACING,
+                                                          why=" (closer nodes resolve nothing more)"),
+                           metavar="PX", help="distance between nodes in pixels, typically 2-5, at least "
+                           f"{MIN_NODE_SPACING:g}, kept as the contour grows or shrinks; smaller follows finer detail "
+                           "but is slower (default: one node per ~3 px); a spacing that would give a contour more "
+                           f"than {MAX_NODES} nodes gives it {MAX_NODES}, with a warning")
+    nodes.add_argument("--n-nodes", type=_number(int, 3, high=MAX_NODES, why=" (each step costs ~n^2.6)"),
+                       metavar="N", help=f"number of nodes of each initial contour instead, typically 50-500, at "
+                       f"most {MAX_NODES}")
     g.add_argument("--sigma-factor", type=_number(float, 0, True), metavar="F",
                    help=f"width of the interaction between nodes relative to the node spacing, 0.75-1.5 (max 2); "
                    f"larger: smoother, stiffer contour; default {d['sigma_factor']:g}")

@@ -375,12 +375,12 @@ def _as_frames(stack, axes: str | None, channel, path):
 def _channel_axis(shape, axes: str | None) -> int | None:
     """The axis holding channels, or None: the one the file names (a TIFF's S, the samples of an RGB(A)
     image, or C, the channels of an ImageJ or OME hyperstack), else a last axis of 3 or 4 on an image
-    or a movie (an RGB(A) PNG, a (T, H, W, 3) zarr array: they name no axes)."""
+    or a movie that names no axes (an RGB(A) PNG, a (T, H, W, 3) zarr array)."""
     if axes and axes.endswith("S"):
         return len(axes) - 1
     if axes and "C" in axes:
         return axes.index("C")
-    if len(shape) in (3, 4) and shape[-1] in (3, 4):
+    if axes is None and len(shape) in (3, 4) and shape[-1] in (3, 4):
         return len(shape) - 1
     return None
 

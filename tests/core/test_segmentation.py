@@ -167,6 +167,7 @@ def test_bad_input_gets_a_clear_error(image, init, message):
         (dict(weights={"edges": -1}), "weight"),
         (dict(sigma_factor=3.0), "sigma"),
         (dict(n_nodes=2), "n_nodes"),
+        (dict(n_nodes=100000), "n_nodes must be between 3 and 5000"),
         (dict(reference="sideways"), "reference"),
         (dict(polarity="grey"), "polarity"),
     ],

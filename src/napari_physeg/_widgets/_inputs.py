@@ -19,7 +19,7 @@ from napari.layers import Image, Points, Shapes, Vectors
 from ..core import MATERIALS, Material
 from ..core.contour import nodes_for_spacing
 from ..core.materials import suggested_stiffness
-from ..core.segmentation import DEFAULT_NODE_SPACING, drawing_nodes
+from ..core.segmentation import DEFAULT_NODE_SPACING, MAX_NODES, MIN_NODE_SPACING, drawing_nodes
 from ._layers import PointsAsPolygon, image_transform_kwargs, shape_in_layer_coords
 
 __all__ = [
@@ -139,9 +139,9 @@ class PhysicsControls:
         self._stiffness = FloatSpinBox(label="stiffness r (N/m)",
                                        value=suggested_stiffness(core_default(function, "material")),
                                        min=1.0, max=1e10, step=100.0, tooltip=tips["stiffness"])
-        self._spacing = FloatSpinBox(label="node spacing (px)", value=DEFAULT_NODE_SPACING, min=0.5, max=50.0,
+        self._spacing = FloatSpinBox(label="node spacing (px)", value=DEFAULT_NODE_SPACING, min=MIN_NODE_SPACING, max=50.0,
                                      step=0.5, tooltip=tips["spacing"])
-        self._count = SpinBox(label="node count (0 = by spacing)", value=0, min=0, max=5000, step=10,
+        self._count = SpinBox(label="node count (0 = by spacing)", value=0, min=0, max=MAX_NODES, step=10,
                               tooltip=tips["count"])
         # The custom constants sit right under the material, shown only for "custom".
         self.main = [self._material, self._young, self._poisson, self._density, self._stiffness]

@@ -41,6 +41,13 @@ __all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgres
 DEFAULT_NODE_SPACING = 3.0
 MIN_NODES = 24
 MAX_DEFAULT_NODES = 1000
+#: The most nodes an initial model may have: every step costs about
+#: n^2.6 (4000 nodes took 13 s, 8000 81 s; a 0.01-px spacing typed for
+#: 1 px, 15,700 nodes on a nucleus, never ended). The widgets and the
+#: command line take node spacings of MIN_NODE_SPACING px or more: closer
+#: nodes resolve nothing more of the image.
+MAX_NODES = 5000
+MIN_NODE_SPACING = 0.5
 
 #: Elements of at most this many nodes are held as dense matrices (and
 #: factored by Cholesky), larger ones sparse (and factored by SuperLU).
@@ -930,8 +937,9 @@ def _checked_options(material, forces, weights, stiffness, reference, integrator
         raise ValueError(f"polarity must be 'auto', 'bright' or 'dark', got {polarity!r}")
     if not (max_step_length > 0 and tol > 0 and int(max_steps) >= 0):
         raise ValueError("max_step_length and tol must be positive and max_steps non-negative")
-    if n_nodes is not None and int(n_nodes) < 3:
-        raise ValueError(f"n_nodes must be at least 3, got {n_nodes!r}")
+    if n_nodes is not None and not 3 <= int(n_nodes) <= MAX_NODES:
+        raise ValueError(f"n_nodes must be between 3 and {MAX_NODES}, got {n_nodes!r}: one node every 2-5 px "
+                         "is typical (contour.nodes_for_spacing)")
     return material, weights, r
 
 
@@ -1270,7 +1278,8 @@ def segment(
         suits ``material`` (:func:`~.materials.suggested_stiffness`: rubber
         2e3, copper 1e6).
     n_nodes : int, optional
-        Nodes of the initial model (default: one every ~3 px, 24 to 1000). The
+        Nodes of the initial model, 3 to ``MAX_NODES`` (5000; default: one
+        every ~3 px, 24 to 1000). The
         spacing is then kept as the contour grows or shrinks, up to 1000 nodes
         (or ``n_nodes`` if more; ``MODAL_MAX_NODES`` with the modal
         integrator), beyond which the spacing and ``sigma`` grow.
