@@ -81,10 +81,11 @@ def read_shapes_csv(path, *, leading: bool = False):
         else:
             try:
                 [float(c) for c in rows[0][-2:]]
-                body = rows
+                body, swap = rows, False
             except ValueError:  # a header line
-                body = rows[1:]
-            out = [np.asarray([[float(r[-2]), float(r[-1])] for r in body], dtype=np.float64)]
+                body, swap = rows[1:], _xy_header(header[-2:])
+            points = np.asarray([[float(r[-2]), float(r[-1])] for r in body], dtype=np.float64)
+            out = [points[:, ::-1] if swap else points]
             before = [()]
     except IndexError:
         raise ValueError(f"could not read contours from {path}: a line has fewer columns than expected (is it "
@@ -97,6 +98,13 @@ def read_shapes_csv(path, *, leading: bool = False):
     if bad:
         raise ValueError(f"could not read contours from {path}: shape {bad[0]} has a NaN or infinite coordinate")
     return (out, before) if leading else out
+
+
+def _xy_header(names) -> bool:
+    """Whether a plain table's last two header cells name (x, y) columns, which are (col, row): a
+    table saved with x, y was read as row, col, and its contour lay transposed (or wholly outside a
+    non-square image). Other names are read as (row, col), the documented order."""
+    return [n.lower() for n in names] in (["x", "y"], ["col", "row"], ["column", "row"])
 
 
 def _napari_shapes(header, body, path) -> list[np.ndarray]:
