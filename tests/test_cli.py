@@ -444,6 +444,15 @@ def test_match_of_contours_in_x_y_and_row_col_says_so_on_one_line(tmp_path, caps
     assert "swap the columns" in warned[0]
 
 
+@pytest.mark.parametrize("command", ["match", "simulate"])
+def test_a_shape_matched_with_itself_is_refused(tmp_path, capsys, command):
+    a, b, _ = data.hand_pair(67, 66)
+    hands = write_shapes_csv(tmp_path / "hands.csv", [a, b])
+    out = tmp_path / "out.csv"
+    assert main([command, str(hands), "--out", str(out), "--a-shape", "1", "--b-shape", "1"]) == 2
+    assert "both shape 1" in capsys.readouterr().err and not out.exists()
+
+
 def test_match_and_simulate_from_one_csv(tmp_path, capsys):
     a, b, truth = data.hand_pair(67, 66)
     hands = write_shapes_csv(tmp_path / "hands.csv", [a, b])

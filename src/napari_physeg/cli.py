@@ -363,6 +363,9 @@ def _pair(args):
             raise ValueError(f"{opt} {index}: {path} holds {len(shapes)} shape(s), numbered from 0"
                              + ("; give a second file B, or two shapes in A" if not args.b and len(shapes) < 2
                                 else ""))
+    if b_shapes is a_shapes and b_index == args.a_shape:  # as the widgets refuse it
+        raise ValueError(f"--a-shape and --b-shape are both shape {b_index} of {args.a}: a contour matched "
+                         "with itself says nothing; choose another shape for b, or give a second file B")
     from .core.segmentation import drawing_nodes
 
     # A rectangle's 4 corners are a drawing, not the element's nodes.
