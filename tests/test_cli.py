@@ -56,6 +56,17 @@ def test_a_shapes_csv_with_a_byte_order_mark_is_read_shape_by_shape(tmp_path):
     assert np.array_equal(read_shapes_csv(tmp_path / "plain-bom.csv")[0], [[1, 2], [3, 4], [5, 1]])
 
 
+def test_a_warning_names_the_shape_it_is_about(scene, capsys):
+    """Two drawings, the second partly beyond the image: segment()'s clipping warning says which."""
+    obj, image, _, tmp = scene
+    t = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    beyond = np.column_stack([10 + 20 * np.sin(t), 64 + 20 * np.cos(t)])
+    init = write_shapes_csv(tmp / "two.csv", [obj.init_near, beyond])
+    main(["segment", str(image), "--init", str(init), "--out", str(tmp / "o.csv")])
+    warned = [line for line in capsys.readouterr().err.splitlines() if "outside the image" in line]
+    assert len(warned) == 1 and "shape 1: " in warned[0]
+
+
 def test_nd_shapes_keep_the_last_two_axes_and_plain_tables_work(tmp_path):
     p = tmp_path / "nd.csv"
     p.write_text("index,shape-type,vertex-index,axis-0,axis-1,axis-2\n"
