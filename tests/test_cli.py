@@ -75,6 +75,10 @@ def test_nd_shapes_keep_the_last_two_axes_and_plain_tables_work(tmp_path):
     q = tmp_path / "plain.csv"
     q.write_text("row,col\n1,2\n3,4\n5,1\n")
     assert np.array_equal(read_shapes_csv(q)[0], [[1, 2], [3, 4], [5, 1]])
+    # A Points layer saved by napari: each point is no contour.
+    q.write_text("index,axis-0,axis-1\n0,10,20\n1,30,40\n")
+    with pytest.raises(ValueError, match="Points layer's CSV"):
+        read_shapes_csv(q)
     # Named x, y (col, row): read as (row, col) it lay transposed, or outside a non-square image.
     for header in ("x,y", "X,Y", "col,row"):
         q.write_text(f"{header}\n2,1\n4,3\n1,5\n")

@@ -75,6 +75,11 @@ def read_shapes_csv(path, *, leading: bool = False):
     header = [c.strip() for c in rows[0]]
     try:
         if "index" in header and "axis-0" in header:
+            indices = [r[header.index("index")] for r in rows[1:]]
+            if "shape-type" not in header and len(set(indices)) == len(indices):
+                raise ValueError("it is a Points layer's CSV (one point per row, no shape type): contours are "
+                                 "shapes; draw each object in a Shapes layer (a polygon, or an ellipse about a "
+                                 "point) and save that layer")
             full = _napari_shapes(header, rows[1:], path)
             out = [v[:, -2:] for v in full]
             before = [tuple(v[0, :-2]) for v in full]
