@@ -201,6 +201,10 @@ def simulate(
 ) -> SimulationResult:
     """Simulate the deformation of contour ``a`` into contour ``b``.
 
+    The rigid part of the move (a turn about ``a``'s centroid and a shift)
+    carries the contour along at no elastic cost; the material resists only
+    the change of shape (see ``docs/physics.md`` section 6).
+
     Parameters
     ----------
     a, b : (N, 2) array_like
@@ -216,16 +220,19 @@ def simulate(
     material : str or Material, optional
         Virtual material of ``a``.
     n_frames : int, optional
-        Frames returned, first (``a``) and last (on ``b``) included.
+        Frames returned (an integer, at least 2), first (``a``) and last (on
+        ``b``) included.
     sigma_factor : float, optional
-        Gaussian width of the element relative to ``a``'s node spacing.
+        Gaussian width of the element relative to ``a``'s node spacing, in
+        (0, 2] (0.75-1.5 is the useful range).
     damping_ratio : float, optional
-        Rayleigh damping ratio at the lowest and highest natural frequencies
-        of the body held by its target springs (1 = no overshoot).
+        Rayleigh damping ratio (> 0) at the lowest and highest natural
+        frequencies of the body held by its target springs (1 = no overshoot).
     max_steps : int, optional
-        Upper bound on time steps.
+        Upper bound on time steps (an integer, at least 1).
     tol : float, optional
-        At rest when no node is farther than ``tol`` px from the equilibrium.
+        At rest when no node is farther than ``tol`` px (> 0) from the
+        equilibrium, the rigid move's remainder counted in.
     callback : callable, optional
         ``callback(step, shape)`` after each step; return ``False`` to stop
         (the result then has ``stop_reason="cancelled"``).
