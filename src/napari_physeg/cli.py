@@ -487,7 +487,8 @@ def _track(args) -> int:
         counts = {s: tr.status[k].count(s) for s in dict.fromkeys(tr.status[k])}
         print(f"object {k}: " + ", ".join(f"{n} {s}" for s, n in counts.items()))
     print(f"wrote {', '.join(str(p) for p in written if p.exists())} ({tr.timings['total']:.1f} s)")
-    return 1 if any(LOST in row for row in tr.status) else 0
+    # A frame that could not be used stopped the run (its warning says which): what was done is written.
+    return 1 if tr.stop_reason != "completed" or any(LOST in row for row in tr.status) else 0
 
 
 # --------------------------------------------------------------------------

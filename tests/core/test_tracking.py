@@ -475,11 +475,20 @@ def test_displacement_weight_breaks_the_symmetry_of_round_shapes():
     assert np.hypot(*(a[pairs[:, 0]] - b[pairs[:, 1]]).T).max() < 1.5
 
 
-def test_a_frame_with_nan_pixels_is_an_error_not_a_lost_object():
-    frames = _disk_movie([[(48, 48)]] * 4)
-    frames[2, 10, 10] = np.nan
+def test_a_frame_with_nan_pixels_stops_the_run_there_and_keeps_the_frames_done():
+    """A NaN frame late in a movie threw away every frame tracked before it;
+    now the run stops there (the other direction goes on), says which frame
+    and why, and keeps what was done. On the start frame it is bad input."""
+    frames = _disk_movie([[(48, 48)]] * 6)
+    frames[4, 10, 10] = np.nan
+    with pytest.warns(UserWarning, match="frame 4 has NaN.*forward stopped there"):
+        tr = track(frames, _circle((48, 48), 16), start=2)
+    assert tr.stop_reason == "frame error" and any("frame 4" in w for w in tr.warnings)
+    assert tr.status[0] == [TRACKED] * 4 + ["not processed"] * 2
+    assert tr.contours[0][3] is not None and tr.contours[0][4] is None
     with pytest.raises(ValueError, match="frame 2 has NaN"):
-        track(frames, _circle((48, 48), 16))
+        frames[2, 10, 10] = np.nan
+        track(frames, _circle((48, 48), 16), start=2)
 
 
 def test_a_misspelt_segment_option_fails_before_any_frame():

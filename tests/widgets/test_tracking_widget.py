@@ -77,6 +77,19 @@ def test_cancel_keeps_the_frames_done(dock, qtbot, wait_done):
     assert worker is not None
 
 
+def test_a_frame_that_cannot_be_used_stops_the_run_and_keeps_the_frames_done(movie_in_viewer, wait_done):
+    viewer, widget = movie_in_viewer
+    movie = np.array(viewer.layers["deforming cell"].data, dtype=float)
+    movie[5, 3, 3] = np.nan  # a bad pixel in frame 5 of 8
+    viewer.layers["deforming cell"].data = movie
+    widget.run()
+    wait_done(widget)
+    result = widget.last_result
+    assert result.stop_reason == "frame error" and result.status[0][:5] == ["tracked"] * 5
+    assert len([layer for layer in widget.output_layers if isinstance(layer, Shapes)][0].data) == 5
+    assert "stopped at a frame that could not be used" in widget._status.value
+
+
 def test_contours_off_the_current_frame_are_refused(movie_in_viewer, errors):
     viewer, widget = movie_in_viewer
     viewer.dims.set_point(0, 5)

@@ -323,7 +323,9 @@ class TrackingWidget(WorkerWidget):
             return
         self._export_btn.enabled = True
         counts = {s: sum(row.count(s) for row in result.status) for s in (TRACKED, LOST)}
-        done = "cancelled: the frames tracked so far were kept" if result.stop_reason == "cancelled" else "done"
+        done = {"cancelled": "cancelled: the frames tracked so far were kept",
+                "frame error": "stopped at a frame that could not be used (see the warning): the frames tracked "
+                               "so far were kept"}.get(result.stop_reason, "done")
         self._status.value = (f"{result.n_objects} object(s), {counts[TRACKED]} object-frames tracked, "
                               f"{counts[LOST]} lost ({done}, {result.timings['total']:.1f} s)")
         show_info(f"Tracking: {self._status.value}. The maps (frame x arc) are hidden image layers")

@@ -170,7 +170,10 @@ class TrackingResult:
     start : int
         The frame the initial contours were drawn on.
     stop_reason : str
-        ``"completed"`` or ``"cancelled"``.
+        ``"completed"``, ``"cancelled"``, or ``"frame error"``: a frame after
+        the start one could not be read or held NaN pixels; the tracking
+        stopped there in that direction (the other went on), the frames done
+        are kept, and ``warnings`` says which frame and why.
     timings : dict
         Seconds spent on ``"segmentation"``, ``"correspondence"`` and ``"total"``.
     warnings : tuple of str
@@ -456,10 +459,17 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
         step = 1 if frame_order.step > 0 else -1
         before = start_image
         for t in frame_order:
-            image = np.asarray(frames[t], dtype=np.float64)  # one frame at a time (dask, zarr)
-            if not np.isfinite(image).all():
-                raise ValueError(f"frame {t} has NaN or infinite pixels; fill or mask them before tracking "
-                                 "(e.g. np.nan_to_num)")
+            try:
+                image = _frame(frames, t)
+            except ValueError as err:
+                if t == start:  # nothing done yet: bad input
+                    raise
+                # Keep what succeeded: the frames done in this direction (minutes of work) stay.
+                said.append(f"{err}: tracking {'forward' if step > 0 else 'backward'} stopped there, the frames "
+                            "done are kept (the others are 'not processed')")
+                warnings.warn(said[-1], UserWarning, stacklevel=2)
+                stop_reason = "frame error"
+                break
             shared = FrameFeatures.of(image, options.get("isef_b", 0.7))
             run.stage = np.zeros(2) if before is None else _stage_shift(run, before, image, t, step)
             before = image
@@ -486,6 +496,21 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
         contours=contours, status=status, **analysis, start=start, stop_reason=stop_reason,
         timings={"segmentation": t_segmented - t_start, "correspondence": t_end - t_segmented,
                  "total": t_end - t_start}, warnings=tuple(said))
+
+
+def _frame(frames, t: int) -> np.ndarray:
+    """Frame ``t`` as float64, read now (one frame at a time: dask, zarr); a ValueError naming
+    the frame if it cannot be read or holds NaN or infinite pixels."""
+    try:
+        image = np.asarray(frames[t], dtype=np.float64)
+    except ValueError:  # already says what (a file reader's, see io.open_stack)
+        raise
+    except Exception as err:  # noqa: BLE001 - a decoder's or a store's error: one plain sentence
+        raise ValueError(f"frame {t} could not be read: {type(err).__name__}: {' '.join(str(err).split())}") from None
+    if not np.isfinite(image).all():
+        raise ValueError(f"frame {t} has NaN or infinite pixels; fill or mask them before tracking "
+                         "(e.g. np.nan_to_num)")
+    return image
 
 
 #: A drawing that holds at least this share of another's area passes over
