@@ -4,6 +4,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
 from scipy.spatial import cKDTree
 
 from napari_physeg import data
@@ -136,6 +137,26 @@ def test_a_moved_and_turned_copy_is_reached_by_a_rigid_move(material, turn, shif
     edges = np.linalg.norm(np.diff(sim.frames, axis=1), axis=2)
     assert np.abs(edges - edges[0]).max() < 0.05
     assert np.all(np.diff(np.linalg.norm(sim.frames - b, axis=2).mean(1)) < 0)  # on its way to b
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(radii=st.lists(st.floats(0.6, 1.4), min_size=5, max_size=9), n=st.integers(12, 60),
+       turn=st.floats(-np.pi, np.pi), shift=st.tuples(st.floats(-1e3, 1e3), st.floats(-1e3, 1e3)),
+       material=st.sampled_from(["rubber", "copper"]))
+def test_any_rigid_move_of_a_star_shape_is_followed_exactly(radii, n, turn, shift, material):
+    """Fuzzed: a star-shaped contour into a turned and shifted copy of
+    itself ends on the copy, every frame a rigid copy of ``a``, none
+    crossing itself."""
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    r = 30 * np.interp(t, np.linspace(0, 2 * np.pi, len(radii) + 1), radii + radii[:1])
+    a = np.column_stack([100 + r * np.sin(t), 100 + r * np.cos(t)])
+    rotation = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    b = (a - a.mean(0)) @ rotation.T + a.mean(0) + np.asarray(shift)
+    sim = simulate(a, b, _truth_matching(a, b, np.arange(n)), material=material, n_frames=5)
+    assert sim.converged and np.abs(sim.frames[-1] - b).max() < 0.05
+    edges = np.linalg.norm(np.diff(sim.frames, axis=1), axis=2)
+    assert np.abs(edges - edges[0]).max() < 0.05
+    assert not any(_self_intersects(frame) for frame in sim.frames)
 
 
 def test_a_horse_turned_a_quarter_turn_does_not_fold_its_legs():
