@@ -373,3 +373,19 @@ def area_centroid(contour) -> np.ndarray:
     if abs(area) < 1e-12:
         return contour.mean(0)
     return np.array([((r + r1) * cross).sum(), ((c + c1) * cross).sum()]) / (6 * area)
+
+
+def rotation_matrix(angle: float) -> np.ndarray:
+    """The rotation by ``angle`` (radians) of ``(row, col)`` column vectors;
+    rows of points turn as ``points @ rotation_matrix(angle).T``."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s], [s, c]])
+
+
+def rotation_between(source: np.ndarray, target: np.ndarray) -> float:
+    """The angle of the rotation (about the origin, no reflection: the two
+    run the same way) that brings the rows of ``source`` closest to the
+    paired rows of ``target`` (least squares, orthogonal Procrustes)."""
+    u, _, vt = np.linalg.svd(np.asarray(target, float).T @ np.asarray(source, float))
+    turn = u @ np.diag([1.0, np.linalg.det(u @ vt)]) @ vt
+    return float(np.arctan2(turn[1, 0], turn[0, 0]))

@@ -55,7 +55,6 @@ stage is in ``docs/benchmarks.md`` (section "Matching"). Coordinates are
 from __future__ import annotations
 
 import inspect
-import itertools
 import warnings
 from dataclasses import dataclass, field
 
@@ -64,7 +63,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from ._drain import drain
-from .contour import resample, segment_lengths, signed_area
+from .contour import resample, rotation_between, rotation_matrix, segment_lengths, signed_area
 from .inner_distance import inner_distance_context
 from .materials import Material
 from ._validation import check_contour, check_count, check_number
@@ -370,6 +369,12 @@ def _pair_mixings() -> np.ndarray:
     return np.concatenate([rotations, rotations * np.array([1.0, -1.0])[None, :, None]])
 
 
+def _mixed(q: np.ndarray, features: np.ndarray) -> np.ndarray:
+    """Modal features ``(m, modes, 2)`` remixed by ``q``: new mode ``i`` is ``sum_j q[i, j]`` old mode ``j``
+    (a sign, for one mode; a rotation or reflection, for a pair)."""
+    return np.einsum("pq,mqd->mpd", q, features)
+
+
 def _group_best(fa: np.ndarray, fb: np.ndarray, cols: list[int]) -> np.ndarray:
     """The correction of ``b``'s modes ``cols`` (a single mode's sign, or a
     pair's mixing, see _pair_mixings) that leaves the two clouds of their
@@ -380,7 +385,7 @@ def _group_best(fa: np.ndarray, fb: np.ndarray, cols: list[int]) -> np.ndarray:
     tree_a = cKDTree(A)
     best = None
     for q in (_pair_mixings() if len(cols) == 2 else np.array([[[1.0]], [[-1.0]]])):
-        B = np.einsum("pq,mqd->mpd", q, fb[:, cols]).reshape(len(fb), -1)
+        B = _mixed(q, fb[:, cols]).reshape(len(fb), -1)
         distance = _cloud_distance(A, B, tree_a, cKDTree(B))
         if best is None or distance < best[0] - 1e-12:
             best = (distance, q)
@@ -415,7 +420,7 @@ def _mode_correction(fa: np.ndarray, fb: np.ndarray, groups, frames=(0.0,)):
         for group in groups:
             cols = list(group)
             q = _group_best(fa, corrected, cols)
-            corrected[:, cols] = np.einsum("pq,mqd->mpd", q, corrected[:, cols])
+            corrected[:, cols] = _mixed(q, corrected[:, cols])
             signs[cols] = np.where(np.diag(q) < 0, -1.0, 1.0)
         distance = joint(corrected)
         for _ in range(len(groups)):  # each pass flips at least one group, or ends
@@ -449,9 +454,7 @@ def _fitted_along(fa: np.ndarray, fb: np.ndarray, basis_a: ModalBasis, basis_b: 
     reflection that brings the paired feature rows closest (orthogonal
     Procrustes, both)."""
     ok = partner >= 0
-    u, _, vt = np.linalg.svd(basis_a.nodes[ok].T @ basis_b.nodes[partner[ok]])
-    turn = u @ np.diag([1.0, np.linalg.det(u @ vt)]) @ vt  # a proper rotation: both run the same way
-    theta = float(np.arctan2(turn[1, 0], turn[0, 0]))
+    theta = rotation_between(basis_b.nodes[partner[ok]], basis_a.nodes[ok])
     turned = _rotate(fb, theta)
     corrected = turned.copy()
     signs = np.ones(fa.shape[1])
@@ -459,14 +462,14 @@ def _fitted_along(fa: np.ndarray, fb: np.ndarray, basis_a: ModalBasis, basis_b: 
         cols = list(group)
         u, _, vt = np.linalg.svd(np.einsum("npd,nqd->pq", fa[ok][:, cols], turned[partner[ok]][:, cols]))
         q = u @ vt
-        corrected[:, cols] = np.einsum("pq,mqd->mpd", q, turned[:, cols])
+        corrected[:, cols] = _mixed(q, turned[:, cols])
         signs[cols] = np.where(np.diag(q) < 0, -1.0, 1.0)
     return corrected, signs, theta
 
 
 def _rotate(f: np.ndarray, theta: float) -> np.ndarray:
-    c, s = np.cos(theta), np.sin(theta)
-    return f @ np.array([[c, s], [-s, c]])
+    """Modal features ``f`` (their last axis the ``(u, v)`` displacement) turned by ``theta``."""
+    return f @ rotation_matrix(theta).T
 
 
 #: Rotations of ``b``'s frame tried when the principal axes are ill defined

@@ -43,7 +43,7 @@ from scipy.sparse.linalg import spsolve
 
 from ._drain import drain
 from ._validation import check_contour, check_count, check_number
-from .contour import segment_lengths
+from .contour import rotation_between, rotation_matrix, segment_lengths
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import (
     coefficient_system,
@@ -453,21 +453,19 @@ class _RigidCarry:
         """The turn and shift that bring ``a`` (centred) closest to ``targets``
         (least squares, no reflection: the two run the same way)."""
         shift = targets.mean(axis=0)
-        u, _, vt = np.linalg.svd((targets - shift).T @ a)
-        turn = u @ np.diag([1.0, np.linalg.det(u @ vt)]) @ vt
-        angle = float(np.arctan2(turn[1, 0], turn[0, 0]))
+        angle = rotation_between(a, targets - shift)
         # The farthest a node of a, or of the shape it deforms to, lies from the turn's centre.
         radius = max(float(np.hypot(*a.T).max()), float(np.hypot(*(targets - shift).T).max()))
         return cls(angle, shift, float(damping_ratio), abs(angle) * radius + float(np.hypot(*shift)))
 
     def seen_from_a(self, points: np.ndarray) -> np.ndarray:
         """``points`` with the whole rigid move undone: where the element must deform to."""
-        return (points - self.shift) @ _turn(self.angle)
+        return (points - self.shift) @ rotation_matrix(self.angle)
 
     def moved(self, points: np.ndarray, t: float) -> np.ndarray:
         """``points`` carried the share of the rigid move done at time ``t``."""
         done = 1.0 - self._remaining(t)
-        return points @ _turn(done * self.angle).T + done * self.shift
+        return points @ rotation_matrix(done * self.angle).T + done * self.shift
 
     def left(self, t: float) -> float:
         """How far (px) the rigid move still has to take the farthest node at time ``t``, at most."""
@@ -490,11 +488,6 @@ class _RigidCarry:
             return np.exp(-z * w) / root
         return np.exp(-z * w) * (np.cos(root * w) + z / root * np.sin(root * w))
 
-
-def _turn(angle: float) -> np.ndarray:
-    """The rotation by ``angle`` of (row, col) column vectors."""
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, -s], [s, c]])
 
 
 def _even_frames(path: np.ndarray, dt: float, n_frames: int):

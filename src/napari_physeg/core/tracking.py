@@ -42,7 +42,8 @@ from scipy.spatial import cKDTree
 from ._drain import drain
 from ._validation import check_contour
 from .contour import (area_centroid, as_contour, bounding_window, closest_on_polyline, nearest_node, outward_normals,
-                      perimeter, polygon_mask, positively_oriented, remove_loops, resample, signed_area)
+                      perimeter, polygon_mask, positively_oriented, remove_loops, resample, rotation_matrix,
+                      signed_area)
 from .dynamics import DivergenceError
 from .matching import match
 from .region import hasty_margin
@@ -1060,7 +1061,7 @@ def _rigid_motion(source: np.ndarray, target: np.ndarray, iterations: int = 30):
     angle, shift = 0.0, dense.mean(0) - centre
     extent = float(np.abs(source - centre).max())
     for _ in range(iterations):
-        rotation = _rotation(angle)
+        rotation = rotation_matrix(angle)
         moved = (source - centre) @ rotation.T + centre + shift
         nearest = tree.query(moved)[1]
         n = normals[nearest]
@@ -1076,13 +1077,8 @@ def _rigid_motion(source: np.ndarray, target: np.ndarray, iterations: int = 30):
         # A thousandth of a pixel over the contour's extent: far below its node spacing.
         if abs(update[0]) * extent < 1e-3 and np.abs(update[1:]).max() < 1e-3:
             break
-    rotation = _rotation(angle)
+    rotation = rotation_matrix(angle)
     return rotation, centre + shift - centre @ rotation.T
-
-
-def _rotation(angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, -s], [s, c]])
 
 
 def curvature(contour: np.ndarray) -> np.ndarray:
