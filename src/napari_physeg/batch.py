@@ -91,7 +91,7 @@ def segment_options_for(contour, options: dict, node_spacing: float | None) -> d
         length = perimeter(contour)
         warnings.warn(f"a node spacing of {node_spacing:g} px gives a contour {length:.0f} px around {n_nodes} "
                       f"nodes: it gets {MAX_NODES} ({length / MAX_NODES:.2g} px apart), the most "
-                      "segment keeps; 2-5 px is typical", UserWarning, stacklevel=2)
+                      "segment takes; 2-5 px is typical", UserWarning, stacklevel=2)
         n_nodes = MAX_NODES
     return {**options, "n_nodes": n_nodes}
 

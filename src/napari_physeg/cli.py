@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .io import TIFF_SUFFIXES, open_stack, parse_frames, read_shapes_csv, same_file, write_shapes_csv
+from .io import TIFF_SUFFIXES, is_zarr, open_stack, parse_frames, read_shapes_csv, same_file, write_shapes_csv
 
 PROG = "napari-physeg"
 
@@ -199,8 +199,6 @@ def _add_io(p, *, out_help: str, init: bool = True) -> None:
 def _check_input(path: Path, what: str, *, image: bool = False) -> None:
     """Refuse an input that is missing, or a folder where a file is expected (an image may be a
     zarr store): a plain sentence, not open()'s [Errno 21]."""
-    from .io import is_zarr
-
     if not path.exists():
         raise ValueError(f"{what} {path} does not exist")
     if path.is_dir() and not (image and is_zarr(path)):

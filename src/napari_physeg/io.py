@@ -75,7 +75,8 @@ def read_shapes_csv(path, *, leading: bool = False):
     header = [c.strip() for c in rows[0]]
     try:
         if "index" in header and "axis-0" in header:
-            indices = [r[header.index("index")] for r in rows[1:]]
+            index = header.index("index")
+            indices = [r[index] for r in rows[1:]]
             if "shape-type" not in header and len(set(indices)) == len(indices):
                 raise ValueError("it is a Points layer's CSV (one point per row, no shape type): contours are "
                                  "shapes; draw each object in a Shapes layer (a polygon, or an ellipse about a "

@@ -139,8 +139,8 @@ class PhysicsControls:
         self._stiffness = FloatSpinBox(label="stiffness r (N/m)",
                                        value=suggested_stiffness(core_default(function, "material")),
                                        min=1.0, max=1e10, step=100.0, tooltip=tips["stiffness"])
-        self._spacing = FloatSpinBox(label="node spacing (px)", value=DEFAULT_NODE_SPACING, min=MIN_NODE_SPACING, max=50.0,
-                                     step=0.5, tooltip=tips["spacing"])
+        self._spacing = FloatSpinBox(label="node spacing (px)", value=DEFAULT_NODE_SPACING, min=MIN_NODE_SPACING,
+                                     max=50.0, step=0.5, tooltip=tips["spacing"])
         self._count = SpinBox(label="node count (0 = by spacing)", value=0, min=0, max=MAX_NODES, step=10,
                               tooltip=tips["count"])
         # The custom constants sit right under the material, shown only for "custom".

@@ -489,7 +489,6 @@ class _RigidCarry:
         return np.exp(-z * w) * (np.cos(root * w) + z / root * np.sin(root * w))
 
 
-
 def _even_frames(path: np.ndarray, dt: float, n_frames: int):
     """Frames at even intervals of the path travelled (mean node
     displacement), interpolated between the two steps that bracket each, and
