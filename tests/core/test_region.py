@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from napari_physeg.core.region import drawing_levels, level_beyond_object, object_region, objectness
+from napari_physeg.core.region import (drawing_levels, level_beyond_object, object_region, objectness,
+                                       traced_border_level)
 
 
 def disk(shape, center, radius):
@@ -433,3 +434,32 @@ def test_other_objects_are_background_whether_or_not_the_object_is_visible(visib
     signed, _, _ = region_features(image, np.zeros(shape), circle((32, 24), 14), polarity=1, avoid=other)
     assert np.all(signed[other] == -1.0)
     assert (signed[disk(shape, (32, 24), 6)] > 0).all() == visible
+
+
+def _blurred_disk(radius=20.0, sigma=3.0, size=96):
+    rows, cols = np.mgrid[:size, :size]
+    disk = (np.hypot(rows - size / 2, cols - size / 2) <= radius).astype(float)
+    return ndi.gaussian_filter(disk, sigma)
+
+
+def _ring(radius, size=96, n=120):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.column_stack([size / 2 + radius * np.sin(t), size / 2 + radius * np.cos(t)])
+
+
+@pytest.mark.parametrize("radius, traced", [(20.0, True), (19.0, True), (18.0, True),  # on the ramp
+                                            (26.0, False), (30.0, False), (10.0, False)])  # around, inside
+def test_a_line_traced_on_the_edge_is_told_from_a_rough_drawing(radius, traced):
+    """An outline along the blurred edge (an earlier result, a label's
+    outline) is an iso-line across which the intensity steps: it gives the
+    border's level, its own. Circles on the background or inside the object
+    do not."""
+    image = _blurred_disk()
+    drawing = _ring(radius)
+    level = traced_border_level(image, drawing, centre=1.0, outside=0.0, floor=0.02)
+    assert (level is not None) == traced
+    if traced:
+        on_line = ndi.map_coordinates(image, drawing.T, order=1)
+        assert level == pytest.approx(np.median(on_line), abs=0.01)
+        model = drawing_levels(image, drawing)
+        assert model.drawn_around and model.mid_level == pytest.approx(level)
