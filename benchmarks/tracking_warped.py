@@ -339,11 +339,13 @@ def switch_cases(name, frames, truth, masks, ids, summary, n=3):
             m = masks[k][u]
             # Around the object's own label and the contour (on whatever it lies on), 12 px more.
             rr, cc = np.nonzero((truth[u] == ids[k]) | (m if m is not None else False))
+            if not rr.size:  # the frame before: no label in the window and no contour
+                continue
             box = (slice(max(rr.min() - 12, 0), rr.max() + 13), slice(max(cc.min() - 12, 0), cc.max() + 13))
             crops.append(dict(t=u, image=frames[u][box], own=(truth[u] == ids[k])[box],
                               labels=truth[u][box], mask=None if m is None else m[box]))
         cases.append(dict(title=f"{name}, object {k} (label {ids[k]}): {int(switched[k].sum())} frames switched",
-                          crops=crops, count=int(switched[k].sum()), nucleus=(MOVIES[name][0].__name__, ids[k])))
+                          crops=crops, t=t, count=int(switched[k].sum()), nucleus=(MOVIES[name][0].__name__, ids[k])))
     return cases
 
 
@@ -365,6 +367,8 @@ def worst_figure(cases, path, n=4):
     if not cases:
         return None
     fig, axes = plt.subplots(2, len(cases), figsize=(3.6 * len(cases), 7.4), squeeze=False)
+    for ax in axes.ravel():
+        ax.axis("off")
     for j, case in enumerate(cases):
         for i, crop in enumerate(case["crops"]):
             ax = axes[i, j]
@@ -376,7 +380,7 @@ def worst_figure(cases, path, n=4):
                 ax.contour(crop["own"], [0.5], colors="lime", linewidths=1.4)
             if crop["mask"] is not None:
                 ax.contour(crop["mask"], [0.5], colors="red", linewidths=1.4)
-            when = "before the switch" if i == 0 and crop["t"] < case["crops"][1]["t"] else "first switched"
+            when = "before the switch" if crop["t"] < case["t"] else "first switched"
             ax.set_title((case["title"] + "\n" if i == 0 else "") + f"frame {crop['t']}: {when}", fontsize=8)
             ax.axis("off")
     fig.suptitle("our worst identity switches: own label green, other labels yellow, our contour red", fontsize=9)

@@ -632,3 +632,31 @@ def test_a_result_started_from_again_stays_where_it_is(dsb):
     a, b = polygon2mask(image.shape, first.contour), polygon2mask(image.shape, again.contour)
     assert again.converged
     assert (a & b).sum() / (a | b).sum() > 0.8
+
+
+def test_a_crowded_nucleus_on_identical_frames_is_not_lost(dsb):
+    """track() on two identical frames of the crowded Data Science Bowl
+    field, every nucleus drawn as its label's outline 3 px out. A tracked
+    frame's drawing lies a margin around the previous contour: read as
+    traced on the border (on a saturated nucleus' wide ramp, 3 px out is
+    mid-ramp), the contour grew to it and the nucleus (label 156) was lost."""
+    from skimage import measure
+
+    from napari_physeg.core import LOST, track
+    from napari_physeg.core.contour import outward_normals, remove_loops, resample
+
+    image, labels = dsb
+    window = (slice(64, 448), slice(64, 448))  # the middle of the crowd
+    image, labels = image[window].astype(float), labels[window]
+    sides = np.unique(np.r_[labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+    ids = [i for i in np.flatnonzero(np.bincount(labels.ravel()) >= 150) if i and i not in sides]
+    inits = []
+    for i in ids:
+        outline = resample(max(measure.find_contours((labels == i).astype(float), 0.5), key=len)[:-1], spacing=2.0)
+        inits.append(remove_loops(outline + 3.0 * outward_normals(outline)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        res = track(np.stack([image, image]), inits)
+    assert 156 in ids
+    assert res.status[ids.index(156)][1] != LOST
+    assert sum(s[1] == LOST for s in res.status) <= 1

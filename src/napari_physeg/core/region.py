@@ -195,7 +195,7 @@ def _median(values: np.ndarray) -> float:
 
 
 def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | None = None,
-                   noise: float | None = None) -> RegionModel:
+                   noise: float | None = None, may_be_traced: bool = True) -> RegionModel:
     """Object and background levels, polarity, and whether the drawing is around the object.
 
     Parameters
@@ -210,6 +210,9 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         Standard deviation of the noise in ``intensity``. Measured on it when
         None, which is right only for an unsmoothed image: smoothing hides
         white noise from the measure far more than it lowers it.
+    may_be_traced : bool, optional
+        Whether the drawing may be traced on the object's border (see
+        :func:`traced_border_level`); False for one known to lie around it.
 
     Returns
     -------
@@ -232,7 +235,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     within = intensity[drawn]
     within = within[:: max(1, within.size // _MAX_SAMPLES)]
     outside = _outside_level(intensity, drawing, centre, on_line, along, within, floor)
-    border = traced_border_level(intensity, drawing, centre, outside, floor)
+    border = traced_border_level(intensity, drawing, centre, outside, floor) if may_be_traced else None
     if border is not None and polarity in (None, np.sign(centre - outside)):
         # Traced on the object's border (an earlier result, a label's
         # outline): it says where the border lies. Read as a rough drawing,

@@ -584,8 +584,9 @@ class _FeatureWindow:
     """
 
     def __init__(self, image, drawing, init, *, polarity, weights, max_line_length, isef_b, refine,
-                 shared=None, avoid=None):
+                 shared=None, avoid=None, may_be_traced=True):
         self.image, self.drawing, self.polarity = image, drawing, polarity
+        self.may_be_traced = may_be_traced
         self.shared, self.avoid = shared, avoid
         # The plane under the background, read on the whole image (its
         # illumination), taken out of every window (see background.py).
@@ -635,7 +636,8 @@ class _FeatureWindow:
                 return self._read_drawing(self._whole_image)
             raise ValueError("image is constant: there is no object border to segment")
         origin = np.array([context[0].start, context[1].start], dtype=float)
-        self.model = drawing_levels(intensity, self.drawing - origin, self.polarity, noise)
+        self.model = drawing_levels(intensity, self.drawing - origin, self.polarity, noise,
+                                    may_be_traced=self.may_be_traced)
         self.polarity = self.model.polarity
 
     def _compute(self, window) -> None:
@@ -1044,7 +1046,8 @@ def _evolve(
     """The steps of :func:`segment` (see :func:`iter_segment`); every option given.
 
     ``start`` (optional, (N, 2)): the nodes to start from, when they are not
-    the drawing ``init`` itself (see :func:`_segment_from`).
+    the drawing ``init`` itself (see :func:`_segment_from`); the drawing then
+    lies around the object, never traced on its border.
     """
 
     t_start = time.perf_counter()
@@ -1074,7 +1077,8 @@ def _evolve(
     features = _FeatureWindow(image, drawing, init, polarity={"bright": 1, "dark": -1}.get(polarity),
                               weights=weights, max_line_length=max_line_length, isef_b=isef_b,
                               refine=refine and reference == "incremental", shared=features,
-                              avoid=None if avoid is None else np.asarray(avoid, dtype=bool))
+                              avoid=None if avoid is None else np.asarray(avoid, dtype=bool),
+                              may_be_traced=start is None)
     t_features = time.perf_counter()
 
     body = _new_body(
@@ -1387,8 +1391,11 @@ def segment(
 
 def _segment_from(image, drawing, start, **options) -> SegmentationResult:
     """:func:`segment` with the object's levels read from ``drawing`` (around
-    it) and the contour starting from ``start``, a contour already near the
-    border: in a time-lapse, the previous frame's result where the motion
-    predicts it. Started from the drawing, it would first have to travel
-    back the drawing's margin."""
+    it: a margin away from ``start``, never read as traced on the border, see
+    :func:`~.region.traced_border_level`) and the contour starting from
+    ``start``, a contour already near the border: in a time-lapse, the
+    previous frame's result where the motion predicts it. Started from the
+    drawing, it would first have to travel back the drawing's margin. (Read
+    as traced, a margin of 3 px around a blurred nucleus lay on its edge's
+    ramp: the contour grew to it, and the tracker lost the nucleus.)"""
     return drain(_evolve(**_segment_arguments(image, drawing, options), start=start))
