@@ -144,6 +144,10 @@ class RegionModel:
     border_level : float or None
         The level at the object's border: that of a drawing traced on it (see
         :func:`traced_border_level`); None for the levels' midpoint.
+    user_drawing : bool
+        Whether a person drew the drawing, centred on what they mean (see
+        :func:`object_region`), rather than a program around a known
+        contour (a tracked frame's margin).
     """
 
     polarity: int
@@ -152,6 +156,7 @@ class RegionModel:
     drawn_around: bool
     least_contrast: float = MIN_CONTRAST
     border_level: float | None = None
+    user_drawing: bool = True
 
     @property
     def contrast(self) -> float:
@@ -195,7 +200,7 @@ def _median(values: np.ndarray) -> float:
 
 
 def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | None = None,
-                   noise: float | None = None, may_be_traced: bool = True) -> RegionModel:
+                   noise: float | None = None, user_drawing: bool = True) -> RegionModel:
     """Object and background levels, polarity, and whether the drawing is around the object.
 
     Parameters
@@ -210,9 +215,11 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         Standard deviation of the noise in ``intensity``. Measured on it when
         None, which is right only for an unsmoothed image: smoothing hides
         white noise from the measure far more than it lowers it.
-    may_be_traced : bool, optional
-        Whether the drawing may be traced on the object's border (see
-        :func:`traced_border_level`); False for one known to lie around it.
+    user_drawing : bool, optional
+        Whether a person drew it (it may then be traced on the object's
+        border, see :func:`traced_border_level`); False for a margin a
+        program drew around a known contour (a tracked frame's), which lies
+        around the object.
 
     Returns
     -------
@@ -235,7 +242,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     within = intensity[drawn]
     within = within[:: max(1, within.size // _MAX_SAMPLES)]
     outside = _outside_level(intensity, drawing, centre, on_line, along, within, floor)
-    border = traced_border_level(intensity, drawing, centre, outside, floor) if may_be_traced else None
+    border = traced_border_level(intensity, drawing, centre, outside, floor) if user_drawing else None
     if border is not None and polarity in (None, np.sign(centre - outside)):
         # Traced on the object's border (an earlier result, a label's
         # outline): it says where the border lies. Read as a rough drawing,
@@ -310,7 +317,8 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         # The user knows better: take the levels in the order they say.
         obj, background = (max(obj, background), min(obj, background)) if polarity > 0 else \
             (min(obj, background), max(obj, background))
-    return RegionModel(int(polarity), float(obj), float(background), bool(around), floor)
+    return RegionModel(int(polarity), float(obj), float(background), bool(around), floor,
+                       user_drawing=user_drawing)
 
 
 #: A drawing is traced on its object's border when, along at least
@@ -873,7 +881,7 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     # meet there at a neck too).
     depth = _depth(like)
     if model.drawn_around:
-        region = _split_at_cores(depth, like, seed, drawn, reach, stronger=stronger)
+        region = _split_at_cores(depth, like, seed, drawn, reach, stronger=stronger, centred=model.user_drawing)
         region &= ~_crossed_neighbours(depth, like, seed, drawn)
     else:
         # No drawing line bounds it: neighbours touching at a neck narrow
@@ -968,12 +976,14 @@ def _side_distance(shape, image_sides) -> np.ndarray:
     return distance
 
 
-def _split_at_cores(depth, like, seed, drawn, reach, side_distance=None, stronger=None) -> np.ndarray:
+def _split_at_cores(depth, like, seed, drawn, reach, side_distance=None, stronger=None,
+                    centred=False) -> np.ndarray:
     """The blob of ``like`` the seed marks, split from neighbours at their
     necks by a watershed of the depth from the blobs' cores (see _cores). The
     cores lying mostly inside ``drawn`` (the drawing around the object, or
-    None) are the object's lobes. Blobs of a level beyond the object's
-    (``stronger``, see _stronger_neighbours) seed neighbours too."""
+    None) are the object's lobes (behind a neck, if the drawing is
+    ``centred`` on them too: see _drawn_around_too). Blobs of a level beyond
+    the object's (``stronger``, see _stronger_neighbours) seed neighbours too."""
     cores, n = _cores(depth, seed, reach, side_distance)
     ours = np.unique(cores[seed])
     ours = ours[ours > 0]
@@ -993,7 +1003,9 @@ def _split_at_cores(depth, like, seed, drawn, reach, side_distance=None, stronge
             core_blob = np.zeros(n + 1, blobs.dtype)
             core_blob[cores.ravel()] = blobs.ravel()
             lobes = lobes[np.isin(core_blob[lobes], core_blob[ours])]
-            lobes = _across_no_neck(lobes[~np.isin(lobes, ours)], cores, ours, depth, like)
+            lobes = lobes[~np.isin(lobes, ours)]
+            behind_a_neck = _drawn_around_too(lobes, cores, ours, depth, like, drawn) if centred else lobes[:0]
+            lobes = np.union1d(_across_no_neck(lobes, cores, ours, depth, like), behind_a_neck)
         ours = np.union1d(ours, lobes)
     if ours.size == 0:  # the seed marks only a thin part: its blob is the object
         return blobs == blobs[seed][0]
@@ -1118,6 +1130,38 @@ def _across_no_neck(lobes, cores, ours, depth, like) -> np.ndarray:
     area = np.maximum(np.bincount(cores.ravel(), minlength=cores.max() + 1), 1)
     share = np.bincount(cores[basins], minlength=cores.max() + 1) / area
     return lobes[share[lobes] >= 0.5]
+
+
+def _drawn_around_too(lobes, cores, ours, depth, like, drawn) -> np.ndarray:
+    """Those of the cores ``lobes`` (within the drawing ``drawn``, behind a
+    neck) that the drawing is centred on with the object's cores ``ours``:
+    taken with them, one by one, their basins' centroid comes nearer the
+    drawing's. A drawing is centred on what it means: a box twice a nucleus
+    holds whole neighbours off its centre; a drawing around a body with a
+    head on a narrow neck (a blob of napari_physeg.data, seeds 1 and 6) is
+    centred on both, and was cut at the neck."""
+    if lobes.size == 0:
+        return lobes
+    basins = segmentation.watershed(-depth, cores, mask=like)
+    pixels = np.nonzero(basins)
+    labels = basins[pixels]
+    area = np.bincount(labels, minlength=cores.max() + 1).astype(float)
+    moments = np.stack([np.bincount(labels, weights=p, minlength=cores.max() + 1) for p in pixels])
+    target = np.array([p.mean() for p in np.nonzero(drawn)])
+    taken = list(ours)
+    kept = []
+    while True:
+        here = moments[:, taken].sum(1) / max(area[taken].sum(), 1.0)
+        best, nearest = None, np.hypot(*(here - target))
+        for lobe in np.setdiff1d(lobes, kept):
+            group = taken + [lobe]
+            distance = np.hypot(*(moments[:, group].sum(1) / max(area[group].sum(), 1.0) - target))
+            if distance < nearest:
+                best, nearest = lobe, distance
+        if best is None:
+            return np.array(kept, dtype=lobes.dtype)
+        taken.append(best)
+        kept.append(best)
 
 
 #: Two depth basins of an object-like blob are one object when the neck

@@ -584,9 +584,9 @@ class _FeatureWindow:
     """
 
     def __init__(self, image, drawing, init, *, polarity, weights, max_line_length, isef_b, refine,
-                 shared=None, avoid=None, may_be_traced=True):
+                 shared=None, avoid=None, user_drawing=True):
         self.image, self.drawing, self.polarity = image, drawing, polarity
-        self.may_be_traced = may_be_traced
+        self.user_drawing = user_drawing
         self.shared, self.avoid = shared, avoid
         # The plane under the background, read on the whole image (its
         # illumination), taken out of every window (see background.py).
@@ -637,7 +637,7 @@ class _FeatureWindow:
             raise ValueError("image is constant: there is no object border to segment")
         origin = np.array([context[0].start, context[1].start], dtype=float)
         self.model = drawing_levels(intensity, self.drawing - origin, self.polarity, noise,
-                                    may_be_traced=self.may_be_traced)
+                                    user_drawing=self.user_drawing)
         self.polarity = self.model.polarity
 
     def _compute(self, window) -> None:
@@ -1078,7 +1078,7 @@ def _evolve(
                               weights=weights, max_line_length=max_line_length, isef_b=isef_b,
                               refine=refine and reference == "incremental", shared=features,
                               avoid=None if avoid is None else np.asarray(avoid, dtype=bool),
-                              may_be_traced=start is None)
+                              user_drawing=start is None)
     t_features = time.perf_counter()
 
     body = _new_body(
@@ -1391,8 +1391,9 @@ def segment(
 
 def _segment_from(image, drawing, start, **options) -> SegmentationResult:
     """:func:`segment` with the object's levels read from ``drawing`` (around
-    it: a margin away from ``start``, never read as traced on the border, see
-    :func:`~.region.traced_border_level`) and the contour starting from
+    it: a margin away from ``start``, not a user's drawing, so never read as
+    traced on the border, see :func:`~.region.traced_border_level`, nor as
+    centred on what it means) and the contour starting from
     ``start``, a contour already near the border: in a time-lapse, the
     previous frame's result where the motion predicts it. Started from the
     drawing, it would first have to travel back the drawing's margin. (Read
