@@ -328,7 +328,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
 #: outside, at the line's median level give or take TRACED_SPREAD of that
 #: contrast; and that level lies TRACED_POSITION of the way from the
 #: outside's level to the centre's. An iso-line on an edge. On the real-image
-#: benchmark (every fourth object), the results of segment() pass (411 of
+#: benchmark (every fourth object), the results of segment() pass (399 of
 #: 443; those that fail lie mostly against touching neighbours), and rough
 #: drawings around, inside or across objects do not (0 of 443: their lines
 #: lie on the background, a halo or the object, at levels that vary along
