@@ -1004,8 +1004,12 @@ def _split_at_cores(depth, like, seed, drawn, reach, side_distance=None, stronge
             core_blob[cores.ravel()] = blobs.ravel()
             lobes = lobes[np.isin(core_blob[lobes], core_blob[ours])]
             lobes = lobes[~np.isin(lobes, ours)]
-            behind_a_neck = _drawn_around_too(lobes, cores, ours, depth, like, drawn) if centred else lobes[:0]
-            lobes = np.union1d(_across_no_neck(lobes, cores, ours, depth, like), behind_a_neck)
+            joined = _across_no_neck(lobes, cores, ours, depth, like)
+            behind_a_neck = np.setdiff1d(lobes, joined)
+            if centred and behind_a_neck.size:
+                joined = np.union1d(joined, _drawn_around_too(behind_a_neck, cores, np.union1d(ours, joined), depth,
+                                                              like, drawn))
+            lobes = joined
         ours = np.union1d(ours, lobes)
     if ours.size == 0:  # the seed marks only a thin part: its blob is the object
         return blobs == blobs[seed][0]
