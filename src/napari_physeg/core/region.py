@@ -1152,17 +1152,14 @@ def _drawn_around_too(lobes, cores, ours, depth, like, drawn) -> np.ndarray:
     area = np.bincount(labels, minlength=cores.max() + 1).astype(float)
     moments = np.stack([np.bincount(labels, weights=p, minlength=cores.max() + 1) for p in pixels])
     target = np.array([p.mean() for p in np.nonzero(drawn)])
-    taken = list(ours)
-    kept = []
+
+    def off_centre(group) -> float:
+        return float(np.hypot(*(moments[:, group].sum(1) / max(area[group].sum(), 1.0) - target)))
+
+    taken, kept = list(ours), []
     while True:
-        here = moments[:, taken].sum(1) / max(area[taken].sum(), 1.0)
-        best, nearest = None, np.hypot(*(here - target))
-        for lobe in np.setdiff1d(lobes, kept):
-            group = taken + [lobe]
-            distance = np.hypot(*(moments[:, group].sum(1) / max(area[group].sum(), 1.0) - target))
-            if distance < nearest:
-                best, nearest = lobe, distance
-        if best is None:
+        best = min(np.setdiff1d(lobes, kept), key=lambda lobe: off_centre(taken + [lobe]), default=None)
+        if best is None or off_centre(taken + [best]) >= off_centre(taken):
             return np.array(kept, dtype=lobes.dtype)
         taken.append(best)
         kept.append(best)
