@@ -1245,8 +1245,9 @@ def _matching_cost(job: _Job, t_a: np.ndarray, t_b: np.ndarray):
     shape_cost = _shape_cost(job, A, B, t_a, t_b)
     hypotheses = _mode_hypotheses(job, fa, fb, basis_a, basis_b, k, shape_cost)
     scored = []
-    for corrected, signs, theta in hypotheses:
-        Z = _pairwise_sq(fa.reshape(na, -1), corrected.reshape(nb, -1))
+    for corrected, signs, theta, Z in hypotheses:
+        if Z is None:
+            Z = _pairwise_sq(fa.reshape(na, -1), corrected.reshape(nb, -1))
         C = _with_displacement(job, job.modal_weight * Z / k + shape_cost, A, B)
         coarse = _coarse_search(job, C) if len(hypotheses) > 1 else None
         # The modes' own reading (the paper's) is kept unless another is clearly cheaper.
@@ -1261,7 +1262,8 @@ def _matching_cost(job: _Job, t_a: np.ndarray, t_b: np.ndarray):
 def _mode_hypotheses(job: _Job, fa: np.ndarray, fb: np.ndarray, basis_a: ModalBasis, basis_b: ModalBasis, k: int,
                      shape_cost) -> list:
     """Hypotheses on ``b``'s modes' signs and mixes, each (corrected
-    features, each mode's sign, frame rotation): from the modes' clouds
+    features, each mode's sign, frame rotation, and their squared feature
+    distances to ``a``'s if already computed, else None): from the modes' clouds
     alone (see _mode_correction, over rotations of ``b``'s frame when its
     principal axes are ill defined), and, when the cost has the shape's own
     terms (curvature and inner-distance context, which need no sign),
@@ -1269,19 +1271,19 @@ def _mode_hypotheses(job: _Job, fa: np.ndarray, fb: np.ndarray, basis_a: ModalBa
     matched exact copies of near-round coins and nuclei half a turn off:
     their modes' clouds are nearly symmetric."""
     if not job.sign_correction:
-        return [(fb, np.ones(k), 0.0)]
+        return [(fb, np.ones(k), 0.0, None)]
     groups = _mode_groups(basis_a, basis_b, k)
     isotropic = max(basis_a.anisotropy, basis_b.anisotropy) > _ISOTROPIC
-    hypotheses = [_mode_correction(fa, fb, groups, _FRAME_ROTATIONS if isotropic else (0.0,))]
-    if job.modal_weight > 0 and np.ndim(shape_cost) == 2:
-        # The displacement term scaled as for the cost with the modes: a
-        # round shape's curvature and context are flat, and scaled to them
-        # alone it vanished.
-        modal = _pairwise_sq(fa.reshape(len(fa), -1), hypotheses[0][0].reshape(len(fb), -1)) / k
-        scale = float(np.median((job.modal_weight * modal + shape_cost).min(axis=1)))
-        path = _coarse_partners(_coarse_search(job, _with_displacement(job, shape_cost, job.A, job.B, scale)), len(fa))
-        hypotheses.append(_fitted_along(fa, fb, basis_a, basis_b, groups, path))
-    return hypotheses
+    clouds = _mode_correction(fa, fb, groups, _FRAME_ROTATIONS if isotropic else (0.0,))
+    if not (job.modal_weight > 0 and np.ndim(shape_cost) == 2):
+        return [(*clouds, None)]
+    # The displacement term scaled as for the cost with the modes: a round
+    # shape's curvature and context are flat, and scaled to them alone it
+    # vanished.
+    Z = _pairwise_sq(fa.reshape(len(fa), -1), clouds[0].reshape(len(fb), -1))
+    scale = float(np.median((job.modal_weight * Z / k + shape_cost).min(axis=1)))
+    path = _coarse_partners(_coarse_search(job, _with_displacement(job, shape_cost, job.A, job.B, scale)), len(fa))
+    return [(*clouds, Z), (*_fitted_along(fa, fb, basis_a, basis_b, groups, path), None)]
 
 
 def _with_displacement(job: _Job, C: np.ndarray, A: np.ndarray, B: np.ndarray, scale: float | None = None):
