@@ -17,7 +17,10 @@ each seeded by the case's name:
 * **box 2x**: a box twice the bounding box, holding whole neighbours in a crowded field;
 * **over the edge**: a circle 0.45x the object's radius, three quarters of the way from its
   centroid to a random point of its outline, so that it crosses the object's edge (a hasty
-  click-drag near the border).
+  click-drag near the border);
+* **again**: the polygon's own result, started from again (a user refining a result, or
+  pressing Segment twice). Under the table: how many of these results move (IoU below 0.9
+  with the result they started from).
 
 Run::
 
@@ -94,8 +97,13 @@ DRAWINGS = {"polygon": polygon, "ellipse": ellipse, "off-centre": off_centre, "t
             "click inside": click_inside, "box 2x": box_2x, "over the edge": over_the_edge}
 
 
+AGAIN = "again"  # the polygon's result, started from again
+MOVED = 0.9  # below this IoU with the result it started from, a result started again has moved
+
+
 def run(groups=GROUPS):
-    """One row per object and drawing: group, object, drawing, IoU, stop reason."""
+    """One row per object and drawing: group, object, drawing, IoU, stop reason, and for
+    ``AGAIN`` the IoU with the result it started from (else NaN)."""
     rows = []
     for group in groups:
         for obj in real_data.GROUPS[group]():
@@ -103,16 +111,30 @@ def run(groups=GROUPS):
                 init = draw(obj, real_data.rng_for(f"drawings/{group}/{obj.name}/{kind}"))
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    result, _ = run_ours(obj, init)
-                rows.append((group, obj.name, kind, result["iou"], result["stop"]))
+                    result, contour = run_ours(obj, init)
+                rows.append((group, obj.name, kind, result["iou"], result["stop"], np.nan))
+                if kind == "polygon" and contour is not None:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore")
+                        again, second = run_ours(obj, contour)
+                    same = 0.0 if second is None else _iou(contour, second, obj.image.shape)
+                    rows.append((group, obj.name, AGAIN, again["iou"], again["stop"], same))
     return rows
 
 
+def _iou(a, b, shape) -> float:
+    from skimage.draw import polygon2mask
+
+    ma, mb = polygon2mask(shape, a), polygon2mask(shape, b)
+    return float((ma & mb).sum() / max((ma | mb).sum(), 1))
+
+
 def table(rows) -> list[str]:
-    lines = ["| group | " + " | ".join(DRAWINGS) + " |", "|---|" + "---|" * len(DRAWINGS)]
-    for group in dict.fromkeys(r[0] for r in rows):
+    kinds, groups = [*DRAWINGS, AGAIN], dict.fromkeys(r[0] for r in rows)
+    lines = ["| group | " + " | ".join(kinds) + " |", "|---|" + "---|" * len(kinds)]
+    for group in groups:
         cells = []
-        for kind in DRAWINGS:
+        for kind in kinds:
             iou = np.array([r[3] for r in rows if r[0] == group and r[2] == kind])
             cells.append(f"{iou.mean():.3f} ({np.mean(iou < 0.85):.0%}, {iou.min():.2f})")
         lines.append(f"| {group} | " + " | ".join(cells) + " |")
@@ -121,6 +143,9 @@ def table(rows) -> list[str]:
         stops[r[4]] = stops.get(r[4], 0) + 1
     lines += ["", f"Mean IoU (share below 0.85, worst) over {len(rows)} runs; stop reasons: "
               + ", ".join(f"{k} {v}" for k, v in sorted(stops.items())) + "."]
+    moved = {group: [r[5] < MOVED for r in rows if r[0] == group and r[2] == AGAIN] for group in groups}
+    lines += ["", f"Started again from the polygon's result, results that moved (IoU below {MOVED} with it): "
+              + ", ".join(f"{group} {sum(m)} of {len(m)}" for group, m in moved.items()) + "."]
     return lines
 
 
@@ -131,7 +156,7 @@ def main(argv=None) -> int:
     rows = run()
     OUT.mkdir(exist_ok=True)
     with open(OUT / "drawings_cases.csv", "w", newline="") as f:
-        csv.writer(f).writerows([("group", "object", "drawing", "iou", "stop"), *rows])
+        csv.writer(f).writerows([("group", "object", "drawing", "iou", "stop", "iou_with_start"), *rows])
     lines = [f"Machine: {machine()}", "Command: `python benchmarks/drawings.py`", "", *table(rows)]
     print("\n".join(lines))
     if args.write:
