@@ -456,7 +456,8 @@ def test_a_line_traced_on_the_edge_is_told_from_a_rough_drawing(radius, traced):
     do not."""
     image = _blurred_disk()
     drawing = _ring(radius)
-    level = traced_border_level(image, drawing, centre=1.0, outside=0.0, floor=0.02)
+    size = float(np.sqrt(np.ptp(drawing, axis=0).prod()))  # as drawing_levels measures it
+    level = traced_border_level(image, drawing, size, centre=1.0, outside=0.0, floor=0.02)
     assert (level is not None) == traced
     if traced:
         on_line = ndi.map_coordinates(image, drawing.T, order=1)

@@ -242,7 +242,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     within = intensity[drawn]
     within = within[:: max(1, within.size // _MAX_SAMPLES)]
     outside = _outside_level(intensity, drawing, centre, on_line, along, within, floor)
-    border = traced_border_level(intensity, drawing, centre, outside, floor) if user_drawing else None
+    border = traced_border_level(intensity, drawing, size, centre, outside, floor) if user_drawing else None
     if border is not None and polarity in (None, np.sign(centre - outside)):
         # Traced on the object's border (an earlier result, a label's
         # outline): it says where the border lies. Read as a rough drawing,
@@ -339,16 +339,16 @@ TRACED_SPREAD = 0.15
 TRACED_POSITION = (0.35, 0.75)
 
 
-def traced_border_level(intensity: np.ndarray, drawing: np.ndarray, centre: float, outside: float,
+def traced_border_level(intensity: np.ndarray, drawing: np.ndarray, size: float, centre: float, outside: float,
                         floor: float) -> float | None:
     """The level on ``drawing``'s line if the drawing is traced on the border
     of an object of level ``centre`` against ``outside`` (see TRACED_SHARE),
-    else None. ``floor``: the least contrast."""
+    else None. ``size``: the drawing's (the root of its bounding box's
+    area); ``floor``: the least contrast."""
     contrast = abs(centre - outside)
     if not np.isfinite(contrast) or contrast <= floor:
         return None
-    size = float(np.sqrt(max(abs(np.ptp(drawing[:, 0]) * np.ptp(drawing[:, 1])), 1.0)))
-    side = int(np.clip(round(_SIDE_FRACTION * size), 1, _SIDE_WIDTH))
+    side = _side_width(size)
     nodes = resample(positively_oriented(drawing), spacing=1.0)
     if len(nodes) < 8:
         return None
@@ -684,11 +684,17 @@ def _off_centre_level(within: np.ndarray, span: float, on_line: float, outside: 
     return other if share >= _OFF_CENTRE_SHARE and abs(other - on_line) > least else None
 
 
+def _side_width(size: float) -> int:
+    """How far either side of a drawn line its sides are read: a tenth of
+    the drawing's ``size``, 1 to _SIDE_WIDTH px."""
+    return int(np.clip(round(_SIDE_FRACTION * size), 1, _SIDE_WIDTH))
+
+
 def _either_side(intensity, drawn, line, size) -> tuple[float, float]:
     """The levels just inside and just outside the drawn line (``line``, its
     band of pixels; ``drawn``, the pixels it encloses), within a tenth of the
     drawing's ``size`` (1-3 px) of it."""
-    side = int(np.clip(round(_SIDE_FRACTION * size), 1, _SIDE_WIDTH))
+    side = _side_width(size)
     # On the line's bounding box (and the sides' width): the window it is
     # read on may be the whole image.
     rows, cols = np.nonzero(line)
