@@ -43,10 +43,12 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 from scipy import ndimage as ndi  # noqa: E402
+from skimage.draw import polygon2mask  # noqa: E402
 
 import real_data  # noqa: E402
 from _common import machine, write_section  # noqa: E402
 from real import OUT, run_ours  # noqa: E402
+from segmentation import iou  # noqa: E402
 
 GROUPS = ("nuclei", "heldout", "small", "timelapse", "coins", "dsb")
 
@@ -117,16 +119,11 @@ def run(groups=GROUPS):
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore")
                         again, second = run_ours(obj, contour)
-                    same = 0.0 if second is None else _iou(contour, second, obj.image.shape)
+                    same = 0.0 if second is None else iou(polygon2mask(obj.image.shape, contour),
+                                                          polygon2mask(obj.image.shape, second))
                     rows.append((group, obj.name, AGAIN, again["iou"], again["stop"], same))
     return rows
 
-
-def _iou(a, b, shape) -> float:
-    from skimage.draw import polygon2mask
-
-    ma, mb = polygon2mask(shape, a), polygon2mask(shape, b)
-    return float((ma & mb).sum() / max((ma | mb).sum(), 1))
 
 
 def table(rows) -> list[str]:
