@@ -6,10 +6,34 @@ fresh examples, as one should after changing the core, run with
 ``HYPOTHESIS_PROFILE=explore``; pin what it finds with ``@example``.
 """
 
+import importlib.util
 import os
+from pathlib import Path
 
+import pytest
 from hypothesis import settings
 
 settings.register_profile("repeatable", derandomize=True)
 settings.register_profile("explore", derandomize=False)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
+
+
+# The 2018 Data Science Bowl test images with their hand-drawn labels, shipped in the stardist
+# wheel (``make setup`` installs it with ``--no-deps``; only its files are read): widefield
+# nuclei, crowded, of very different brightness (the ``dsb`` and ``stack3d`` groups of
+# ``benchmarks/real.py``).
+
+
+@pytest.fixture(scope="session")
+def stardist_images() -> Path:
+    spec = importlib.util.find_spec("stardist")
+    if spec is None:
+        pytest.skip("stardist's wheel is not installed (make setup installs it)")
+    return Path(list(spec.submodule_search_locations)[0]) / "data" / "images"
+
+
+@pytest.fixture(scope="session")
+def dsb(stardist_images):
+    """The 2D image and its labels."""
+    tifffile = pytest.importorskip("tifffile")
+    return tifffile.imread(stardist_images / "img2d.tif"), tifffile.imread(stardist_images / "mask2d.tif")

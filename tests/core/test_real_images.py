@@ -433,23 +433,9 @@ def test_an_outline_traced_on_a_small_nucleus_stays_a_traced_outline(stack):
     assert iou > 0.85, iou
 
 
-# The 2018 Data Science Bowl test image with its hand-drawn labels, shipped in the stardist
-# wheel (``make setup`` installs it with ``--no-deps``; only its files are read): widefield
-# nuclei, crowded, of very different brightness. The cases that failed on it when it was first
-# tried (session 12); the full set is the ``dsb`` group of ``benchmarks/real.py``.
-
-
-def _stardist_images() -> Path:
-    spec = importlib.util.find_spec("stardist")
-    if spec is None:
-        pytest.skip("stardist's wheel is not installed (make setup installs it)")
-    return Path(list(spec.submodule_search_locations)[0]) / "data" / "images"
-
-
-@pytest.fixture(scope="module")
-def dsb():
-    images = _stardist_images()
-    return tifffile.imread(images / "img2d.tif"), tifffile.imread(images / "mask2d.tif")
+# The 2018 Data Science Bowl test image (the ``dsb`` fixture of tests/conftest.py): the cases
+# that failed on it when it was first tried (session 12); the full set is the ``dsb`` group of
+# ``benchmarks/real.py``.
 
 
 @pytest.mark.parametrize("label", [46, 22, 156, 120, 131])
@@ -548,9 +534,8 @@ def test_a_box_twice_a_nucleus_leaves_out_the_neighbours_it_crosses(dsb, label):
 
 
 @pytest.fixture(scope="module")
-def volume():
-    images = _stardist_images()
-    return tifffile.imread(images / "img3d.tif"), tifffile.imread(images / "mask3d.tif")
+def volume(stardist_images):
+    return tifffile.imread(stardist_images / "img3d.tif"), tifffile.imread(stardist_images / "mask3d.tif")
 
 
 @pytest.mark.xfail(strict=True, reason="known (session 20): a nucleus barely brighter than the haze around it, "

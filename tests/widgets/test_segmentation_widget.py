@@ -814,20 +814,12 @@ def test_a_failure_names_the_image_it_was_run_on(viewer_widget, wait_done, error
     assert len(errors) == 1 and "on 'blank'" in errors[0] and "constant" in errors[0]
 
 
-def test_segmenting_a_result_again_keeps_it(viewer_widget, wait_done, errors):
+def test_segmenting_a_result_again_keeps_it(viewer_widget, wait_done, errors, dsb):
     """A user who presses Segment again with the result layer as the input
     (to refine it) gets the same outline back: a crowded, blurred nucleus of
     the Data Science Bowl image, whose result lies on its edge's ramp (it
-    kept 0.16 of itself when the ramp was read as the background)."""
-    import importlib.util
-    from pathlib import Path
-
-    tifffile = pytest.importorskip("tifffile")
-    spec = importlib.util.find_spec("stardist")
-    if spec is None:
-        pytest.skip("stardist's wheel is not installed (make setup installs it)")
-    images = Path(list(spec.submodule_search_locations)[0]) / "data" / "images"
-    image, labels = tifffile.imread(images / "img2d.tif"), tifffile.imread(images / "mask2d.tif")
+    kept 0.20 of itself when the ramp was read as the background)."""
+    image, labels = dsb
     nucleus = labels == 100
     centre, radius = np.argwhere(nucleus).mean(0), 1.4 * np.sqrt(nucleus.sum() / np.pi)
     t = np.linspace(0, 2 * np.pi, 48, endpoint=False)
