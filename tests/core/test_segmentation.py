@@ -370,6 +370,19 @@ def test_small_circle_deep_inside_a_large_object(make):
     assert _iou(res.contour, obj.mask) > 0.98
 
 
+@pytest.mark.parametrize("bright, start", [(True, "outline"), (False, "outline"), (True, "init_near")])
+def test_a_closed_hand_keeps_the_slits_between_its_fingers(bright, start):
+    """The closed hand's fingers are 3-6 px apart at 256 x 256, less than the
+    region force's line is long: from the walls of a slit that line reached the
+    next finger, whose object-ness pushed the wall into the slit until the two
+    walls pinched and the slit was cut off (IoU 0.944 from the hand's own
+    outline, bright or dark, and from a drawing around it before session 32)."""
+    obj = data.hand(pose="closed", bright=bright)
+    res = segment(obj.image, getattr(obj, start))
+    assert res.converged
+    assert _iou(res.contour, obj.mask) > 0.99
+
+
 @pytest.mark.parametrize("make", [data.hand, data.blob])
 def test_circle_far_larger_than_the_object(make):
     """A circle of twice the object's extent (much of it beyond the image):

@@ -549,16 +549,21 @@ DIVISION_NECK = 0.25
 
 def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
     """Warn of each object lost on frame ``t`` whose contour on the frame
-    done before held two bodies (see :func:`pinched_bodies`): a division ends
-    a track, which is seldom what "lost" alone would tell. Tracking backward
-    (``step`` -1), the two bodies came together on the frame after ``t``.
-    Returns the messages."""
+    done before held two bodies (see :func:`pinched_bodies`), or that was
+    pinched in two on ``t`` itself: a division ends a track, which is seldom
+    what "lost" alone would tell. Tracking backward (``step`` -1), the two
+    bodies came together. Returns the messages."""
     said = []
     for k in range(len(run.inits)):
-        before = run.contours[k][t - step]  # the frame done before (t is not the start frame)
-        if run.status[k][t] != LOST or before is None:
+        if run.status[k][t] != LOST:
             continue
-        bodies = pinched_bodies(before)
+        # Its contour on the frame done before (t is not the start frame),
+        # else the one it parted on this frame: two bodies a pixel or two
+        # apart hold the contour between them no longer.
+        before, held = run.contours[k][t - step], t - step
+        bodies = None if before is None else pinched_bodies(before)
+        if bodies is None and t in run.seen[k].parted and run.status[k][t - step] == TRACKED:
+            bodies, held = pinched_bodies(run.seen[k].parted[t]), t
         if bodies is None:
             continue
         where = " and ".join(f"({c[0]:.0f}, {c[1]:.0f})" for c in (area_centroid(b) for b in bodies))
@@ -566,7 +571,7 @@ def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
         what = ("it divided, or took in a neighbour, and is reported lost from frame {t} on" if step > 0 else
                 "the two came together there (two objects that met, or a neighbour it took in), and it is "
                 "reported lost on frame {t} and before")
-        said.append(f"object {k} held two bodies on frame {t - step} (at {where}, joined by a neck "
+        said.append(f"object {k} held two bodies on frame {held} (at {where}, joined by a neck "
                     f"{neck:.1f} px wide): {what.format(t=t)}; to follow the two, draw each on frame {t} "
                     f"and track from there (start={t})")
         warnings.warn(said[-1], UserWarning, stacklevel=5)
@@ -644,9 +649,10 @@ class _Seen:
     polarity: str
     whole_area: float
     contrasts: dict = field(default_factory=dict)  # frame -> contrast where tracked
+    parted: dict = field(default_factory=dict)  # frame -> a contour pinched in two on its way to being lost there
 
     def copy(self) -> _Seen:
-        return replace(self, contrasts=dict(self.contrasts))
+        return replace(self, contrasts=dict(self.contrasts), parted=dict(self.parted))
 
     def faded(self, contrast: float, t: int) -> bool:
         """Whether ``contrast`` on frame ``t`` is below FADED_CONTRAST times
@@ -942,6 +948,12 @@ def _found(image, shared, owner, t, k, init, predicted, previous, seen: _Seen, o
         seen.contrasts[t] = _contrast(image, contour, res.polarity, avoid)
         return contour, TRACKED
     verdict = _judge(contour, previous, predicted, seen.whole_area, image.shape)
+    if verdict == LOST:
+        # Pinched in two on its way (a division, or a neighbour it took in
+        # let go), it kept one body: see _warn_divided.
+        parted = next((h for h in res.history if pinched_bodies(h) is not None), None)
+        if parted is not None:
+            seen.parted[t] = parted
     # Faded: what is left is the out-of-focus glow of an object that left
     # the focal plane, or the halo of a neighbour.
     if verdict == TRACKED:
