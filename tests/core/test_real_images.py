@@ -619,6 +619,36 @@ def test_a_result_started_from_again_stays_where_it_is(dsb):
     assert (a & b).sum() / (a | b).sum() > 0.8
 
 
+@pytest.mark.parametrize("label", [60, 9])
+def test_an_outline_traced_among_touching_neighbours_keeps_its_nucleus(dsb, label):
+    """Started from its label's outline, a nucleus of the Data Science Bowl
+    crowd, touching neighbours as bright as itself along a third to a half of
+    it: the line lies on the edge's ramp elsewhere. Read as a drawing inside an
+    object (its line on object-bright pixels at the contacts), the contour
+    spread over the whole crowd (IoU 0.17 and 0.28 before session 32)."""
+    from skimage import measure
+
+    image, labels = dsb
+    nucleus = labels == label
+    outline = max(measure.find_contours(np.pad(nucleus, 1).astype(float), 0.5), key=len)[:-1:2] - 1
+    res, iou = segmented(image, nucleus, outline)
+    assert res.converged
+    assert iou > 0.75, iou
+
+
+def test_a_click_on_a_textured_nucleus_is_not_read_as_traced(stack):
+    """A click 7 px across on a nucleus' texture finds an edge's ramp along
+    10 px of its 23 (the spots), 0.70 of the way up: read as an outline traced
+    among neighbours, the contour stayed on the click (IoU 0.02; see
+    region.TRACED_AMONG_NEIGHBOURS_LENGTH). It is a click inside."""
+    image = stack[0][32].astype(float)
+    lo, hi = np.percentile(image, [0.1, 99.9])  # as benchmarks/real_data.py: its brightest spots saturate
+    truth = stack[1][32] == 9
+    res, iou = segmented(np.clip((image - lo) / (hi - lo), 0, 1), truth, circle((234.0, 119.0), 3.6125))
+    assert res.converged
+    assert iou > 0.9, iou
+
+
 def test_a_crowded_nucleus_on_identical_frames_is_not_lost(dsb):
     """track() on two identical frames of the crowded Data Science Bowl
     field, every nucleus drawn as its label's outline 3 px out. A tracked
