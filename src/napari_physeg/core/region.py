@@ -249,8 +249,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         # its line on the edge's ramp gave the background another level and
         # the border moved at each new start (on crowded nuclei, 107 of 226
         # results started from again lost a tenth of their IoU and more).
-        return RegionModel(int(np.sign(centre - outside)), float(centre), float(outside), True, floor,
-                           border_level=float(border))
+        return _traced_model(centre, outside, floor, border)
     # Around the object, the line lies on the background: at least halfway
     # from the centre's level toward the outside's. (Comparing the line with
     # the outside instead fails when the rings hold look-alike neighbours.)
@@ -304,8 +303,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     elif user_drawing and polarity in (None, np.sign(centre - outside)) and \
             (border := traced_border_level(intensity, drawing, size, centre, outside, floor,
                                            TRACED_AMONG_NEIGHBOURS_SHARE, TRACED_AMONG_NEIGHBOURS_LENGTH)) is not None:
-        return RegionModel(int(np.sign(centre - outside)), float(centre), float(outside), True, floor,
-                           border_level=float(border))
+        return _traced_model(centre, outside, floor, border)
     else:
         obj, background = on_line, outside
     # A small drawing deep inside a textured object, its centre or the rings
@@ -386,6 +384,13 @@ def traced_border_level(intensity: np.ndarray, drawing: np.ndarray, size: float,
 #: ramp along 10 px of its 23, 0.70 of the way up.
 TRACED_AMONG_NEIGHBOURS_SHARE = 0.25
 TRACED_AMONG_NEIGHBOURS_LENGTH = 16.0
+
+
+def _traced_model(centre: float, outside: float, floor: float, border: float) -> RegionModel:
+    """The levels of a drawing traced on the border, at level ``border``, of an
+    object of level ``centre`` against ``outside`` (``floor``: the least contrast)."""
+    return RegionModel(int(np.sign(centre - outside)), float(centre), float(outside), True, floor,
+                       border_level=float(border))
 
 
 def _centred(intensity, middle, rest, level, other) -> bool:

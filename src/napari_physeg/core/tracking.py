@@ -563,7 +563,7 @@ def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
         before, held = run.contours[k][t - step], t - step
         bodies = None if before is None else pinched_bodies(before)
         if bodies is None and t in run.seen[k].parted and run.status[k][t - step] == TRACKED:
-            bodies, held = pinched_bodies(run.seen[k].parted[t]), t
+            bodies, held = run.seen[k].parted[t], t
         if bodies is None:
             continue
         where = " and ".join(f"({c[0]:.0f}, {c[1]:.0f})" for c in (area_centroid(b) for b in bodies))
@@ -649,7 +649,7 @@ class _Seen:
     polarity: str
     whole_area: float
     contrasts: dict = field(default_factory=dict)  # frame -> contrast where tracked
-    parted: dict = field(default_factory=dict)  # frame -> a contour pinched in two on its way to being lost there
+    parted: dict = field(default_factory=dict)  # frame -> the two bodies of a contour pinched on its way to being lost there
 
     def copy(self) -> _Seen:
         return replace(self, contrasts=dict(self.contrasts), parted=dict(self.parted))
@@ -951,7 +951,7 @@ def _found(image, shared, owner, t, k, init, predicted, previous, seen: _Seen, o
     if verdict == LOST:
         # Pinched in two on its way (a division, or a neighbour it took in
         # let go), it kept one body: see _warn_divided.
-        parted = next((h for h in res.history if pinched_bodies(h) is not None), None)
+        parted = next((bodies for bodies in map(pinched_bodies, res.history) if bodies is not None), None)
         if parted is not None:
             seen.parted[t] = parted
     # Faded: what is left is the out-of-focus glow of an object that left
