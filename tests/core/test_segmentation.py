@@ -146,7 +146,8 @@ GOOD_INIT = data.ellipse((64, 64)).init_near
         (GOOD_IMAGE, [[10, 10], [20, 20], [30, 30]], "degenerate"),
         (GOOD_IMAGE, GOOD_INIT + 500, "wholly outside"),
         (GOOD_IMAGE, GOOD_INIT[:, :1], r"\(N, 2\)"),
-        (np.where(np.eye(64, dtype=bool), np.nan, GOOD_IMAGE), GOOD_INIT, "NaN"),
+        (np.where(np.eye(64, dtype=bool), np.inf, GOOD_IMAGE), GOOD_INIT, "infinite"),
+        (np.full((64, 64), np.nan), GOOD_INIT, "NaN pixels only"),
         (np.dstack([GOOD_IMAGE] * 3), GOOD_INIT, r"RGB.*rgb2gray.*stain.*rgb2hed"),
         (np.stack([GOOD_IMAGE] * 5), GOOD_INIT, "2D"),
         (np.full((64, 64), 7.0), GOOD_INIT, "constant"),
@@ -156,6 +157,28 @@ GOOD_INIT = data.ellipse((64, 64)).init_near
 def test_bad_input_gets_a_clear_error(image, init, message):
     with pytest.raises(ValueError, match=message):
         segment(image, init)
+
+
+@pytest.mark.parametrize("bright", [True, False])
+def test_nan_pixels_are_no_data_where_the_object_ends_as_at_the_image_side(bright):
+    """The margin a registration leaves (NaN) cuts the object as the image's
+    side would: the same result as on the image cropped there, no pixel of it
+    in the margin, and a warning that says so. (NaN was refused; zeros in its
+    place make a dark frame, an edge of their own.)"""
+    blob = data.blob(seed=3, bright=bright)
+    rows = np.flatnonzero(blob.mask.any(1))
+    cut = int(rows.min() + 0.35 * np.ptp(rows))
+    image = blob.image.astype(float)
+    image[:cut] = np.nan
+    with pytest.warns(UserWarning, match=r"NaN pixels .* no data"):
+        res = segment(image, blob.init_far)
+    inside = polygon2mask(image.shape, res.contour)
+    assert res.converged and not (inside & np.isnan(image)).any()
+    with pytest.warns(UserWarning, match="clipped"):  # the drawing goes beyond the cropped image
+        cropped = segment(blob.image[cut:], blob.init_far - [cut, 0])
+    as_cropped = np.zeros_like(inside)
+    as_cropped[cut:] = polygon2mask(blob.image[cut:].shape, cropped.contour)
+    assert (inside & as_cropped).sum() / (inside | as_cropped).sum() > 0.98
 
 
 @pytest.mark.parametrize(

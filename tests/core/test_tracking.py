@@ -398,6 +398,28 @@ def test_an_object_that_moves_out_of_the_image_has_left_the_field_of_view():
     assert all(c is None for c in tr.contours[0][first_left:])
 
 
+def test_a_registered_movie_s_nan_margin_is_the_side_of_its_field_of_view():
+    """A drift-corrected movie has no data (NaN) where the stage moved away:
+    an object that goes into that margin leaves the field of view there, as
+    it would out of the movie cropped to the data; the contours never take in
+    a NaN pixel. (Every frame with NaN was refused.)"""
+    centres = [[(48, 40 + 8 * t), (30, 20)] for t in range(7)]
+    frames = _disk_movie(centres)
+    frames[1:, :, 72:] = np.nan  # the stage moved: nothing was seen there after frame 0
+    inits = [_circle((48, 40), 16), _circle((30, 20), 16)]
+    with pytest.warns(UserWarning, match="6 frames hold NaN pixels"):
+        tr = track(frames, inits)
+    cropped = track(frames[:, :, :72], inits)
+    assert tr.status == cropped.status and LEFT in tr.status[0] and tr.status[1] == [TRACKED] * 7
+    for t in range(1, 7):
+        for k in range(2):
+            if tr.status[k][t] == TRACKED:
+                mask = polygon_mask(tr.contours[k][t], frames.shape[1:])
+                assert not (mask & np.isnan(frames[t])).any()
+                assert iou(tr.contours[k][t], np.pad(polygon_mask(cropped.contours[k][t], (96, 72)),
+                                                     ((0, 0), (0, 24)))) > 0.97
+
+
 @pytest.mark.parametrize("side", ["left", "right", "top", "bottom"])
 def test_an_object_that_moves_in_fast_through_a_side_is_followed(side):
     """A disk that shows a sixth of itself, then half of itself, then the
@@ -478,19 +500,19 @@ def test_displacement_weight_breaks_the_symmetry_of_round_shapes():
     assert np.hypot(*(a[pairs[:, 0]] - b[pairs[:, 1]]).T).max() < 1.5
 
 
-def test_a_frame_with_nan_pixels_stops_the_run_there_and_keeps_the_frames_done():
-    """A NaN frame late in a movie threw away every frame tracked before it;
+def test_a_frame_with_infinite_pixels_stops_the_run_there_and_keeps_the_frames_done():
+    """A bad frame late in a movie threw away every frame tracked before it;
     now the run stops there (the other direction goes on), says which frame
     and why, and keeps what was done. On the start frame it is bad input."""
     frames = _disk_movie([[(48, 48)]] * 6)
-    frames[4, 10, 10] = np.nan
-    with pytest.warns(UserWarning, match="frame 4 has NaN.*forward stopped there"):
+    frames[4, 10, 10] = np.inf
+    with pytest.warns(UserWarning, match="frame 4 has infinite.*forward stopped there"):
         tr = track(frames, _circle((48, 48), 16), start=2)
     assert tr.stop_reason == "frame error" and any("frame 4" in w for w in tr.warnings)
     assert tr.status[0] == [TRACKED] * 4 + ["not processed"] * 2
     assert tr.contours[0][3] is not None and tr.contours[0][4] is None
-    with pytest.raises(ValueError, match="frame 2 has NaN"):
-        frames[2, 10, 10] = np.nan
+    with pytest.raises(ValueError, match="frame 2 has infinite"):
+        frames[2, 10, 10] = -np.inf
         track(frames, _circle((48, 48), 16), start=2)
 
 

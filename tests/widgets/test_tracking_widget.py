@@ -80,7 +80,7 @@ def test_cancel_keeps_the_frames_done(dock, qtbot, wait_done):
 def test_a_frame_that_cannot_be_used_stops_the_run_and_keeps_the_frames_done(movie_in_viewer, wait_done):
     viewer, widget = movie_in_viewer
     movie = np.array(viewer.layers["deforming cell"].data, dtype=float)
-    movie[5, 3, 3] = np.nan  # a bad pixel in frame 5 of 8
+    movie[5, 3, 3] = np.inf  # a bad pixel in frame 5 of 8
     viewer.layers["deforming cell"].data = movie
     widget.run()
     wait_done(widget)
@@ -247,7 +247,7 @@ def test_an_error_of_the_core_is_one_message_not_a_traceback(dock, qtbot, wait_d
     the GUI thread, a traceback on top of the widget's message."""
     viewer, widget = dock(TrackingWidget)
     movie = _disk_movie()
-    movie[:, :, :6] = np.nan  # the empty margin of a registered movie
+    movie[:, 3, 3] = np.inf  # an overflow in every frame, the start one too
     viewer.add_image(movie, name="movie")
     viewer.add_shapes([_circle_on_frame((40, 40), 20)], shape_type="polygon", name="drawn")
     widget.reset_choices()
@@ -257,7 +257,24 @@ def test_an_error_of_the_core_is_one_message_not_a_traceback(dock, qtbot, wait_d
         wait_done(widget)
         qtbot.wait(50)
     assert caught == []
-    assert len(errors) == 1 and "NaN" in errors[0]
+    assert len(errors) == 1 and "infinite" in errors[0]
+
+
+def test_a_registered_movie_with_an_empty_margin_is_tracked(dock, wait_done, errors, warned):
+    """The margin a registration leaves (NaN) was refused with an error;
+    it is no data, kept out of the contours, and said once."""
+    viewer, widget = dock(TrackingWidget)
+    movie = _disk_movie()
+    movie[1:, :, :6] = np.nan  # the empty margin of a registered movie
+    viewer.add_image(movie, name="movie")
+    viewer.add_shapes([_circle_on_frame((40, 40), 20)], shape_type="polygon", name="drawn")
+    widget.reset_choices()
+    viewer.dims.set_point(0, 0)
+    widget.run()
+    wait_done(widget)
+    assert errors == [] and widget.last_result.status[0] == ["tracked"] * 5
+    assert len([layer for layer in widget.output_layers if isinstance(layer, Shapes)][0].data) == 5
+    assert sum("4 frames hold NaN pixels" in m for m in warned) == 1
 
 
 def test_a_movie_with_a_time_scale_keeps_its_slider_and_extent(dock, wait_done, errors):

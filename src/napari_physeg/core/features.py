@@ -51,6 +51,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from scipy import ndimage as ndi
 from scipy import signal
 
 __all__ = [
@@ -137,6 +138,45 @@ def _check_noise(noise) -> float | None:
         raise ValueError(f"noise must be a finite non-negative number (the noise's standard deviation, in the "
                          f"image's units) or None to estimate it, got {noise!r}")
     return float(noise)
+
+
+def _without_missing(image, *, name: str = "image") -> tuple[np.ndarray, np.ndarray | None]:
+    """``image`` with its NaN pixels (no data) filled, and where they were.
+
+    NaN marks pixels nothing was measured at: the margin a registration or a
+    stage-drift correction leaves, a masked region. Each takes the value of
+    the nearest measured pixel, so their border makes no edge of its own
+    (zeros would: a dark frame around a bright field); the caller keeps the
+    contour out of them, as out of the image (``missing``).
+
+    Parameters
+    ----------
+    image : (H, W) array_like
+    name : str, optional
+        The image's name in error messages.
+
+    Returns
+    -------
+    filled : (H, W) ndarray
+        ``image`` itself when it has no NaN pixel, else a float64 copy filled.
+    missing : (H, W) ndarray of bool or None
+        The NaN pixels; None when there are none.
+
+    Raises
+    ------
+    ValueError
+        If every pixel is NaN.
+    """
+    arr = np.asarray(image)
+    if arr.dtype.kind != "f":
+        return arr, None
+    missing = np.isnan(arr)
+    if not missing.any():
+        return arr, None
+    if missing.all():
+        raise ValueError(f"{name} holds NaN pixels only: there is nothing to segment")
+    nearest = ndi.distance_transform_edt(missing, return_distances=False, return_indices=True)
+    return arr[tuple(nearest)].astype(np.float64), missing
 
 
 def _as_image(image, *, name: str = "image", min_size: int = 1) -> np.ndarray:

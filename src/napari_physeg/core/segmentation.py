@@ -27,7 +27,7 @@ from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, conto
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
-from .features import (_as_image, _check_2d, _intensity_range, _noise_sigma, _normalize, chamfer_distance,
+from .features import (_as_image, _check_2d, _without_missing, _intensity_range, _noise_sigma, _normalize, chamfer_distance,
                        normalized_intensity, shen_castan_edges)
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .materials import Material, get_material, suggested_stiffness
@@ -526,13 +526,15 @@ class FrameFeatures:
     intensity: np.ndarray  # normalised, lightly smoothed (sigma 1 px), uneven illumination removed
     noise: float | None = None  # standard deviation of the noise in intensity (None: unknown)
     plane: np.ndarray | None = None  # the background's plane in the image's units (see background_plane)
+    missing: np.ndarray | None = None  # the image's NaN pixels, no data: no contour enters them (None: none)
 
     @classmethod
     def of(cls, image, isef_b: float = 0.7) -> FrameFeatures:
-        image = _as_image(_validate_image(image))
+        image, missing = _without_missing(_validate_image(image))
+        image = _as_image(image)
         plane = background_plane(image)
         image = plane_removed(image, plane, (slice(0, image.shape[0]), slice(0, image.shape[1])))
-        return cls(*_edges_and_intensity(normalized_intensity(image), isef_b), plane=plane)
+        return cls(*_edges_and_intensity(normalized_intensity(image), isef_b), plane=plane, missing=missing)
 
 
 #: White noise's standard deviation is multiplied by 1 / (2 sqrt(pi) sigma)
@@ -1051,7 +1053,7 @@ def _evolve(
     """
 
     t_start = time.perf_counter()
-    image = _validate_image(image)
+    image, missing = _without_missing(_validate_image(image))
     from ._validation import check_contour  # the one validation of segment, match and simulate
 
     init = check_contour(init, "init")
@@ -1074,6 +1076,7 @@ def _evolve(
         if given is not None and np.shape(getattr(given, "edges", given)) != image.shape:
             raise ValueError(f"{name} must be of the image's shape {image.shape}, got "
                              f"{np.shape(getattr(given, 'edges', given))}")
+    avoid = _avoiding_missing(avoid, missing, features)
     features = _FeatureWindow(image, drawing, init, polarity={"bright": 1, "dark": -1}.get(polarity),
                               weights=weights, max_line_length=max_line_length, isef_b=isef_b,
                               refine=refine and reference == "incremental", shared=features,
@@ -1151,6 +1154,22 @@ def _evolve(
         timings={"features": t_features - t_start, "model": body.model_time,
                  "evolution": t_end - t_features - body.model_time, "total": t_end - t_start},
     )
+
+
+def _avoiding_missing(avoid, missing, features: FrameFeatures | None):
+    """``avoid`` with the pixels that hold no data (``missing``: NaN in the
+    image; or in the image ``features`` were computed on): a contour keeps
+    out of them as out of the image, whose side an object they cut takes
+    for its own."""
+    if missing is not None:
+        warnings.warn(f"{int(missing.sum())} NaN pixels of the image ({missing.mean():.1%}) were read as no data: "
+                      "the contour keeps out of them", UserWarning,
+                      stacklevel=5)  # the caller of segment() (through _avoiding_missing, _evolve, drain and segment)
+    if features is not None and features.missing is not None:
+        missing = features.missing if missing is None else missing | features.missing
+    if missing is None:
+        return avoid
+    return missing if avoid is None else np.asarray(avoid, dtype=bool) | missing
 
 
 def _before_collapse(features: _FeatureWindow, settled, drawing, steps: int, max_line_length: float):
@@ -1268,7 +1287,9 @@ def segment(
     ----------
     image : (H, W) array_like
         Grey-level image of any real dtype. RGB images must be reduced to one
-        channel first.
+        channel first. NaN pixels hold no data (the margin a registration or
+        a drift correction leaves): the contour keeps out of them, as out of
+        the image, with a warning.
     init : (N, 2) array_like
         Initial contour, ``(row, col)`` nodes, closed without a repeated node,
         ``N >= 3``. Nodes outside the image are clipped to it (with a warning).
@@ -1356,7 +1377,7 @@ def segment(
     Raises
     ------
     ValueError
-        For bad input: a non-2D image, NaN pixels, a constant image, a contour
+        For bad input: a non-2D image, infinite or only NaN pixels, a constant image, a contour
         with fewer than 3 distinct nodes or wholly outside the image, bad
         parameters; and when the contour collapses to a point because no
         object border lies within reach of it.

@@ -45,6 +45,7 @@ from .contour import (area_centroid, as_contour, bounding_window, closest_on_pol
                       perimeter, polygon_mask, positively_oriented, remove_loops, resample, rotation_matrix,
                       signed_area)
 from .dynamics import DivergenceError
+from .features import _without_missing
 from .matching import match
 from .region import hasty_margin
 from .segmentation import FrameFeatures, _segment_from, check_segment_options, segment
@@ -172,7 +173,7 @@ class TrackingResult:
         The frame the initial contours were drawn on.
     stop_reason : str
         ``"completed"``, ``"cancelled"``, or ``"frame error"``: a frame after
-        the start one could not be read or held NaN pixels; the tracking
+        the start one could not be read or held infinite pixels; the tracking
         stopped there in that direction (the other went on), the frames done
         are kept, and ``warnings`` says which frame and why.
     timings : dict
@@ -383,16 +384,27 @@ def _paint(owner: np.ndarray, contour: np.ndarray | None, value: int, only_free:
     owner[box][inside] = value
 
 
-def _touches_side(contour: np.ndarray, shape) -> bool:
-    """Whether a node of ``contour`` lies on (or beyond) the image's side."""
-    return bool(np.any((contour <= 0.0) | (contour >= np.array(shape) - 1.0)))
+#: The pixels next to a node (and its own), where _touches_side looks for missing data.
+_NEXT_TO = np.array([(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1)])
 
 
-def _judge(contour, previous, predicted, whole_area, shape) -> str:
+def _touches_side(contour: np.ndarray, shape, missing: np.ndarray | None = None) -> bool:
+    """Whether a node of ``contour`` lies on (or beyond) the image's side, or
+    next to its ``missing`` pixels (no data: the view ends there too)."""
+    if np.any((contour <= 0.0) | (contour >= np.array(shape) - 1.0)):
+        return True
+    if missing is None:
+        return False
+    near = np.clip(np.rint(contour).astype(int)[:, None, :] + _NEXT_TO, 0, np.array(shape) - 1)
+    return bool(missing[near[..., 0], near[..., 1]].any())
+
+
+def _judge(contour, previous, predicted, whole_area, shape, missing=None) -> str:
     """Is ``contour`` the object seen on ``previous`` (and ``predicted`` on
-    this frame), or has it gone?"""
+    this frame), or has it gone? (``missing``: the frame's pixels that hold
+    no data, see _touches_side.)"""
     area, prev_area = abs(signed_area(contour)), abs(signed_area(previous))
-    at_side, was_at_side = _touches_side(contour, shape), _touches_side(previous, shape)
+    at_side, was_at_side = _touches_side(contour, shape, missing), _touches_side(previous, shape, missing)
     if at_side and area < LEFT_FRACTION * whole_area:
         return LEFT
     # The image's side hides part of an object it cuts: one that moves in
@@ -454,6 +466,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                contours=[[None] * n_frames for _ in range(n_obj)], status=[[None] * n_frames for _ in range(n_obj)],
                seen=[_Seen(polarity, abs(signed_area(c))) for c in inits])
     total, done, stop_reason, said = n_obj * n_frames, 0, "completed", []
+    with_missing = []  # the frames with NaN pixels
     # Forward from the start frame, then backward from it.
     start_image = None
     for frame_order in (range(start, n_frames), range(start - 1, -1, -1)):
@@ -471,7 +484,12 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                 warnings.warn(said[-1], UserWarning, stacklevel=2)
                 stop_reason = "frame error"
                 break
-            shared = FrameFeatures.of(image, options.get("isef_b", 0.7))
+            # NaN pixels hold no data (a registration's margin): filled once
+            # for every object, which keeps out of them (see _without_missing).
+            image, missing = _without_missing(image)
+            shared = replace(FrameFeatures.of(image, options.get("isef_b", 0.7)), missing=missing)
+            if missing is not None:
+                with_missing.append(t)
             run.stage = np.zeros(2) if before is None else _stage_shift(run, before, image, t, step)
             before = image
             if t == start:
@@ -487,6 +505,10 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
             said += _warn_not_found(run, frame_shape) if t == start else _warn_divided(run, t, step)
         if stop_reason == "cancelled":
             break
+    if with_missing:
+        said.append(f"{len(with_missing)} frames hold NaN pixels (first: frame {min(with_missing)}), read as no data: "
+                    "the contours keep out of them, and an object that goes into them has left the field of view")
+        warnings.warn(said[-1], UserWarning, stacklevel=2)
     contours = run.contours
     status = run.status
     t_segmented = time.perf_counter()
@@ -501,15 +523,16 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
 
 def _frame(frames, t: int) -> np.ndarray:
     """Frame ``t`` as float64, read now (one frame at a time: dask, zarr); a ValueError naming
-    the frame if it cannot be read or holds NaN or infinite pixels."""
+    the frame if it cannot be read or holds infinite pixels (NaN ones hold no data, see
+    _without_missing)."""
     try:
         image = np.asarray(frames[t], dtype=np.float64)
     except ValueError:  # already says what (a file reader's, see io.open_stack)
         raise
     except Exception as err:  # noqa: BLE001 - a decoder's or a store's error: one plain sentence
         raise ValueError(f"frame {t} could not be read: {type(err).__name__}: {' '.join(str(err).split())}") from None
-    if not np.isfinite(image).all():
-        raise ValueError(f"frame {t} has NaN or infinite pixels; fill or mask them before tracking "
+    if np.isinf(image).any():
+        raise ValueError(f"frame {t} has infinite pixels; clip or replace them before tracking "
                          "(e.g. np.nan_to_num)")
     return image
 
@@ -938,7 +961,7 @@ def _found(image, shared, owner, t, k, init, predicted, previous, seen: _Seen, o
             warnings.filterwarnings("ignore", message=".*lie outside the image", category=UserWarning)
             res = segment_here(init, predicted) if previous is None else _redrawn(segment_here, init, predicted)
     except (ValueError, DivergenceError):
-        return None, LEFT if previous is not None and _touches_side(init, image.shape) else LOST
+        return None, LEFT if previous is not None and _touches_side(init, image.shape, shared.missing) else LOST
     if not res.converged:
         return None, LOST
     contour = positively_oriented(res.contour)
@@ -947,7 +970,7 @@ def _found(image, shared, owner, t, k, init, predicted, previous, seen: _Seen, o
         seen.whole_area = abs(signed_area(contour))
         seen.contrasts[t] = _contrast(image, contour, res.polarity, avoid)
         return contour, TRACKED
-    verdict = _judge(contour, previous, predicted, seen.whole_area, image.shape)
+    verdict = _judge(contour, previous, predicted, seen.whole_area, image.shape, shared.missing)
     if verdict == LOST:
         # Pinched in two on its way (a division, or a neighbour it took in
         # let go), it kept one body: see _warn_divided.
@@ -961,7 +984,7 @@ def _found(image, shared, owner, t, k, init, predicted, previous, seen: _Seen, o
         verdict = LOST if seen.faded(contrast, t) else TRACKED
         if verdict == TRACKED and np.isfinite(contrast):
             seen.contrasts[t] = contrast
-    if verdict == TRACKED and not _touches_side(contour, image.shape):
+    if verdict == TRACKED and not _touches_side(contour, image.shape, shared.missing):
         seen.whole_area = abs(signed_area(contour))
     return (contour if verdict == TRACKED else None), verdict
 
@@ -1151,7 +1174,7 @@ def track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_option
     ----------
     frames : (T, H, W) array_like
         The movie: a numpy array, or a lazy dask or zarr array read one frame
-        at a time.
+        at a time. NaN pixels hold no data (see :func:`segment`).
     inits : (N, 2) array_like or sequence of them
         One contour per object, drawn on frame ``start`` (around or inside the
         object, as for :func:`segment`).
@@ -1178,8 +1201,10 @@ def track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_option
     ValueError
         For frames that are not a (T, H, W) stack, no or bad contours, a
         start frame outside the movie or a bad ``segment_options`` value
-        (before any frame is read); for a frame with NaN or infinite pixels
-        (when it is read).
+        (before any frame is read); for a frame with infinite pixels (when it
+        is read). NaN pixels hold no data (the margin a registration leaves):
+        the contours keep out of them, an object that goes into them has left
+        the field of view, and ``warnings`` says which frames held some.
     TypeError
         For an option :func:`segment` does not have in ``segment_options``.
 
