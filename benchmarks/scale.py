@@ -8,9 +8,13 @@ same cases unzoomed. With ``--invert`` the unzoomed images are also inverted (da
 bright background, as in bright-field or phase contrast), which a method without a polarity bias
 should score alike. With ``--slope`` they are also lit unevenly: a background that rises across
 the field, corner to corner, by the image's whole range (as excitation or a lamp that falls off
-across the field makes it). Ours only: the probe asks whether the defaults hold, not who wins.
+across the field makes it). With ``--cut`` the unzoomed images are also cut across the object's
+middle, the part above it missing: once as NaN pixels (the margin a registration leaves, which
+``segment`` reads as no data) and once cropped away, both scored against the truth below the cut;
+the two should score alike. Ours only: the probe asks whether the defaults hold, not who wins.
 
     python benchmarks/scale.py --scale 0.5 2 3 --invert --slope --every 4
+    python benchmarks/scale.py --scale 1 --cut --every 2
 
 Zoom: ``cv2.resize`` of the image (area averaging to shrink, bilinear to enlarge), the truth
 resized bilinearly and cut at 0.5, the drawing's nodes mapped with the pixel grid
@@ -57,7 +61,27 @@ def sloped(obj):
     return replace(obj, image=obj.image + np.ptp(obj.image) * (rows + cols) / max(h + w - 2, 1))
 
 
-VARIANTS = {"inverted": inverted, "sloped": sloped}
+def _cut_row(obj) -> int:
+    rows = np.flatnonzero(obj.mask.any(1))
+    return int((rows.min() + rows.max()) / 2)
+
+
+def cut_nan(obj, init):
+    """``obj`` with no data (NaN) above its middle row, its truth cut there."""
+    cut = _cut_row(obj)
+    image, mask = obj.image.astype(np.float64), obj.mask.copy()
+    image[:cut], mask[:cut] = np.nan, False
+    return replace(obj, image=image, mask=mask), init
+
+
+def cut_cropped(obj, init):
+    """``obj`` cropped below its middle row (the drawing moved with it)."""
+    cut = _cut_row(obj)
+    return replace(obj, image=obj.image[cut:], mask=obj.mask[cut:]), init - [cut, 0]
+
+
+VARIANTS = {"inverted": lambda obj, init: (inverted(obj), init), "sloped": lambda obj, init: (sloped(obj), init),
+            "cut (NaN)": cut_nan, "cut (cropped)": cut_cropped}
 
 
 def run_group(job):
@@ -70,7 +94,7 @@ def run_group(job):
         if i % every:
             continue
         for variant in variants:
-            case = (VARIANTS[variant](obj), init) if variant in VARIANTS else zoomed(obj, init, variant)
+            case = VARIANTS[variant](obj, init) if variant in VARIANTS else zoomed(obj, init, variant)
             result, _ = real.run_ours(*case)
             rows.append((group, variant, result["iou"], bool(result["error"]), result["steps"] or np.nan))
     return rows
@@ -97,15 +121,17 @@ def main(argv=None):
     ap.add_argument("--scale", nargs="+", type=float, default=[0.5, 1.0, 2.0])
     ap.add_argument("--invert", action="store_true", help="also the unzoomed images inverted")
     ap.add_argument("--slope", action="store_true", help="also the unzoomed images lit unevenly")
+    ap.add_argument("--cut", action="store_true", help="also the unzoomed images cut by NaN pixels, and cropped")
     ap.add_argument("--every", type=int, default=4, help="every n-th case of each group")
     ap.add_argument("--groups", nargs="+", choices=list(real_data.GROUPS), default=list(real_data.GROUPS))
     args = ap.parse_args(argv)
     variants = sorted(set(args.scale) | {1.0}) + (["inverted"] if args.invert else []) + \
-        (["sloped"] if args.slope else [])
+        (["sloped"] if args.slope else []) + (["cut (NaN)", "cut (cropped)"] if args.cut else [])
     with Pool(2) as pool:
         rows = [r for part in pool.map(run_group, [(g, variants, args.every) for g in args.groups]) for r in part]
     print(f"Command: `python benchmarks/scale.py --scale {' '.join(f'{s:g}' for s in args.scale)}"
-          f"{' --invert' if args.invert else ''}{' --slope' if args.slope else ''} --every {args.every}`\n")
+          f"{' --invert' if args.invert else ''}{' --slope' if args.slope else ''}{' --cut' if args.cut else ''}"
+          f" --every {args.every}`\n")
     print(table(rows, variants))
 
 

@@ -675,3 +675,25 @@ def test_a_crowded_nucleus_on_identical_frames_is_not_lost(dsb):
     assert 156 in ids
     assert res.status[ids.index(156)][1] != LOST
     assert sum(s[1] == LOST for s in res.status) <= 1
+
+
+@pytest.mark.parametrize("label", [6, 16, 17])
+def test_a_nucleus_cut_by_a_nan_margin_ends_as_at_the_image_side(stack, label):
+    """A registration's NaN margin cuts a nucleus across its middle: the same
+    result as on the image cropped there. (Filled from the nearest measured
+    pixel, the nucleus streamed into the margin, the rings the levels are
+    read on took the streaks for the object, and these ended at 0.31-0.69 of
+    the cropped result.)"""
+    image, labels = stack[0][32].astype(float), stack[1][32]
+    truth = ndi.binary_fill_holes(labels == label)
+    rows = np.flatnonzero(truth.any(1))
+    cut = (rows.min() + rows.max()) // 2
+    init = circle(np.argwhere(truth).mean(axis=0), 1.3 * np.sqrt(truth.sum() / np.pi))
+    image[:cut] = np.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # NaN read as no data; the cropped drawing clipped
+        found = polygon2mask(truth.shape, segment(image, init).contour)
+        cropped = segment(image[cut:], init - [cut, 0]).contour + [cut, 0]
+    as_cropped = polygon2mask(truth.shape, cropped)
+    assert not found[:cut].any()
+    assert (found & as_cropped).sum() / (found | as_cropped).sum() > 0.93
