@@ -408,6 +408,22 @@ def test_a_bad_image_error_comes_back_from_the_worker(viewer_widget, wait_done, 
     assert not output_layers(viewer) and len(viewer.layers) == 2
 
 
+def test_an_image_with_a_nan_margin_is_segmented_and_said_so(viewer_widget, wait_done, errors, napari_notifications,
+                                                             hand):
+    """The margin a registration leaves (NaN) was an error; it is no data,
+    kept out of the contour, and a warning says so."""
+    viewer, widget = viewer_widget
+    image = hand.image.astype(float)
+    image[:, :12] = np.nan
+    viewer.add_image(image, name="registered hand")
+    viewer.add_shapes([light(hand.init_near)], shape_type="polygon", name="init")
+    widget.reset_choices()
+    widget.run()
+    wait_done(widget)
+    assert errors == [] and len(output_layers(viewer)) == 1
+    assert any("NaN pixels" in str(n.message) and n.severity == "warning" for n in napari_notifications)
+
+
 def test_divergence_is_reported_with_the_fix(viewer_widget, wait_done, errors, monkeypatch):
     viewer, widget = viewer_widget
     viewer.open_sample("napari-physeg", "hand_segmentation")

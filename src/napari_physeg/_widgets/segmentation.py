@@ -399,6 +399,10 @@ def prepare_segmentation(image_layer, shapes_layer, *, world_point=None, channel
     if not contours:
         raise InputError("; ".join(off_images))
     warnings.extend(f"{message}; it was left out" for message in sliced.refused + off_images)
+    missing = int(np.isnan(plane).sum()) if plane.dtype.kind == "f" else 0
+    if missing:  # said here: the core's warning is not relayed (see relay_warnings)
+        warnings.append(f"{missing} NaN pixels of {image_layer.name!r} ({missing / plane.size:.1%}) were read as no "
+                        "data: the contours keep out of them")
     return SegmentationJob(
         image=plane,
         contours=contours,
