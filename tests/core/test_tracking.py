@@ -407,7 +407,7 @@ def test_a_registered_movie_s_nan_margin_is_the_side_of_its_field_of_view():
     frames = _disk_movie(centres)
     frames[1:, :, 72:] = np.nan  # the stage moved: nothing was seen there after frame 0
     inits = [_circle((48, 40), 16), _circle((30, 20), 16)]
-    with pytest.warns(UserWarning, match="6 frames hold NaN pixels"):
+    with pytest.warns(UserWarning, match="NaN pixels, read as no data, in 6 of 7 frames"):
         tr = track(frames, inits)
     cropped = track(frames[:, :, :72], inits)
     assert tr.status == cropped.status and LEFT in tr.status[0] and tr.status[1] == [TRACKED] * 7
@@ -418,6 +418,21 @@ def test_a_registered_movie_s_nan_margin_is_the_side_of_its_field_of_view():
                 assert not (mask & np.isnan(frames[t])).any()
                 assert iou(tr.contours[k][t], np.pad(polygon_mask(cropped.contours[k][t], (96, 72)),
                                                      ((0, 0), (0, 24)))) > 0.97
+
+
+def test_a_frame_without_data_is_a_gap_the_objects_are_followed_across():
+    """A dropped frame stored as NaN raised out of track() and lost every
+    frame done; no object is seen on it, and each is found again after it.
+    As the start frame it is bad input."""
+    frames = _disk_movie([[(48, 44 + 2 * t)] for t in range(6)])
+    frames[3] = np.nan
+    with pytest.warns(UserWarning, match="in 1 of 6 frames"):
+        tr = track(frames, _circle((48, 44), 16))
+    assert tr.stop_reason == "completed" and tr.contours[0][3] is None
+    assert tr.status[0][:3] == [TRACKED] * 3 and tr.status[0][4:] == [TRACKED] * 2
+    assert iou(tr.contours[0][5], polygon_mask(_circle((48, 54), 12, n=200), frames.shape[1:])) > 0.9
+    with pytest.raises(ValueError, match="start frame 3 holds NaN pixels only"):
+        track(frames, _circle((48, 50), 16), start=3)
 
 
 @pytest.mark.parametrize("side", ["left", "right", "top", "bottom"])

@@ -486,7 +486,10 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                 break
             # NaN pixels hold no data (a registration's margin): filled once
             # for every object, which keeps out of them (see _without_missing).
-            image, missing = _without_missing(image)
+            image, missing = _measured(image)
+            if t == start and missing is not None and missing.all():
+                raise ValueError(f"the start frame {t} holds NaN pixels only (no data): draw the contours on a "
+                                 "frame with data and start there")
             shared = replace(FrameFeatures.of(image, options.get("isef_b", 0.7)), missing=missing)
             if missing is not None:
                 with_missing.append(t)
@@ -506,8 +509,9 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
         if stop_reason == "cancelled":
             break
     if with_missing:
-        said.append(f"{len(with_missing)} frames hold NaN pixels (first: frame {min(with_missing)}), read as no data: "
-                    "the contours keep out of them, and an object that goes into them has left the field of view")
+        said.append(f"NaN pixels, read as no data, in {len(with_missing)} of {n_frames} frames (first: frame "
+                    f"{min(with_missing)}): the contours keep out of them, and an object that goes into them has left "
+                    "the field of view")
         warnings.warn(said[-1], UserWarning, stacklevel=2)
     contours = run.contours
     status = run.status
@@ -519,6 +523,16 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
         contours=contours, status=status, **analysis, start=start, stop_reason=stop_reason,
         timings={"segmentation": t_segmented - t_start, "correspondence": t_end - t_segmented,
                  "total": t_end - t_start}, warnings=tuple(said))
+
+
+def _measured(image: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """Frame ``image`` with its NaN pixels filled, and where they were (see
+    _without_missing). A frame without a measured pixel (a dropped frame
+    stored as NaN) is blank: no object is found on it, and each is looked
+    for again on the next ones, as after a blank frame."""
+    if image.dtype.kind == "f" and np.isnan(image).all():
+        return np.zeros(image.shape), np.ones(image.shape, dtype=bool)
+    return _without_missing(image)
 
 
 def _frame(frames, t: int) -> np.ndarray:
