@@ -27,8 +27,8 @@ from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, conto
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
-from .features import (_as_image, _check_2d, _without_missing, _intensity_range, _noise_sigma, _normalize, chamfer_distance,
-                       normalized_intensity, shen_castan_edges)
+from .features import (_as_image, _check_2d, _intensity_range, _noise_sigma, _normalize, _without_missing,
+                       chamfer_distance, normalized_intensity, shen_castan_edges)
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .materials import Material, get_material, suggested_stiffness
 from .region import _disk, _fill, _scaled, drawing_levels, level_beyond_object, object_region, objectness
