@@ -212,7 +212,9 @@ def polygon_mask(contour: np.ndarray, shape) -> np.ndarray:
 DENSE_PAIRS_MAX_POINTS = 128
 
 
-@lru_cache(maxsize=16)
+# One entry per node count up to DENSE_PAIRS_MAX_POINTS (5.6 MB at most): the
+# objects of a movie have as many node counts, and 16 entries thrashed.
+@lru_cache(maxsize=DENSE_PAIRS_MAX_POINTS)
 def pair_indices(n: int) -> tuple[np.ndarray, np.ndarray]:
     """The indices ``i < j`` of the pairs of ``n`` points, in ``pdist``'s order (read-only)."""
     i, j = np.triu_indices(n, k=1)
@@ -236,19 +238,22 @@ def pairs_within(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndar
 def _crossing_pairs(contour: np.ndarray) -> np.ndarray:
     """Pairs ``(i, j)``, ``i < j``, of non-adjacent edges that cross, sorted."""
     n = len(contour)
-    p, q = contour, np.roll(contour, -1, axis=0)
-    seg = np.linalg.norm(q - p, axis=1)
+    ahead = np.concatenate([contour[1:], contour[:1]])
+    edge = ahead - contour
     # Two edges can only cross if their midpoints are closer than their lengths.
-    i, j = pairs_within(0.5 * (p + q), seg.max() + 1e-9)
+    i, j = pairs_within(0.5 * (contour + ahead), np.sqrt(np.einsum("ij,ij->i", edge, edge).max()) + 1e-9)
     keep = (j - i > 1) & ~((i == 0) & (j == n - 1))
     i, j = i[keep], j[keep]
-
-    def side(o, a, b):
-        return (a[:, 0] - o[:, 0]) * (b[:, 1] - o[:, 1]) - (a[:, 1] - o[:, 1]) * (b[:, 0] - o[:, 0])
-
-    crosses = (side(p[i], q[i], p[j]) * side(p[i], q[i], q[j]) < 0) & (
-        side(p[j], q[j], p[i]) * side(p[j], q[j], q[i]) < 0)
+    # Each edge's ends lie on either side of the other's line (cross products of opposite signs).
+    start_i, start_j, edge_i, edge_j = contour[i], contour[j], edge[i], edge[j]
+    crosses = (_cross(edge_i, start_j - start_i) * _cross(edge_i, ahead[j] - start_i) < 0) & (
+        _cross(edge_j, start_i - start_j) * _cross(edge_j, ahead[i] - start_j) < 0)
     return np.column_stack([i[crosses], j[crosses]])
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The z component of the cross products of the rows of ``u`` and ``v``."""
+    return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
 
 
 def remove_loops(contour: np.ndarray, max_loops: int = 100) -> np.ndarray:

@@ -1367,10 +1367,13 @@ def _holes(mask: np.ndarray, image_sides) -> tuple[np.ndarray, np.ndarray, np.nd
     at_corner = (top | bottom) & (left | right)
     at_corner[0] = False  # the mask's own pixels
     for piece in np.flatnonzero(at_corner & on_image_side & ~on_other_side):
-        rows, cols = np.nonzero(pieces == piece)
-        hull = cv2.convexHull(np.column_stack([cols, rows]).astype(np.int32))
+        inside = (pieces == piece).view(np.uint8)
+        # The hull of the piece's outlines is that of its pixels, at a fraction of the cost.
+        outlines = cv2.findContours(inside, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)[0]
+        hull = cv2.convexHull(np.vstack(outlines))
         # Pixel centres: a hull's area is half a pixel short of the pixels' along its rim.
-        at_corner[piece] = rows.size < CORNER_SOLIDITY * (cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1)
+        at_corner[piece] = (np.count_nonzero(inside)
+                            < CORNER_SOLIDITY * (cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1))
     enclosed = ~(on_image_side | on_other_side)
     open_to_image = on_image_side & ~on_other_side & ~at_corner
     enclosed[0] = open_to_image[0] = False

@@ -403,7 +403,7 @@ class _RemeshWatch:
         return bool(closest <= self.gap)  # as cKDTree.query_pairs(gap): distances <= gap
 
 
-@lru_cache(maxsize=16)
+@lru_cache(maxsize=DENSE_PAIRS_MAX_POINTS)
 def _non_neighbour_pairs(n: int) -> np.ndarray:
     """Which pairs of ``pdist``'s condensed order join two nodes of a closed
     contour of ``n`` nodes that are not neighbours along it."""
