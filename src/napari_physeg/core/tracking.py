@@ -349,13 +349,18 @@ def _drawing_around(contour: np.ndarray) -> np.ndarray:
     return _grown(contour, _margin(contour))
 
 
+def _depth_inside(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Each of ``points``' distance inside the closed ``polygon`` (px; < 0 outside)."""
+    xy = np.ascontiguousarray(polygon[:, ::-1], dtype=np.float32)  # OpenCV's (x, y)
+    return np.array([cv2.pointPolygonTest(xy, (float(x), float(y)), True) for y, x in points])
+
+
 def _against_the_limit(contour: np.ndarray, drawing: np.ndarray) -> bool:
     """Whether ``contour`` rests against the limit that ``drawing`` sets to
     its object (the drawing grown by region.hasty_margin px) along at least
     AT_LIMIT_SHARE of its nodes, rather than on the object's border."""
     margin = hasty_margin(abs(signed_area(drawing)))
-    polygon = np.ascontiguousarray(drawing[:, ::-1], dtype=np.float32)  # OpenCV's (x, y)
-    inside = np.array([cv2.pointPolygonTest(polygon, (float(x), float(y)), True) for y, x in contour])
+    inside = _depth_inside(drawing, contour)
     # Within a pixel and a half of it: the limit is a raster's dilation, and
     # the polish moves the nodes by up to a pixel.
     return bool(np.mean(-inside >= margin - 1.5) >= AT_LIMIT_SHARE)
@@ -379,8 +384,9 @@ def _carried(drawing: np.ndarray | None, last: np.ndarray, start: np.ndarray) ->
     """The drawing to segment from ``start`` in: ``drawing``, that of the
     frame where the object was last seen (as ``last``), moved as ``start``
     moved from ``last``, while it still lies around ``start`` as a new one
-    would (all of it at least half _drawing_around's margin away, and most
-    of it within twice that margin); else a new one around ``start``.
+    would (all of ``start`` at least CARRIED_NEAREST of _drawing_around's
+    margin inside it, and half of it within CARRIED_MEDIAN margins); else a
+    new one around ``start``.
 
     The drawing's line reads the object's background. Drawn anew around each
     frame's contour, on a blurred edge it lay on the ramp at a distance the
@@ -394,8 +400,7 @@ def _carried(drawing: np.ndarray | None, last: np.ndarray, start: np.ndarray) ->
         return _drawing_around(start)
     moved = drawing + (area_centroid(start) - area_centroid(last))
     margin = _margin(start)
-    polygon = np.ascontiguousarray(moved[:, ::-1], dtype=np.float32)  # OpenCV's (x, y)
-    inside = np.array([cv2.pointPolygonTest(polygon, (float(x), float(y)), True) for y, x in start])
+    inside = _depth_inside(moved, start)
     if inside.min() >= CARRIED_NEAREST * margin and np.median(inside) <= CARRIED_MEDIAN * margin:
         return moved
     return _drawing_around(start)
