@@ -1002,7 +1002,10 @@ def test_a_contour_keeps_out_of_the_pixels_it_is_told_to_avoid(gap, angle, brigh
     the pixels nearer its centre): no edge parts them, so the polish, which
     measures the blob's border on the raw image, must not take the contour
     into the other's pixels, out of which the region force kept it (2-7 such
-    pixels before session 25; a straight side between nodes may still clip one)."""
+    pixels before session 25; a straight side between nodes may still clip one).
+    Along the other's staircase of pixels the contour may leave a few of its
+    own (4 at the image's scale; 6 on the view magnified twice that a disk
+    of 9 px radius is now segmented on, see core.magnify): 96 % are kept."""
     rr, cc = np.mgrid[:64, :80]
     a = np.array([32.0, 30.0])
     b = a + gap * np.array([np.sin(np.radians(angle)), np.cos(np.radians(angle))])
@@ -1015,7 +1018,7 @@ def test_a_contour_keeps_out_of_the_pixels_it_is_told_to_avoid(gap, angle, brigh
     assert res.converged
     region = polygon2mask(image.shape, res.contour)
     assert (region & other).sum() <= 1
-    assert (region & in_a & ~other).sum() >= 0.97 * (in_a & ~other).sum()
+    assert (region & in_a & ~other).sum() >= 0.96 * (in_a & ~other).sum()
 
 
 def test_a_membrane_labelled_cell_drawn_around_is_the_whole_cell():

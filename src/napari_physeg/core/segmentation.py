@@ -12,7 +12,7 @@ import inspect
 import time
 import warnings
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import cv2
@@ -30,8 +30,10 @@ from .element import coefficient_system, rayleigh_coefficients, reference_freque
 from .features import (_as_image, _check_2d, _intensity_range, _noise_sigma, _normalize, _without_missing,
                        chamfer_distance, normalized_intensity, shen_castan_edges)
 from .forces import FORCE_NAMES, ForceField, normalize_weights
+from .magnify import MagnifiedView, magnification
 from .materials import Material, get_material, suggested_stiffness
-from .region import _disk, _fill, _scaled, drawing_levels, level_beyond_object, object_region, objectness
+from .region import (RegionModel, _disk, _fill, _least_contrast, _scaled, drawing_levels, level_beyond_object,
+                     object_region, objectness)
 from .subpixel import polish
 
 __all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "FrameFeatures", "region_features"]
@@ -153,7 +155,7 @@ def _warn_if_figure_eight(drawing: np.ndarray) -> None:
                       "not cross itself, around (or inside) the object", UserWarning, stacklevel=5)
 
 
-def _clip_to_image(init: np.ndarray, shape) -> np.ndarray:
+def _clip_to_image(init: np.ndarray, shape, warn: bool = True) -> np.ndarray:
     hi = np.array(shape, dtype=float) - 1.0
     outside = np.any((init < 0) | (init > hi), axis=1)
     if outside.all():
@@ -165,11 +167,12 @@ def _clip_to_image(init: np.ndarray, shape) -> np.ndarray:
                 "check that the contour and image use the same coordinates"
             )
     if outside.any():
-        warnings.warn(
-            f"{outside.sum()} of {len(init)} nodes of init lie outside the image and were clipped to it",
-            UserWarning,
-            stacklevel=5,  # the caller of segment() (through _evolve, drain and segment)
-        )
+        if warn:
+            warnings.warn(
+                f"{outside.sum()} of {len(init)} nodes of init lie outside the image and were clipped to it",
+                UserWarning,
+                stacklevel=5,  # the caller of segment() (through _evolve, drain and segment)
+            )
         init = as_contour(np.clip(init, 0.0, hi), name="init (clipped to the image)")
     return init
 
@@ -586,8 +589,12 @@ class _FeatureWindow:
     """
 
     def __init__(self, image, drawing, init, *, polarity, weights, max_line_length, isef_b, refine,
-                 shared=None, avoid=None, user_drawing=True):
+                 shared=None, avoid=None, user_drawing=True, image_noise=None, raw_model=None):
         self.image, self.drawing, self.polarity = image, drawing, polarity
+        # The noise's standard deviation in the image's units, and the
+        # drawing's levels in them, when the image cannot tell them (a
+        # magnified view, see _magnified); else measured and read.
+        self.image_noise, self.raw_model = image_noise, raw_model
         self.user_drawing = user_drawing
         self.shared, self.avoid = shared, avoid
         # The plane under the background, read on the whole image (its
@@ -628,7 +635,8 @@ class _FeatureWindow:
             sub = self.evenly_lit(context)
             self.levels = _intensity_range(sub)
             normalised = _normalize(sub, levels=self.levels)
-            self.noise = _noise_sigma(normalised)
+            self.noise = _noise_sigma(normalised) if self.image_noise is None else \
+                self.image_noise / max(self.levels[1] - self.levels[0], 1e-300)
             intensity = _lightly_smoothed(normalised)
             noise = _SMOOTHED_NOISE_GAIN * self.noise
             # The first feature window is often the context (the whole image).
@@ -640,7 +648,19 @@ class _FeatureWindow:
         origin = np.array([context[0].start, context[1].start], dtype=float)
         self.model = drawing_levels(intensity, self.drawing - origin, self.polarity, noise,
                                     user_drawing=self.user_drawing)
+        if self.raw_model is not None and not self.model.is_visible:
+            # A magnified view shows what the image does, and more finely:
+            # where its own reading of the drawing sees no object, the
+            # image's reading stands (the view's pixel statistics, smoothed
+            # by the interpolation, are not the image's).
+            seen = _in_units(self.raw_model, self.levels, least_contrast=self.model.least_contrast)
+            if seen.is_visible:
+                self.model = seen
         self.polarity = self.model.polarity
+
+    def model_in_image_units(self) -> RegionModel:
+        """The drawing's levels in the image's units (see _in_units)."""
+        return _in_units(self.model, self.levels, inverse=True)
 
     def _compute(self, window) -> None:
         sub = self.image[window]
@@ -685,14 +705,31 @@ class _FeatureWindow:
         return old - self.origin
 
 
+def _in_units(model: RegionModel, levels, *, inverse: bool = False, least_contrast: float | None = None
+              ) -> RegionModel:
+    """``model``'s levels, read in the image's units, in those of an
+    intensity normalised from the image's ``levels`` (lo, hi; see
+    features._normalize), with its ``least_contrast`` there; or back
+    (``inverse``)."""
+    lo, hi = levels
+    span = max(hi - lo, 1e-300)
+
+    def to(level):
+        return None if level is None else (lo + level * span if inverse else (level - lo) / span)
+
+    floor = model.least_contrast * span if inverse else least_contrast
+    return replace(model, object_level=to(model.object_level), background_level=to(model.background_level),
+                   border_level=to(model.border_level), least_contrast=floor)
+
+
 def _polished(features: _FeatureWindow, nodes: np.ndarray) -> np.ndarray:
     """``nodes`` (window frame), at rest, polished onto the border measured
     on the raw image (subpixel.polish), but for those the polish would take
     next to or into pixels of ``avoid``: between touching objects with no
     edge between them the raw image's border lies in the other's pixels,
     and the region force's balance, half-way between the two, stands."""
-    polished = np.clip(polish(features.evenly_lit(features.window), nodes, polarity=features.polarity), -0.5,
-                       features.bounds)
+    polished = np.clip(polish(features.evenly_lit(features.window), nodes, polarity=features.polarity,
+                              noise=features.image_noise), -0.5, features.bounds)
     if features.avoid is None:
         return polished
     near_others = cv2.dilate(features.avoid[features.window].view(np.uint8), np.ones((3, 3), np.uint8))
@@ -1043,15 +1080,23 @@ def _evolve(
     history_every: int,
     features: FrameFeatures | None,
     avoid,
+    magnify: bool,
     start=None,
+    warn: bool = True,
+    image_noise: float | None = None,
+    raw_model: RegionModel | None = None,
 ):
     """The steps of :func:`segment` (see :func:`iter_segment`); every option given.
 
     ``start`` (optional, (N, 2)): the nodes to start from, when they are not
     the drawing ``init`` itself (see :func:`_segment_from`); the drawing then
-    lies around the object, never traced on its border.
+    lies around the object, never traced on its border. ``warn``: whether
+    to warn of the drawing's and the image's flaws (not again on a
+    magnified view, see :func:`_magnified`); ``image_noise`` and
+    ``raw_model``: the noise's standard deviation and the drawing's levels
+    (the image's units), when the image cannot tell them.
     """
-
+    options = dict(locals())
     t_start = time.perf_counter()
     image, missing = _without_missing(_validate_image(image))
     from ._validation import check_contour  # the one validation of segment, match and simulate
@@ -1062,9 +1107,10 @@ def _evolve(
     # The drawing as the user made it (partly beyond the image, maybe) tells
     # the object from its background; the clipped one starts the contour.
     drawing = init
-    _warn_if_figure_eight(drawing)
-    init = _clip_to_image(init, image.shape)
-    first = init if start is None else _clip_to_image(check_contour(start, "start"), image.shape)
+    if warn:
+        _warn_if_figure_eight(drawing)
+    init = _clip_to_image(init, image.shape, warn)
+    first = init if start is None else _clip_to_image(check_contour(start, "start"), image.shape, warn)
     nodes, spacing, sigma_used = _initial_nodes(first, n_nodes, sigma, sigma_factor)
     if integrator == "modal" and len(nodes) > MODAL_MAX_NODES:
         raise ValueError(
@@ -1076,13 +1122,15 @@ def _evolve(
         if given is not None and np.shape(getattr(given, "edges", given)) != image.shape:
             raise ValueError(f"{name} must be of the image's shape {image.shape}, got "
                              f"{np.shape(getattr(given, 'edges', given))}")
-    avoid = _avoiding_missing(avoid, missing, features)
+    avoid = _avoiding_missing(avoid, missing, features, warn)
     features = _FeatureWindow(image, drawing, init, polarity={"bright": 1, "dark": -1}.get(polarity),
                               weights=weights, max_line_length=max_line_length, isef_b=isef_b,
                               refine=refine and reference == "incremental", shared=features,
                               avoid=None if avoid is None else np.asarray(avoid, dtype=bool),
-                              user_drawing=start is None)
+                              user_drawing=start is None, image_noise=image_noise, raw_model=raw_model)
     t_features = time.perf_counter()
+    if magnify and features.shared is None and (factor := magnification(_object_radius(features))) > 1:
+        return (yield from _magnified(factor, features, options, t_start))
 
     body = _new_body(
         nodes - features.origin, features.bounds, spacing=spacing, sigma=sigma_used, material=material,
@@ -1156,12 +1204,12 @@ def _evolve(
     )
 
 
-def _avoiding_missing(avoid, missing, features: FrameFeatures | None):
+def _avoiding_missing(avoid, missing, features: FrameFeatures | None, warn: bool = True):
     """``avoid`` with the pixels that hold no data (``missing``: NaN in the
-    image; or in the image ``features`` were computed on): a contour keeps
-    out of them as out of the image, whose side an object they cut takes
-    for its own."""
-    if missing is not None:
+    image, with a warning if ``warn``; or in the image ``features`` were
+    computed on): a contour keeps out of them as out of the image, whose
+    side an object they cut takes for its own."""
+    if missing is not None and warn:
         warnings.warn(f"{int(missing.sum())} NaN pixels of the image ({missing.mean():.1%}) were read as no data: "
                       "the contour keeps out of them", UserWarning,
                       stacklevel=5)  # the caller of segment() (through _avoiding_missing, _evolve, drain and segment)
@@ -1170,6 +1218,74 @@ def _avoiding_missing(avoid, missing, features: FrameFeatures | None):
     if missing is None:
         return avoid
     return missing if avoid is None else np.asarray(avoid, dtype=bool) | missing
+
+
+def _object_radius(features: _FeatureWindow) -> float:
+    """The object's radius (px; that of the disk of its area) as the drawing
+    says it: its own region's, within a drawing around it; the drawing's
+    when no region stands out."""
+    drawn = float(np.sqrt(abs(signed_area(features.drawing)) / np.pi))
+    area = float(np.count_nonzero(features.fields[0].objectness > 0))
+    if area == 0:
+        return drawn
+    radius = float(np.sqrt(area / np.pi))
+    return min(radius, drawn) if features.model.drawn_around else radius
+
+
+@lru_cache(maxsize=None)
+def _magnified_noise_gain(factor: int) -> float:
+    """The standard deviation of white noise, magnified ``factor`` times (see
+    :mod:`.magnify`), as the segmentation reads it (lightly smoothed), over
+    that of white noise read so: how much noisier the magnified view is, to
+    the segmentation, than its pixels' noise says (interpolation spreads each
+    sample over ``factor`` px, which a smoothing of 1 px no longer averages;
+    measured on the view itself, Immerkaer's second differences see almost
+    none of it, and a circle around a small disk in strong noise came to rest
+    on the noise)."""
+    noise = np.random.default_rng(0).standard_normal((128, 128))
+    view = cv2.resize(noise, None, fx=factor, fy=factor, interpolation=cv2.INTER_LINEAR)
+    inner = slice(8 * factor, -8 * factor)
+    return float(_lightly_smoothed(view)[inner, inner].std()) / _SMOOTHED_NOISE_GAIN
+
+
+def _magnified(factor: int, features: _FeatureWindow, options: dict, t_start: float):
+    """:func:`_evolve` of a small object on a view of its neighbourhood
+    magnified ``factor`` times (see :mod:`.magnify`), its progress and result
+    brought back to the image. The view holds the drawing, the start and the
+    object's region, and the windows the segmentation reads around them. If
+    the segmentation fails there, or its contour meets the view's cut, the
+    object is segmented on the image itself."""
+    image, drawing, start = features.image, np.asarray(options["init"], dtype=float), options["start"]
+    shape = image.shape
+    region = np.argwhere(features.fields[0].objectness > 0) + features.origin
+    points = [np.clip(drawing, 0, np.array(shape) - 1.0), region]
+    if start is not None:
+        points.append(np.clip(np.asarray(start, dtype=float), 0, np.array(shape) - 1.0))
+    # The segmentation reads the drawing within CONTEXT_MARGIN guard bands of
+    # it, and guard bands are of the view's pixels.
+    margin = CONTEXT_MARGIN * (float(options["max_line_length"]) + 8.0) / factor + 2.0
+    view = MagnifiedView.around(np.vstack(points), shape, margin, factor)
+    sigma = options["sigma"]
+    inner = {**options, "image": view.image(image), "init": view.inward(drawing),
+             "start": None if start is None else view.inward(start),
+             "avoid": None if features.avoid is None else view.mask(features.avoid),
+             "sigma": None if sigma is None else float(sigma) * factor, "magnify": False, "warn": False,
+             "image_noise": _noise_sigma(features.evenly_lit(view.window)) * _magnified_noise_gain(factor),
+             "raw_model": features.model_in_image_units()}
+    run, res = _evolve(**inner), None
+    try:
+        state = next(run)
+        while True:
+            stop = yield SegmentationProgress(state.step, view.outward(state.contour), state.phase)
+            state = run.send(stop)
+    except StopIteration as done:
+        res = done.value
+    except (ValueError, DivergenceError):
+        pass  # as it would fail on the image itself, or not: see there
+    if res is None or (res.stop_reason != "cancelled" and view.reaches_a_cut(view.outward(res.contour))):
+        return (yield from _evolve(**{**options, "magnify": False}))
+    return replace(res, contour=view.outward(res.contour), history=tuple(view.outward(h) for h in res.history),
+                   timings={**res.timings, "total": time.perf_counter() - t_start})
 
 
 def _before_collapse(features: _FeatureWindow, settled, drawing, steps: int, max_line_length: float):
@@ -1271,6 +1387,7 @@ def segment(
     history_every: int = 5,
     features: FrameFeatures | None = None,
     avoid=None,
+    magnify: bool = True,
     callback=None,
 ) -> SegmentationResult:
     """Segment the object around (or inside) ``init`` with a physical contour.
@@ -1367,6 +1484,14 @@ def segment(
     avoid : (H, W) array of bool, optional
         Pixels of other objects, counted as background whatever they look like:
         the contour does not enter them.
+    magnify : bool, optional
+        Segment an object smaller than :data:`~.magnify.SMALL_OBJECT_RADIUS`
+        (10 px in radius, as its drawing and the image say) on a view of its
+        neighbourhood magnified 2-3 times, where the few-pixel scales the
+        image is read on are fractions of it (see :mod:`.magnify`); the
+        lengths above in px (``max_line_length``, ``max_step_length``,
+        ``tol``, ``sigma``) are then the view's. Not with ``features``
+        (they are the image's own).
     callback : callable, optional
         ``callback(step, contour)`` after each step; return ``False`` to stop.
 
