@@ -6,7 +6,8 @@ from scipy import ndimage as ndi
 from skimage.draw import polygon2mask
 
 from napari_physeg.core import iter_segment, segment
-from napari_physeg.core.magnify import MAX_MAGNIFICATION, SMALL_OBJECT_RADIUS, MagnifiedView, magnification
+from napari_physeg.core.magnify import (MAX_MAGNIFICATION, MAX_VIEW_PIXELS, SMALL_OBJECT_RADIUS, MagnifiedView,
+                                        magnification)
 
 
 def _iou(contour, mask):
@@ -44,6 +45,10 @@ def test_small_objects_are_magnified_to_about_the_size_the_method_reads_well():
     assert all(a >= b for a, b in zip(factors, factors[1:]))  # smaller objects, more magnified
     # Up to the largest magnification, the object reaches the size the method reads well.
     assert all(r * f >= SMALL_OBJECT_RADIUS for r, f in zip(radii, factors) if f < MAX_MAGNIFICATION)
+    # A view that would hold too many pixels is magnified less, or not at all.
+    assert magnification(2.0, window_pixels=MAX_VIEW_PIXELS // 9) == 3
+    assert magnification(2.0, window_pixels=MAX_VIEW_PIXELS // 4) == 2
+    assert magnification(2.0, window_pixels=MAX_VIEW_PIXELS) == 1
 
 
 @pytest.mark.parametrize("factor", [2, 3])
@@ -136,3 +141,26 @@ def test_magnify_false_segments_on_the_image_itself():
     plain, magnified = segment(image, drawing, magnify=False), segment(image, drawing)
     # The magnified view's nodes are a view pixel apart: a finer contour.
     assert len(magnified.contour) > len(plain.contour)
+
+
+def test_a_huge_drawing_around_a_small_object_is_not_magnified_into_a_huge_view(monkeypatch):
+    """A box over most of a 1500 x 1500 image around a disk of 4 px radius:
+    a view magnified 3 times would hold 20 million pixels (160 MB). (So
+    large a drawing says too little about so small an object for the
+    contour to find it, magnified or not: only the view's size is asked.)"""
+    made = []
+    image_of = MagnifiedView.image
+
+    def recorded(self, image):
+        view = image_of(self, image)
+        made.append(view.size)
+        return view
+
+    monkeypatch.setattr(MagnifiedView, "image", recorded)
+    rows, cols = np.ogrid[:1500, :1500]
+    disk = (rows - 750.3) ** 2 + (cols - 750.2) ** 2 <= 16.0
+    image = ndi.gaussian_filter(disk.astype(float), 1.0) + np.random.default_rng(0).normal(0, 0.02, disk.shape)
+    box = np.array([[20.0, 20.0], [20.0, 1480.0], [1480.0, 1480.0], [1480.0, 20.0]])
+    res = segment(image, box)
+    assert res.stop_reason in ("converged", "stalled")
+    assert all(size <= MAX_VIEW_PIXELS for size in made)

@@ -30,7 +30,7 @@ import numpy as np
 
 from .contour import bounding_window
 
-__all__ = ["SMALL_OBJECT_RADIUS", "MAX_MAGNIFICATION", "magnification", "MagnifiedView"]
+__all__ = ["SMALL_OBJECT_RADIUS", "MAX_MAGNIFICATION", "MAX_VIEW_PIXELS", "magnification", "MagnifiedView"]
 
 #: Objects of a smaller radius (px; that of the disk of their area) are
 #: segmented on a magnified view, so that they are about this large there.
@@ -38,13 +38,21 @@ SMALL_OBJECT_RADIUS = 10.0
 #: The largest magnification: a 3-px object becomes 9 px, and the view's
 #: pixels (``MAX_MAGNIFICATION ** 2`` per pixel) stay few.
 MAX_MAGNIFICATION = 3
+#: The most pixels of a magnified view (32 MB of float64): a drawing far
+#: larger than its small object (a box over half a large image) is not worth
+#: seconds of magnified feature images.
+MAX_VIEW_PIXELS = 2 ** 22
 
 
-def magnification(radius: float) -> int:
-    """How many times to magnify an object of ``radius`` px (1: not at all)."""
-    if not radius > 0:
-        return MAX_MAGNIFICATION
-    return int(np.clip(np.ceil(SMALL_OBJECT_RADIUS / radius), 1, MAX_MAGNIFICATION))
+def magnification(radius: float, window_pixels: float = 0.0) -> int:
+    """How many times to magnify an object of ``radius`` px (1: not at all),
+    seen in a window of ``window_pixels`` pixels of the image (at most
+    MAX_VIEW_PIXELS once magnified)."""
+    factor = MAX_MAGNIFICATION if not radius > 0 else \
+        int(np.clip(np.ceil(SMALL_OBJECT_RADIUS / radius), 1, MAX_MAGNIFICATION))
+    while factor > 1 and window_pixels * factor ** 2 > MAX_VIEW_PIXELS:
+        factor -= 1
+    return factor
 
 
 @dataclass(frozen=True)
@@ -66,6 +74,11 @@ class MagnifiedView:
         """The view of the window within ``margin`` px of ``points``' bounding box."""
         shape = (int(image_shape[0]), int(image_shape[1]))
         return cls(bounding_window(np.asarray(points, dtype=float), shape, margin), int(factor), shape)
+
+    @property
+    def pixels(self) -> int:
+        """Pixels of the image in the window (of the view: ``factor ** 2`` times as many)."""
+        return (self.window[0].stop - self.window[0].start) * (self.window[1].stop - self.window[1].start)
 
     @property
     def origin(self) -> np.ndarray:

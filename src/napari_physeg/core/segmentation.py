@@ -1129,8 +1129,8 @@ def _evolve(
                               avoid=None if avoid is None else np.asarray(avoid, dtype=bool),
                               user_drawing=start is None, image_noise=image_noise, raw_model=raw_model)
     t_features = time.perf_counter()
-    if magnify and features.shared is None and (factor := magnification(_object_radius(features))) > 1:
-        return (yield from _magnified(factor, features, options, t_start))
+    if magnify and features.shared is None and magnification(_object_radius(features)) > 1:
+        return (yield from _magnified(features, options, t_start))
 
     body = _new_body(
         nodes - features.origin, features.bounds, spacing=spacing, sigma=sigma_used, material=material,
@@ -1248,12 +1248,12 @@ def _magnified_noise_gain(factor: int) -> float:
     return float(_lightly_smoothed(view)[inner, inner].std()) / _SMOOTHED_NOISE_GAIN
 
 
-def _magnified(factor: int, features: _FeatureWindow, options: dict, t_start: float):
+def _magnified(features: _FeatureWindow, options: dict, t_start: float):
     """:func:`_evolve` of a small object on a view of its neighbourhood
-    magnified ``factor`` times (see :mod:`.magnify`), its progress and result
-    brought back to the image. The view holds the drawing, the start and the
-    object's region, and the windows the segmentation reads around them. If
-    the segmentation fails there, or its contour meets the view's cut, the
+    magnified (see :mod:`.magnify`), its progress and result brought back to
+    the image. The view holds the drawing, the start and the object's
+    region, and the windows the segmentation reads around them. If the
+    segmentation fails there, or its contour meets the view's cut, the
     object is segmented on the image itself."""
     image, drawing, start = features.image, np.asarray(options["init"], dtype=float), options["start"]
     shape = image.shape
@@ -1261,10 +1261,18 @@ def _magnified(factor: int, features: _FeatureWindow, options: dict, t_start: fl
     points = [np.clip(drawing, 0, np.array(shape) - 1.0), region]
     if start is not None:
         points.append(np.clip(np.asarray(start, dtype=float), 0, np.array(shape) - 1.0))
-    # The segmentation reads the drawing within CONTEXT_MARGIN guard bands of
-    # it, and guard bands are of the view's pixels.
-    margin = CONTEXT_MARGIN * (float(options["max_line_length"]) + 8.0) / factor + 2.0
-    view = MagnifiedView.around(np.vstack(points), shape, margin, factor)
+    factor = magnification(_object_radius(features))
+    while True:
+        # The segmentation reads the drawing within CONTEXT_MARGIN guard bands
+        # of it, and guard bands are of the view's pixels.
+        margin = CONTEXT_MARGIN * (float(options["max_line_length"]) + 8.0) / factor + 2.0
+        view = MagnifiedView.around(np.vstack(points), shape, margin, factor)
+        fitting = magnification(_object_radius(features), view.pixels)
+        if fitting == factor:
+            break
+        factor = fitting
+    if factor == 1:  # no view of a size worth its cost
+        return (yield from _evolve(**{**options, "magnify": False, "warn": False}))
     sigma = options["sigma"]
     inner = {**options, "image": view.image(image), "init": view.inward(drawing),
              "start": None if start is None else view.inward(start),
@@ -1283,7 +1291,7 @@ def _magnified(factor: int, features: _FeatureWindow, options: dict, t_start: fl
     except (ValueError, DivergenceError):
         pass  # as it would fail on the image itself, or not: see there
     if res is None or (res.stop_reason != "cancelled" and view.reaches_a_cut(view.outward(res.contour))):
-        return (yield from _evolve(**{**options, "magnify": False}))
+        return (yield from _evolve(**{**options, "magnify": False, "warn": False}))
     return replace(res, contour=view.outward(res.contour), history=tuple(view.outward(h) for h in res.history),
                    timings={**res.timings, "total": time.perf_counter() - t_start})
 
