@@ -1222,14 +1222,14 @@ def _avoiding_missing(avoid, missing, features: FrameFeatures | None, warn: bool
 
 def _object_radius(features: _FeatureWindow) -> float:
     """The object's radius (px; that of the disk of its area) as the drawing
-    says it: its own region's, within a drawing around it; the drawing's
-    when no region stands out."""
-    drawn = float(np.sqrt(abs(signed_area(features.drawing)) / np.pi))
+    says it: its own region's; the drawing's when no region stands out.
+    (Not the drawing's when smaller: a small circle drawn over a large
+    object's edge, magnified for its size, lost a tenth of its IoU on the
+    held-out nuclei, 0.84 -> 0.80.)"""
     area = float(np.count_nonzero(features.fields[0].objectness > 0))
     if area == 0:
-        return drawn
-    radius = float(np.sqrt(area / np.pi))
-    return min(radius, drawn) if features.model.drawn_around else radius
+        area = abs(signed_area(features.drawing))
+    return float(np.sqrt(area / np.pi))
 
 
 @lru_cache(maxsize=None)
