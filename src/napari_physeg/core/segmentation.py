@@ -1129,8 +1129,8 @@ def _evolve(
                               avoid=None if avoid is None else np.asarray(avoid, dtype=bool),
                               user_drawing=start is None, image_noise=image_noise, raw_model=raw_model)
     t_features = time.perf_counter()
-    if magnify and features.shared is None and magnification(_object_radius(features)) > 1:
-        return (yield from _magnified(features, options, t_start))
+    if magnify and features.shared is None and (view := _magnified_view(features, options)) is not None:
+        return (yield from _magnified(view, features, options, t_start))
 
     body = _new_body(
         nodes - features.origin, features.bounds, spacing=spacing, sigma=sigma_used, material=material,
@@ -1220,13 +1220,13 @@ def _avoiding_missing(avoid, missing, features: FrameFeatures | None, warn: bool
     return missing if avoid is None else np.asarray(avoid, dtype=bool) | missing
 
 
-def _object_radius(features: _FeatureWindow) -> float:
+def _object_radius(features: _FeatureWindow, region: np.ndarray) -> float:
     """The object's radius (px; that of the disk of its area) as the drawing
-    says it: its own region's; the drawing's when no region stands out.
-    (Not the drawing's when smaller: a small circle drawn over a large
-    object's edge, magnified for its size, lost a tenth of its IoU on the
-    held-out nuclei, 0.84 -> 0.80.)"""
-    area = float(np.count_nonzero(features.fields[0].objectness > 0))
+    says it: its own ``region``'s (the feature window's object-like pixels);
+    the drawing's when no region stands out. (Not the drawing's when
+    smaller: a small circle drawn over a large object's edge, magnified for
+    its size, lost a tenth of its IoU on the held-out nuclei, 0.84 -> 0.80.)"""
+    area = float(np.count_nonzero(region))
     if area == 0:
         area = abs(signed_area(features.drawing))
     return float(np.sqrt(area / np.pi))
@@ -1248,33 +1248,39 @@ def _magnified_noise_gain(factor: int) -> float:
     return float(_lightly_smoothed(view)[inner, inner].std()) / _SMOOTHED_NOISE_GAIN
 
 
-def _magnified(features: _FeatureWindow, options: dict, t_start: float):
-    """:func:`_evolve` of a small object on a view of its neighbourhood
-    magnified (see :mod:`.magnify`), its progress and result brought back to
-    the image. The view holds the drawing, the start and the object's
-    region, and the windows the segmentation reads around them. If the
-    segmentation fails there, or its contour meets the view's cut, the
-    object is segmented on the image itself."""
-    image, drawing, start = features.image, np.asarray(options["init"], dtype=float), options["start"]
-    shape = image.shape
-    region = np.argwhere(features.fields[0].objectness > 0) + features.origin
-    points = [np.clip(drawing, 0, np.array(shape) - 1.0), region]
-    if start is not None:
-        points.append(np.clip(np.asarray(start, dtype=float), 0, np.array(shape) - 1.0))
-    factor = magnification(_object_radius(features))
+def _magnified_view(features: _FeatureWindow, options: dict) -> MagnifiedView | None:
+    """The magnified view (see :mod:`.magnify`) to segment a small object on,
+    or None for an object large enough, or a view too large to be worth its
+    cost. The view holds the drawing, the start and the object's region, and
+    the windows the segmentation reads around them."""
+    region = features.fields[0].objectness > 0
+    radius = _object_radius(features, region)
+    factor = magnification(radius)
+    if factor == 1:
+        return None
+    shape = np.array(features.image.shape) - 1.0
+    points = [np.clip(np.asarray(options["init"], dtype=float), 0, shape), np.argwhere(region) + features.origin]
+    if options["start"] is not None:
+        points.append(np.clip(np.asarray(options["start"], dtype=float), 0, shape))
     while True:
         # The segmentation reads the drawing within CONTEXT_MARGIN guard bands
         # of it, and guard bands are of the view's pixels.
         margin = CONTEXT_MARGIN * (float(options["max_line_length"]) + 8.0) / factor + 2.0
-        view = MagnifiedView.around(np.vstack(points), shape, margin, factor)
-        fitting = magnification(_object_radius(features), view.pixels)
+        view = MagnifiedView.around(np.vstack(points), features.image.shape, margin, factor)
+        fitting = magnification(radius, view.pixels)
         if fitting == factor:
-            break
+            return view if factor > 1 else None
         factor = fitting
-    if factor == 1:  # no view of a size worth its cost
-        return (yield from _evolve(**{**options, "magnify": False, "warn": False}))
-    sigma = options["sigma"]
-    inner = {**options, "image": view.image(image), "init": view.inward(drawing),
+
+
+def _magnified(view: MagnifiedView, features: _FeatureWindow, options: dict, t_start: float):
+    """:func:`_evolve` of a small object on the magnified ``view`` of its
+    neighbourhood (see :func:`_magnified_view`), its progress and result
+    brought back to the image. If the segmentation fails there, or its
+    contour meets the view's cut, the object is segmented on the image
+    itself."""
+    drawing, start, sigma, factor = options["init"], options["start"], options["sigma"], view.factor
+    inner = {**options, "image": view.image(features.image), "init": view.inward(drawing),
              "start": None if start is None else view.inward(start),
              "avoid": None if features.avoid is None else view.mask(features.avoid),
              "sigma": None if sigma is None else float(sigma) * factor, "magnify": False, "warn": False,
