@@ -7,7 +7,7 @@ from skimage.draw import disk, polygon2mask
 
 from napari_physeg import data
 from napari_physeg.core import segment, track
-from napari_physeg.core.background import UNEVEN_LIGHT, background_plane, plane_values
+from napari_physeg.core.background import DOME_MIN_SIDE, UNEVEN_LIGHT, background_plane, plane_values
 
 SHAPE = (160, 200)
 
@@ -91,3 +91,34 @@ def test_tracking_does_not_see_a_slope_of_the_background():
     for a, b, mask in zip(even.contours[0], sloped.contours[0], movie.masks):
         assert iou(polygon2mask(mask.shape, b), mask) > 0.97
         assert np.abs(a - b).max() < 0.2
+
+
+def domed(level, depth, shape=SHAPE):
+    """A vignette: ``level`` in the middle, falling by ``depth`` toward the corners."""
+    rows, cols = np.mgrid[0:shape[0], 0:shape[1]]
+    r2 = ((rows - (shape[0] - 1) / 2) / shape[0]) ** 2 + ((cols - (shape[1] - 1) / 2) / shape[1]) ** 2
+    return level - 2.0 * depth * r2
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_dome_under_a_vignetted_field_is_found(seed):
+    rng = np.random.default_rng(seed)
+    dome = domed(0.3, 1.0) + tilted(0.0, *(rng.uniform(-0.5, 0.5, 2) / np.array(SHAPE)))
+    surface = background_plane(spotted(rng) + dome)
+    assert surface is not None and len(surface) == 6
+    np.testing.assert_allclose(plane_values(surface, (slice(0, SHAPE[0]), slice(0, SHAPE[1]))), dome, atol=0.03)
+
+
+def test_a_plane_stays_a_plane_and_small_images_get_no_dome():
+    rng = np.random.default_rng(5)
+    assert len(background_plane(spotted(rng) + tilted(0.3, 0.01, -0.005))) == 3
+    small = (spotted(rng) + domed(0.3, 1.0))[:DOME_MIN_SIDE - 1, :DOME_MIN_SIDE - 1]
+    assert background_plane(small) is None or len(background_plane(small)) == 3
+    assert len(background_plane(spotted(rng) + domed(0.3, 1.0), curved=False) or ()) != 6
+
+
+def test_plane_values_of_a_dome_on_a_window():
+    values = plane_values(np.array([1.0, 0.5, -0.25, 0.01, -0.02, 0.03]), (slice(2, 4), slice(10, 13)))
+    rows, cols = np.mgrid[2:4, 10:13]
+    np.testing.assert_allclose(values, 1.0 + 0.5 * rows - 0.25 * cols + 0.01 * rows ** 2 - 0.02 * rows * cols
+                               + 0.03 * cols ** 2)

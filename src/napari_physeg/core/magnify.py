@@ -86,7 +86,11 @@ class MagnifiedView:
 
     def image(self, image) -> np.ndarray:
         """The window of ``image``, magnified (bilinear; float64)."""
-        crop = np.asarray(image[self.window], dtype=np.float64)
+        return self.magnified(image[self.window])
+
+    def magnified(self, crop) -> np.ndarray:
+        """``crop``, an image's window, magnified (bilinear; float64)."""
+        crop = np.asarray(crop, dtype=np.float64)
         return cv2.resize(crop, None, fx=self.factor, fy=self.factor, interpolation=cv2.INTER_LINEAR)
 
     def mask(self, mask) -> np.ndarray:

@@ -589,7 +589,7 @@ class _FeatureWindow:
     """
 
     def __init__(self, image, drawing, init, *, polarity, weights, max_line_length, isef_b, refine,
-                 shared=None, avoid=None, user_drawing=True, image_noise=None, raw_model=None):
+                 shared=None, avoid=None, user_drawing=True, image_noise=None, raw_model=None, evenly_lit=False):
         self.image, self.drawing, self.polarity = image, drawing, polarity
         # The noise's standard deviation in the image's units, and the
         # drawing's levels in them, when the image cannot tell them (a
@@ -598,8 +598,11 @@ class _FeatureWindow:
         self.user_drawing = user_drawing
         self.shared, self.avoid = shared, avoid
         # The plane under the background, read on the whole image (its
-        # illumination), taken out of every window (see background.py).
-        self.plane = shared.plane if shared is not None else background_plane(image)
+        # illumination), taken out of every window (see background.py). A
+        # magnified view shows a window of an image with its surface taken
+        # out: a plane may remain across the window, not a dome (a window's
+        # crowd of objects would read as one).
+        self.plane = shared.plane if shared is not None else background_plane(image, curved=not evenly_lit)
         self.weights, self.max_line_length, self.isef_b = weights, max_line_length, isef_b
         # A second phase with the region force alone (sub-pixel refinement).
         self.with_refinement = refine and weights.get("intensity", 0) > 0 and len(weights) > 1
@@ -1085,6 +1088,7 @@ def _evolve(
     warn: bool = True,
     image_noise: float | None = None,
     raw_model: RegionModel | None = None,
+    evenly_lit: bool = False,
 ):
     """The steps of :func:`segment` (see :func:`iter_segment`); every option given.
 
@@ -1094,7 +1098,8 @@ def _evolve(
     to warn of the drawing's and the image's flaws (not again on a
     magnified view, see :func:`_magnified`); ``image_noise`` and
     ``raw_model``: the noise's standard deviation and the drawing's levels
-    (the image's units), when the image cannot tell them.
+    (the image's units), when the image cannot tell them; ``evenly_lit``:
+    whether the image's background plane is already taken out.
     """
     options = dict(locals())
     t_start = time.perf_counter()
@@ -1127,7 +1132,8 @@ def _evolve(
                               weights=weights, max_line_length=max_line_length, isef_b=isef_b,
                               refine=refine and reference == "incremental", shared=features,
                               avoid=None if avoid is None else np.asarray(avoid, dtype=bool),
-                              user_drawing=start is None, image_noise=image_noise, raw_model=raw_model)
+                              user_drawing=start is None, image_noise=image_noise, raw_model=raw_model,
+                              evenly_lit=evenly_lit)
     t_features = time.perf_counter()
     if magnify and features.shared is None and (view := _magnified_view(features, options)) is not None:
         return (yield from _magnified(view, features, options, t_start))
@@ -1280,7 +1286,8 @@ def _magnified(view: MagnifiedView, features: _FeatureWindow, options: dict, t_s
     contour meets the view's cut, the object is segmented on the image
     itself."""
     drawing, start, sigma, factor = options["init"], options["start"], options["sigma"], view.factor
-    inner = {**options, "image": view.image(features.image), "init": view.inward(drawing),
+    inner = {**options, "image": view.magnified(features.evenly_lit(view.window)), "evenly_lit": True,
+             "init": view.inward(drawing),
              "start": None if start is None else view.inward(start),
              "avoid": None if features.avoid is None else view.mask(features.avoid),
              "sigma": None if sigma is None else float(sigma) * factor, "magnify": False, "warn": False,
