@@ -8,12 +8,14 @@ same cases unzoomed. With ``--invert`` the unzoomed images are also inverted (da
 bright background, as in bright-field or phase contrast), which a method without a polarity bias
 should score alike. With ``--slope`` they are also lit unevenly: a background that rises across
 the field, corner to corner, by the image's whole range (as excitation or a lamp that falls off
-across the field makes it). With ``--cut`` the unzoomed images are also cut across the object's
+across the field makes it). With ``--vignette`` they are vignetted: a background of 0.3 of the
+image's range added, and the whole field dimmed toward its sides, to 40 % at the corners (as a
+widefield lamp's field falls off). With ``--cut`` the unzoomed images are also cut across the object's
 middle, the part above it missing: once as NaN pixels (the margin a registration leaves, which
 ``segment`` reads as no data) and once cropped away, both scored against the truth below the cut;
 the two should score alike. Ours only: the probe asks whether the defaults hold, not who wins.
 
-    python benchmarks/scale.py --scale 0.5 2 3 --invert --slope --every 4
+    python benchmarks/scale.py --scale 0.5 2 3 --invert --slope --vignette --every 4
     python benchmarks/scale.py --scale 1 --cut --every 2
 
 Zoom: ``cv2.resize`` of the image (area averaging to shrink, bilinear to enlarge), the truth
@@ -61,6 +63,15 @@ def sloped(obj):
     return replace(obj, image=obj.image + np.ptp(obj.image) * (rows + cols) / max(h + w - 2, 1))
 
 
+def vignetted(obj):
+    """``obj`` on a background of 0.3 of its range, the field dimmed toward its sides (by
+    ``1.2 r ** 2``, ``r`` the distance from the middle in image sizes: 40 % at the corners)."""
+    h, w = obj.image.shape
+    rows, cols = np.mgrid[0:h, 0:w]
+    r2 = ((rows - (h - 1) / 2) / h) ** 2 + ((cols - (w - 1) / 2) / w) ** 2
+    return replace(obj, image=(obj.image + 0.3 * np.ptp(obj.image)) * (1.0 - 1.2 * r2))
+
+
 def _cut_row(obj) -> int:
     rows = np.flatnonzero(obj.mask.any(1))
     return int((rows.min() + rows.max()) / 2)
@@ -81,12 +92,13 @@ def cut_cropped(obj, init):
 
 
 VARIANTS = {"inverted": lambda obj, init: (inverted(obj), init), "sloped": lambda obj, init: (sloped(obj), init),
+            "vignetted": lambda obj, init: (vignetted(obj), init),
             "cut (NaN)": cut_nan, "cut (cropped)": cut_cropped}
 
 
 def run_group(job):
     """Rows ``(group, variant, iou, raised, steps)`` of one group in every variant (a zoom
-    factor, "inverted" or "sloped")."""
+    factor, "inverted", "sloped", "vignetted" or a cut)."""
     group, variants, every = job
     warnings.simplefilter("ignore")
     rows = []
@@ -121,16 +133,18 @@ def main(argv=None):
     ap.add_argument("--scale", nargs="+", type=float, default=[0.5, 1.0, 2.0])
     ap.add_argument("--invert", action="store_true", help="also the unzoomed images inverted")
     ap.add_argument("--slope", action="store_true", help="also the unzoomed images lit unevenly")
+    ap.add_argument("--vignette", action="store_true", help="also the unzoomed images vignetted")
     ap.add_argument("--cut", action="store_true", help="also the unzoomed images cut by NaN pixels, and cropped")
     ap.add_argument("--every", type=int, default=4, help="every n-th case of each group")
     ap.add_argument("--groups", nargs="+", choices=list(real_data.GROUPS), default=list(real_data.GROUPS))
     args = ap.parse_args(argv)
     variants = sorted(set(args.scale) | {1.0}) + (["inverted"] if args.invert else []) + \
-        (["sloped"] if args.slope else []) + (["cut (NaN)", "cut (cropped)"] if args.cut else [])
+        (["sloped"] if args.slope else []) + (["vignetted"] if args.vignette else []) + (["cut (NaN)", "cut (cropped)"] if args.cut else [])
     with Pool(2) as pool:
         rows = [r for part in pool.map(run_group, [(g, variants, args.every) for g in args.groups]) for r in part]
     print(f"Command: `python benchmarks/scale.py --scale {' '.join(f'{s:g}' for s in args.scale)}"
-          f"{' --invert' if args.invert else ''}{' --slope' if args.slope else ''}{' --cut' if args.cut else ''}"
+          f"{' --invert' if args.invert else ''}{' --slope' if args.slope else ''}"
+          f"{' --vignette' if args.vignette else ''}{' --cut' if args.cut else ''}"
           f" --every {args.every}`\n")
     print(table(rows, variants))
 
