@@ -23,7 +23,7 @@ def monkeypatch_module():
     mp = pytest.MonkeyPatch()
     yield mp
     mp.undo()
-    for name in ("real", "real_data", "segmentation", "_common"):
+    for name in ("real", "real_data", "segmentation", "_common", "noise"):
         sys.modules.pop(name, None)
 
 
@@ -97,3 +97,20 @@ def test_u2os_truth_outlines_each_nucleus_at_its_own_edge(real):
     for mask in truths:
         found = labels == np.bincount(labels[mask]).argmax()
         assert (found & mask).sum() / (found | mask).sum() > 0.85
+
+
+def test_the_noise_probe_adds_the_noise_it_names(real, monkeypatch_module):
+    """``benchmarks/noise.py``: photon counts with the named brightest mean, and white noise of
+    the object's contrast over the named SNR."""
+    import real_data
+    from noise import noisy
+
+    mask = np.zeros((120, 120), bool)
+    mask[disk((60, 60), 15)] = True
+    obj = real_data.Obj("test", "n1", np.where(mask, 0.8, 0.1), mask)
+    rng = np.random.default_rng(0)
+    photons = noisy(obj, "poisson50", rng).image
+    assert abs(photons[mask].mean() - (0.8 * 50 + 2)) < 1.0 and abs(photons[~mask].mean() - (0.1 * 50 + 2)) < 0.2
+    snr = noisy(obj, "snr4", rng).image - obj.image
+    assert abs(snr.std() - 0.7 / 4) < 0.01
+    assert noisy(obj, "clean", rng) is obj
