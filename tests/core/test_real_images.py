@@ -338,6 +338,24 @@ def test_a_click_on_the_background_outlines_the_dark_gap_not_a_nucleus(stack):
     assert found.sum() > 500 and not (found & (labels > 0)).any()
 
 
+@pytest.mark.parametrize("z, label", [(29, 16), (38, 5), (44, 5)])
+def test_a_click_inside_a_dim_nucleus_among_bright_ones(stack, z, label):
+    """The nucleus dimmed to 60 % of its contrast over the background (as a
+    nucleus out of focus or early in the cell cycle), a click inside it. The
+    gaps around it were its dark background and the bright neighbours
+    beyond, all around it, were read as the object it was a dark spot of:
+    the contour leaked over the image (IoU 0.02-0.03). The gaps run across
+    the view to its four sides: they are the ground."""
+    image = stack[0][z].astype(float)
+    truth = ndi.binary_fill_holes(stack[1][z] == label)
+    ground = np.median(image[stack[1][z] == 0])
+    near = ndi.gaussian_filter(ndi.binary_dilation(truth, iterations=2).astype(float), 1.5)
+    dimmed = image - 0.4 * near * (image - ground)
+    centre, radius = np.argwhere(truth).mean(axis=0), np.sqrt(truth.sum() / np.pi)
+    res, iou = segmented(dimmed, truth, circle(centre, 0.4 * radius))
+    assert res.polarity == 1 and iou > 0.9, iou
+
+
 def test_a_click_on_shading_that_collapses_is_told_to_draw_larger():
     """A 3-px circle on a steep, curved shading (no border anywhere) collapses:
     the error says to draw around the object or, inside it, larger than a
@@ -588,18 +606,24 @@ def test_a_faint_nucleus_boxed_at_the_corner_among_bright_ones_is_read_bright(vo
     assert (found & labels).sum() / (found | labels).sum() > 0.5
 
 
-def test_a_contour_that_spreads_over_the_whole_image_has_leaked(volume):
-    """A circle 1.4 times a faint nucleus (slice 25, nucleus 108) whose
-    drawing reads as lying inside a dark object at the haze's level, the
-    neighbours' level its background: the contour spreads over the whole
-    61 x 57 slice and rests on the image's four sides. No border of the
-    object holds it there: it leaked, not converged (it was reported
-    converged, IoU 0.04)."""
+def test_a_faint_nucleus_among_brighter_ones_is_not_read_as_a_dark_hole(volume):
+    """A circle 1.4 times a faint nucleus (slice 25, nucleus 108), barely
+    brighter than the haze, among brighter neighbours. Its drawing was read
+    as lying inside a dark object at the haze's level, the neighbours' level
+    its background: the contour spread over the whole 61 x 57 slice and
+    rested on its four sides (reported converged, IoU 0.04; since session 29
+    "leaked"). The haze's level runs across the whole view, the neighbours
+    are islands in it: the haze is the ground (session 36), and the contour
+    stays on the faint nucleus, bright. (Its label reaches beyond any
+    visible contrast: IoU 0.36.) A contour that spreads over the image is
+    still reported as leaked."""
     image, labels = volume[0][25], volume[1][25] == 108
     res, iou = segmented(image, labels, circle((15.85, 19.47), 9.74))
-    spread = polygon2mask(image.shape, res.contour).mean() > 0.9
-    assert spread == (res.stop_reason == "leaked")
-    assert iou > 0.5 or not res.converged
+    found = polygon2mask(image.shape, res.contour)
+    assert (found.mean() > 0.9) == (res.stop_reason == "leaked")
+    assert res.polarity == 1 and found.sum() < labels.sum()
+    assert (found & labels).sum() > 0.6 * found.sum()
+    assert (found & (volume[1][25] > 0) & ~labels).sum() <= 0.05 * found.sum()
 
 
 def test_a_contour_that_shrinks_onto_the_image_side_collapses_it_does_not_diverge():
