@@ -25,7 +25,7 @@ bench: setup
 	$(PY) benchmarks/matching.py
 	$(PY) benchmarks/real.py
 	$(PY) benchmarks/drawings.py
-	$(PY) benchmarks/scale.py --scale 0.5 2 3 --invert --slope --vignette
+	$(PY) benchmarks/scale.py --scale 0.5 2 3 --invert --slope --vignette --dim
 	$(PY) benchmarks/noise.py
 	$(PY) benchmarks/tracking.py
 	$(PY) benchmarks/tracking_warped.py

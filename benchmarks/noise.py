@@ -1,9 +1,9 @@
 """Noise probe: ``segment()`` and the scikit-image anchors on the real-image cases made noisier.
 
 The real images of ``real.py`` are clean confocal and widefield pictures. Live imaging is often
-photon-starved instead. This probe adds noise to every ``--every``-th case of each group and runs
-ours and the anchors of ``real.py`` (snake aside: MGAC and morphological Chan-Vese on the same
-crops) on the same drawings, in one run:
+photon-starved instead. This probe adds noise to every ``--every``-th object of each group (with
+all its drawings) and runs ours and the anchors of ``real.py`` (snake aside: MGAC and
+morphological Chan-Vese on the same crops) on the same drawings, in one run:
 
 * ``poissonN``: photon counting, the image (in [0, 1]) scaled to ``N`` photons at its brightest,
   over a background of 2 photons: ``Poisson(N * image + 2)``;
@@ -62,9 +62,7 @@ def run_group(job):
     group, noises, every = job
     warnings.simplefilter("ignore")
     rows = []
-    for i, (_, kind, obj, init) in enumerate(real_data.cases([group])):
-        if i % every:
-            continue
+    for i, (_, kind, obj, init) in enumerate(real_data.cases([group], every=every)):
         for noise in noises:
             case = noisy(obj, noise, np.random.default_rng(i))
             ours, _ = real.run_ours(case, init)
@@ -88,7 +86,7 @@ def table(rows, noises) -> str:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--noise", nargs="+", default=["poisson30", "snr2"], help="poissonN and/or snrS")
-    ap.add_argument("--every", type=int, default=4, help="every n-th case of each group")
+    ap.add_argument("--every", type=int, default=4, help="every n-th object of each group, all its drawings")
     ap.add_argument("--groups", nargs="+", choices=GROUPS, default=list(GROUPS))
     args = ap.parse_args(argv)
     noises = ["clean", *args.noise]

@@ -584,15 +584,15 @@ def traced_outline(obj: Obj, offset: float) -> np.ndarray | None:
 INITS = {"circle": init_circle, "freehand": init_freehand, "inside": init_inside, "box": init_box}
 
 
-def cases(groups, quick: bool = False):
+def cases(groups, quick: bool = False, every: int = 1):
     """``(case name, kind, Obj, init)`` for every object of ``groups`` and each init kind.
 
-    ``quick`` keeps every fourth object of each group (at least one).
+    ``every`` keeps every n-th object of each group (at least one), with all its drawings;
+    ``quick`` is ``every=4``.
     """
+    step = 4 if quick else max(int(every), 1)
     for g in groups:
-        objs = GROUPS[g]()
-        if quick:
-            objs = objs[::4]
+        objs = GROUPS[g]()[::step]
         for obj in objs:
             for kind in INIT_KINDS[g]:
                 base = f"{g}/{obj.name}/{kind}"
