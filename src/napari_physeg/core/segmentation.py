@@ -1099,7 +1099,8 @@ def _evolve(
     magnified view, see :func:`_magnified`); ``image_noise`` and
     ``raw_model``: the noise's standard deviation and the drawing's levels
     (the image's units), when the image cannot tell them; ``evenly_lit``:
-    whether the image's background plane is already taken out.
+    whether the image's background surface is already taken out (a
+    magnified view's: a plane of its own is still fitted, no dome).
     """
     options = dict(locals())
     t_start = time.perf_counter()
