@@ -23,7 +23,7 @@ def monkeypatch_module():
     mp = pytest.MonkeyPatch()
     yield mp
     mp.undo()
-    for name in ("real", "real_data", "segmentation", "_common", "noise"):
+    for name in ("real", "real_data", "segmentation", "_common", "noise", "scale"):
         sys.modules.pop(name, None)
 
 
@@ -114,3 +114,23 @@ def test_the_noise_probe_adds_the_noise_it_names(real, monkeypatch_module):
     snr = noisy(obj, "snr4", rng).image - obj.image
     assert abs(snr.std() - 0.7 / 4) < 0.01
     assert noisy(obj, "clean", rng) is obj
+
+
+def test_the_scale_probe_dims_and_vignettes_as_it_says(real, monkeypatch_module):
+    """``benchmarks/scale.py``: ``dimmed`` cuts the object's contrast over its surroundings to 60 %
+    and leaves the rest; ``vignetted`` adds a background of 0.3 of the range and dims the corners
+    to 40 %."""
+    import real_data
+    from scale import dimmed, vignetted
+
+    mask = np.zeros((101, 101), bool)
+    mask[disk((50, 50), 12)] = True
+    image = np.where(mask, 1.0, 0.2)
+    image[disk((15, 15), 6)] = 1.0  # a neighbour, far away
+    obj = real_data.Obj("test", "n1", image, mask)
+    dim = dimmed(obj).image
+    assert np.isclose(np.median(dim[mask]), 0.2 + 0.6 * 0.8, atol=0.01) and np.isclose(dim[15, 15], 1.0)
+    assert np.isclose(dim[50, 90], 0.2)
+    vig = vignetted(obj).image
+    assert np.isclose(vig[50, 50], 1.0 + 0.3 * 0.8, atol=0.01)
+    assert np.isclose(vig[0, 0] / (0.2 + 0.3 * 0.8), 1 - 1.2 * 2 * 0.5 ** 2, atol=0.02)
