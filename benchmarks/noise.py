@@ -31,7 +31,6 @@ from multiprocessing import Pool
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 import real  # noqa: E402
@@ -42,12 +41,6 @@ METHODS = ("ours", "MGAC", "MCV")
 GROUPS = ("nuclei", "heldout", "small", "timelapse", "dsb", "stack3d", "u2os")
 
 
-def _ring(mask: np.ndarray, inner: int, outer: int) -> np.ndarray:
-    def grown(r):
-        return cv2.dilate(mask.view(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1,) * 2))
-    return grown(outer).astype(bool) & ~grown(inner).astype(bool)
-
-
 def noisy(obj, noise: str, rng: np.random.Generator):
     """``obj`` with ``noise`` ("clean", "poissonN" or "snrS") added to its image."""
     image = obj.image
@@ -55,7 +48,7 @@ def noisy(obj, noise: str, rng: np.random.Generator):
         photons = float(noise[len("poisson"):])
         return replace(obj, image=rng.poisson(np.clip(image, 0.0, None) * photons + 2.0).astype(np.float64))
     if noise.startswith("snr"):
-        contrast = abs(np.median(image[obj.mask]) - np.median(image[_ring(obj.mask, 2, 6)]))
+        contrast = abs(np.median(image[obj.mask]) - np.median(image[real_data.ring(obj.mask, 2, 6)]))
         return replace(obj, image=image + rng.normal(0.0, contrast / float(noise[len("snr"):]), image.shape))
     return obj
 

@@ -95,6 +95,7 @@ import zlib
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 from scipy import ndimage as ndi
 from skimage import data as skdata
@@ -499,6 +500,17 @@ def init_box(obj: Obj, rng) -> tuple[np.ndarray, str]:
     centre, half = bounding_box(obj.mask)
     factor = rng.uniform(1.1, 1.5)
     return rectangle(centre + rng.uniform(-0.1, 0.1, 2) * 2 * half, factor * half), f"box{factor:.2f}"
+
+
+def grown(mask: np.ndarray, radius: int) -> np.ndarray:
+    """``mask`` dilated by a disk of ``radius`` px."""
+    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1,) * 2)
+    return cv2.dilate(np.ascontiguousarray(mask, dtype=np.uint8), disk).view(bool)
+
+
+def ring(mask: np.ndarray, inner: int, outer: int) -> np.ndarray:
+    """The pixels ``inner`` to ``outer`` px outside ``mask`` (a disk's dilations)."""
+    return grown(mask, outer) & ~grown(mask, inner)
 
 
 def boundary(mask: np.ndarray, dilate: float) -> np.ndarray:

@@ -79,10 +79,8 @@ def vignetted(obj):
 def dimmed(obj, keep: float = 0.6):
     """``obj`` with its object's contrast over its surroundings (the median of the ring 3-8 px
     outside it) cut to ``keep``; its neighbours as they were."""
-    def grown(r):
-        return cv2.dilate(obj.mask.view(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1,) * 2))
-    ground = np.median(obj.image[grown(8).astype(bool) & ~grown(3).astype(bool)])
-    weight = cv2.GaussianBlur(grown(2).astype(np.float64), (0, 0), 1.5)
+    ground = np.median(obj.image[real_data.ring(obj.mask, 3, 8)])
+    weight = cv2.GaussianBlur(real_data.grown(obj.mask, 2).astype(np.float64), (0, 0), 1.5)
     return replace(obj, image=obj.image - (1.0 - keep) * weight * (obj.image - ground))
 
 
