@@ -1287,12 +1287,13 @@ def _magnified(view: MagnifiedView, features: _FeatureWindow, options: dict, t_s
     contour meets the view's cut, the object is segmented on the image
     itself."""
     drawing, start, sigma, factor = options["init"], options["start"], options["sigma"], view.factor
-    inner = {**options, "image": view.magnified(features.evenly_lit(view.window)), "evenly_lit": True,
+    window = features.evenly_lit(view.window)
+    inner = {**options, "image": view.magnified(window), "evenly_lit": True,
              "init": view.inward(drawing),
              "start": None if start is None else view.inward(start),
              "avoid": None if features.avoid is None else view.mask(features.avoid),
              "sigma": None if sigma is None else float(sigma) * factor, "magnify": False, "warn": False,
-             "image_noise": _noise_sigma(features.evenly_lit(view.window)) * _magnified_noise_gain(factor),
+             "image_noise": _noise_sigma(window) * _magnified_noise_gain(factor),
              "raw_model": features.model_in_image_units()}
     run, res = _evolve(**inner), None
     try:
