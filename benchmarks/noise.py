@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import warnings
 from dataclasses import replace
 from multiprocessing import Pool
@@ -43,6 +44,7 @@ GROUPS = ("nuclei", "heldout", "small", "timelapse", "dsb", "stack3d", "u2os")
 
 def noisy(obj, noise: str, rng: np.random.Generator):
     """``obj`` with ``noise`` ("clean", "poissonN" or "snrS") added to its image."""
+    check_noise(noise)
     image = obj.image
     if noise.startswith("poisson"):
         photons = float(noise[len("poisson"):])
@@ -51,6 +53,14 @@ def noisy(obj, noise: str, rng: np.random.Generator):
         contrast = abs(np.median(image[obj.mask]) - np.median(image[real_data.ring(obj.mask, 2, 6)]))
         return replace(obj, image=image + rng.normal(0.0, contrast / float(noise[len("snr"):]), image.shape))
     return obj
+
+
+def check_noise(noise: str) -> None:
+    """Raise ValueError if ``noise`` is not "clean", "poissonN" or "snrS" (N, S positive numbers)."""
+    level = re.fullmatch(r"(poisson|snr)(\d+\.?\d*|\.\d+)", noise)
+    if noise != "clean" and (level is None or float(level[2]) <= 0):
+        raise ValueError(f"unknown noise {noise!r}: use poissonN (N photons at the brightest) or snrS (S the "
+                         "object's contrast over the noise), e.g. poisson30 snr2")
 
 
 def run_group(job):
@@ -87,6 +97,11 @@ def main(argv=None):
     ap.add_argument("--draws", type=int, default=1, help="noise draws per case (the table averages them)")
     ap.add_argument("--groups", nargs="+", choices=GROUPS, default=list(GROUPS))
     args = ap.parse_args(argv)
+    for noise in args.noise:
+        try:
+            check_noise(noise)
+        except ValueError as error:
+            ap.error(str(error))
     noises = ["clean", *args.noise]
     with Pool(2) as pool:
         jobs = [(g, noises, args.every, max(args.draws, 1)) for g in args.groups]

@@ -114,6 +114,9 @@ def test_the_noise_probe_adds_the_noise_it_names(real, monkeypatch_module):
     snr = noisy(obj, "snr4", rng).image - obj.image
     assert abs(snr.std() - 0.7 / 4) < 0.01
     assert noisy(obj, "clean", rng) is obj
+    for wrong in ("gauss", "poisson", "snr0", "poisson-3"):
+        with pytest.raises(ValueError, match=f"unknown noise '{wrong}'.*poisson30 snr2"):
+            noisy(obj, wrong, rng)
 
 
 def test_the_scale_probe_dims_and_vignettes_as_it_says(real, monkeypatch_module):
