@@ -173,6 +173,32 @@ def test_dark_spot_open_to_the_image_side_is_part_of_the_object(drawn):
     assert (region & ~nucleus).sum() < 0.05 * nucleus.sum()
 
 
+def membrane_stained_cells(radius, wall, shape=(140, 140), seed=0):
+    """Two touching cells whose membranes (bright rings ``wall`` px thick)
+    hold an inside as dark as the ground around them (a membrane stain, a
+    vesicle): the image, the left cell's centre and its inside."""
+    centre = (70.3, 50.6)
+    rows, cols = np.mgrid[: shape[0], : shape[1]]
+    image = np.zeros(shape)
+    for c in (centre, (centre[0], centre[1] + 2 * radius - 1)):
+        d = np.hypot(rows - c[0], cols - c[1])
+        image[(d <= radius) & (d > radius - wall)] = 1.0
+    image = ndi.gaussian_filter(image, 1.0) + 0.05 * np.random.default_rng(seed).standard_normal(shape)
+    return image, centre, disk(shape, centre, radius - wall)
+
+
+@pytest.mark.parametrize("radius, wall", [(10, 3), (16, 2), (24, 3)])
+def test_click_inside_a_membrane_stained_cell_stops_at_its_wall(radius, wall):
+    """The bright wall closes all around the dark inside clicked: it is the
+    inside's background, not a hole of the dark ground to fill (filled, it
+    joined the inside to the ground and the region was the whole view)."""
+    image, centre, inside = membrane_stained_cells(radius, wall)
+    model, region = region_for(image, circle(centre, 0.4 * radius, 24))
+    assert model.polarity == -1
+    assert overlap(region, inside) > 0.9
+    assert not (region & ~disk(image.shape, centre, radius)).any()
+
+
 def test_drawn_inside_a_nucleus_with_a_dim_textured_centre():
     """A bright nucleus whose middle is dimmer (nucleoplasm between bright
     chromatin) on a dark background, drawn inside: the line, brighter than

@@ -920,7 +920,9 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     # those up to a quarter of the object's area are filled (a drawing
     # around it is about its size; a click inside it is not).
     hole_area = 0.25 * (drawn.sum() if model.drawn_around else _area_held(signed > 0, marked | drawn, reach))
-    like = _without_small_holes(signed > 0, hole_area, image_sides)
+    looks_like = signed > 0
+    like = _without_small_holes(looks_like, hole_area, image_sides,
+                                (marked if (marked & looks_like).any() else drawn) & looks_like, drawn)
     seed = (marked if (marked & like).any() else drawn) & like
     if not seed.any():
         return None
@@ -1393,8 +1395,50 @@ def _holes(mask: np.ndarray, image_sides) -> tuple[np.ndarray, np.ndarray, np.nd
     return pieces, enclosed, open_to_image
 
 
-def _without_small_holes(mask: np.ndarray, max_area: float, image_sides) -> np.ndarray:
-    """``mask`` with its holes of at most ``max_area`` px filled (those open to the image's side too)."""
+def _without_small_holes(mask: np.ndarray, max_area: float, image_sides, seed=None, drawn=None) -> np.ndarray:
+    """``mask`` with its holes of at most ``max_area`` px filled (those open to
+    the image's side too), but for a wall around the pieces the drawing lies
+    on (see :func:`_walled_rim`)."""
     pieces, enclosed, open_to_image = _holes(mask, image_sides)
     small = np.bincount(pieces.ravel(), minlength=len(enclosed)) <= max_area
+    rim = None if seed is None else _walled_rim(mask, seed, drawn)
+    if rim is not None:
+        walls = np.unique(pieces[rim])
+        if walls.size == 1:
+            small[walls] = False
     return mask | ((enclosed | open_to_image) & small)[pieces]
+
+
+def _walled_rim(mask: np.ndarray, seed: np.ndarray, drawn: np.ndarray) -> np.ndarray | None:
+    """The pixels just outside the pieces of ``mask`` the seed lies on (their
+    holes filled), when the drawing lies mostly on those pieces and they reach
+    no side of the view; or None.
+
+    When one piece of ``~mask`` holds this whole rim, it is a wall closing
+    around them, not a hole to fill: a membrane-stained cell or a vesicle
+    whose inside looks like its outside, clicked inside (filled, the wall
+    joined the inside to the outside and the contour leaked over the image).
+    A spot of texture is a hole in the object's pieces, not around them; and
+    a click on a dark nucleolus lies on the hole, not on the specks of the
+    nucleus' level inside it.
+    """
+    _, pieces, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8), connectivity=8)
+    held = np.unique(pieces[seed])
+    held = held[held > 0]
+    if held.size == 0:
+        return None
+    top, left = stats[held, cv2.CC_STAT_TOP].min(), stats[held, cv2.CC_STAT_LEFT].min()
+    bottom = (stats[held, cv2.CC_STAT_TOP] + stats[held, cv2.CC_STAT_HEIGHT]).max()
+    right = (stats[held, cv2.CC_STAT_LEFT] + stats[held, cv2.CC_STAT_WIDTH]).max()
+    if top == 0 or left == 0 or bottom == mask.shape[0] or right == mask.shape[1]:
+        return None
+    box = (slice(top - 1, bottom + 1), slice(left - 1, right + 1))
+    # Holes filled: all but what the flood from the box's margin reaches.
+    outside = np.isin(pieces[box], held).astype(np.uint8)
+    cv2.floodFill(outside, None, (0, 0), 2)
+    body = outside != 2
+    if np.count_nonzero(body & drawn[box]) < 0.5 * np.count_nonzero(drawn):
+        return None
+    rim = np.zeros(mask.shape, bool)
+    rim[box] = cv2.dilate(body.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool) & ~body
+    return rim
