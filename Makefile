@@ -27,6 +27,7 @@ bench: setup
 	$(PY) benchmarks/drawings.py
 	$(PY) benchmarks/scale.py --scale 0.5 2 3 --invert --slope --vignette --dim
 	$(PY) benchmarks/noise.py
+	$(PY) benchmarks/membranes.py
 	$(PY) benchmarks/tracking.py
 	$(PY) benchmarks/tracking_warped.py
 	$(PY) benchmarks/batch.py

@@ -23,7 +23,7 @@ def monkeypatch_module():
     mp = pytest.MonkeyPatch()
     yield mp
     mp.undo()
-    for name in ("real", "real_data", "segmentation", "_common", "noise", "scale"):
+    for name in ("real", "real_data", "segmentation", "_common", "noise", "scale", "membranes"):
         sys.modules.pop(name, None)
 
 
@@ -137,3 +137,19 @@ def test_the_scale_probe_dims_and_vignettes_as_it_says(real, monkeypatch_module)
     vig = vignetted(obj).image
     assert np.isclose(vig[50, 50], 1.0 + 0.3 * 0.8, atol=0.01)
     assert np.isclose(vig[0, 0] / (0.2 + 0.3 * 0.8), 1 - 1.2 * 2 * 0.5 ** 2, atol=0.02)
+
+
+def test_the_membrane_probe_draws_the_cells_it_scores(real, monkeypatch_module):
+    """``benchmarks/membranes.py``: the scored cell is the left one, out to its ring's outer edge,
+    and its inside is as dark as the ground when asked (and a quarter of the ring otherwise)."""
+    from membranes import membrane_cells
+
+    for inside in (0.0, 0.25):
+        image, centre, cell, lumen = membrane_cells(16, 3, inside, seed=0)
+        ring = cell & ~lumen
+        assert lumen.sum() < cell.sum() and not (lumen & ~cell).any()
+        assert np.hypot(*(np.argwhere(cell).mean(axis=0) - centre)) < 0.5
+        assert np.median(image[ring]) > 0.6
+        core = np.hypot(*(np.indices(image.shape) - centre[:, None, None])) < 8
+        assert abs(np.median(image[core]) - inside) < 0.03
+        assert abs(np.median(image[:, :20]) - 0.0) < 0.03
