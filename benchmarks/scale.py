@@ -14,7 +14,9 @@ across the field makes it). With ``--vignette`` they are vignetted: a background
 image's range added, and the whole field dimmed toward its sides, to 40 % at the corners (as a
 widefield lamp's field falls off). With ``--dim`` the object alone is dimmed to 60 % of its
 contrast over its surroundings (a nucleus out of focus, or early in its cycle, among bright
-ones). With ``--cut`` the unzoomed images are also cut across the object's
+ones). With ``--alone`` each object is also alone on its image, at each scale: the other labelled
+objects replaced by its ground and the background's noise, a sparse field (whose few objects set
+no intensity percentile), then zoomed. With ``--cut`` the unzoomed images are also cut across the object's
 middle, the part above it missing: once as NaN pixels (the margin a registration leaves, which
 ``segment`` reads as no data) and once cropped away, both scored against the truth below the cut;
 the two should score alike. Ours only: the probe asks whether the defaults hold, not who wins.
@@ -30,6 +32,7 @@ resized bilinearly and cut at 0.5, the drawing's nodes mapped with the pixel gri
 from __future__ import annotations
 
 import argparse
+import hashlib
 import os
 import warnings
 from dataclasses import replace
@@ -84,6 +87,24 @@ def dimmed(obj, keep: float = 0.6):
     return replace(obj, image=obj.image - (1.0 - keep) * weight * (obj.image - ground))
 
 
+def alone(obj, others: np.ndarray):
+    """``obj`` alone on its image: the labelled objects ``others`` (a mask, the object's own
+    pixels aside) replaced by the object's ground (the median of the ring 3-8 px outside it, off
+    the labels) and noise as the background's (the robust spread of its fine detail), their
+    edges blended over a pixel: a sparse field."""
+    image = obj.image.astype(np.float64)
+    labelled = others | obj.mask
+    around = real_data.ring(obj.mask, 3, 8) & ~labelled
+    ground = np.median(image[around] if around.sum() > 20 else image[~labelled])
+    detail = (image - cv2.GaussianBlur(image, (0, 0), 2))[~labelled]
+    spread = 1.15 * 1.4826 * np.median(np.abs(detail - np.median(detail)))  # 1.15: the blur took some
+    gone = real_data.grown(others & ~obj.mask, 3) & ~real_data.grown(obj.mask, 1)
+    weight = cv2.GaussianBlur(gone.astype(np.float64), (0, 0), 1.0)
+    weight[obj.mask] = 0.0
+    noise = real_data.rng_for(f"{obj.group}/{obj.name}/alone").standard_normal(image.shape)
+    return replace(obj, image=(1.0 - weight) * image + weight * (ground + spread * noise))
+
+
 def _cut_row(obj) -> int:
     rows = np.flatnonzero(obj.mask.any(1))
     return int((rows.min() + rows.max()) / 2)
@@ -110,16 +131,34 @@ VARIANTS = {"inverted": lambda obj, init: (inverted(obj), init), "sloped": lambd
 
 def run_group(job):
     """Rows ``(group, variant, iou, raised, steps)`` of one group in every variant (a zoom
-    factor, "inverted", "sloped", "vignetted", "dimmed" or a cut)."""
+    factor, "inverted", "sloped", "vignetted", "dimmed", "alone" or a cut)."""
     group, variants, every = job
     warnings.simplefilter("ignore")
+    labels = _labels(group) if any(str(v).startswith("alone") for v in variants) else {}
     rows = []
     for _, _, obj, init in real_data.cases([group], every=every):
         for variant in variants:
-            case = VARIANTS[variant](obj, init) if variant in VARIANTS else zoomed(obj, init, variant)
+            if str(variant).startswith("alone"):  # "alone", or "alone x<zoom>": alone, then zoomed
+                by_itself = alone(obj, labels[_image_key(obj.image)] & ~obj.mask)
+                case = (by_itself, init) if variant == "alone" else zoomed(by_itself, init, float(variant[7:]))
+            else:
+                case = VARIANTS[variant](obj, init) if variant in VARIANTS else zoomed(obj, init, variant)
             result, _ = real.run_ours(*case)
             rows.append((group, variant, result["iou"], bool(result["error"]), result["steps"] or np.nan))
     return rows
+
+
+def _image_key(image: np.ndarray) -> str:
+    return hashlib.sha1(np.ascontiguousarray(image).tobytes()).hexdigest()
+
+
+def _labels(group: str) -> dict:
+    """The union of the truths of each image of ``group``, keyed by :func:`_image_key`."""
+    union = {}
+    for obj in real_data.GROUPS[group]():
+        key = _image_key(obj.image)
+        union[key] = union.get(key, np.zeros(obj.mask.shape, bool)) | obj.mask
+    return union
 
 
 def table(rows, variants) -> str:
@@ -146,17 +185,22 @@ def main(argv=None):
     ap.add_argument("--vignette", action="store_true", help="also the unzoomed images vignetted")
     ap.add_argument("--dim", action="store_true", help="also the unzoomed images with the object dimmed")
     ap.add_argument("--cut", action="store_true", help="also the unzoomed images cut by NaN pixels, and cropped")
+    ap.add_argument("--alone", action="store_true",
+                    help="also each object alone on its image (a sparse field), at each scale")
     ap.add_argument("--every", type=int, default=4, help="every n-th object of each group, all its drawings")
     ap.add_argument("--groups", nargs="+", choices=list(real_data.GROUPS), default=list(real_data.GROUPS))
     args = ap.parse_args(argv)
     variants = sorted(set(args.scale) | {1.0}) + (["inverted"] if args.invert else []) + \
         (["sloped"] if args.slope else []) + (["vignetted"] if args.vignette else []) + \
-        (["dimmed"] if args.dim else []) + (["cut (NaN)", "cut (cropped)"] if args.cut else [])
+        (["dimmed"] if args.dim else []) + \
+        ([f"alone x{s:g}" if s != 1 else "alone" for s in sorted(set(args.scale) | {1.0})] if args.alone else []) + \
+        (["cut (NaN)", "cut (cropped)"] if args.cut else [])
     with Pool(2) as pool:
         rows = [r for part in pool.map(run_group, [(g, variants, args.every) for g in args.groups]) for r in part]
     print(f"Command: `python benchmarks/scale.py --scale {' '.join(f'{s:g}' for s in args.scale)}"
           f"{' --invert' if args.invert else ''}{' --slope' if args.slope else ''}"
-          f"{' --vignette' if args.vignette else ''}{' --dim' if args.dim else ''}{' --cut' if args.cut else ''}"
+          f"{' --vignette' if args.vignette else ''}{' --dim' if args.dim else ''}{' --alone' if args.alone else ''}"
+          f"{' --cut' if args.cut else ''}"
           f" --every {args.every}`\n")
     print(table(rows, variants))
 

@@ -410,6 +410,44 @@ def test_normalized_intensity_constant_and_small_spot():
     assert out.max() == 1.0 and out[50, 50] == 1.0 and out[0, 0] == 0.0
 
 
+def sparse_spots(bright=True, n_spots=4, radius=3.5, seed=0):
+    """Small blurred spots (0.8 over a 0.1 background, noise 0.03) covering
+    about a quarter of a percent of a 256 px field; their centres."""
+    rng = np.random.default_rng(seed)
+    centres = [(60.3, 70.2), (150.7, 180.1), (200.2, 40.6), (100.5, 200.4)][:n_spots]
+    rows, cols = np.mgrid[:256, :256]
+    image = np.zeros((256, 256))
+    for c in centres:
+        image[np.hypot(rows - c[0], cols - c[1]) <= radius] = 0.7
+    image = ndi.gaussian_filter(image, 1.0) + 0.1 + rng.normal(0, 0.03, image.shape)
+    return (image if bright else 1.0 - image), centres
+
+
+@pytest.mark.parametrize("bright", [True, False])
+def test_normalized_intensity_keeps_the_spots_of_a_sparse_field_unclipped(bright):
+    """The 99th percentile of a field where spots cover a quarter of a
+    percent lies in the background's noise: clipped there, the spots were
+    flat plateaus from their blurred rim inwards (0.2 of their own contrast
+    up), and the contour ended on the rim's foot. The range now reaches the
+    spots: their centres stand above their rims, the ground stays near 0."""
+    image, centres = sparse_spots(bright)
+    out = normalized_intensity(image)
+    level = out if bright else 1.0 - out
+    for r, c in np.round(centres).astype(int):
+        assert level[r, c] > 0.8 and level[r, c] - level[r, c + 4] > 0.4
+    assert np.median(level) < 0.15
+
+
+def test_normalized_intensity_of_a_crowded_field_is_that_of_its_percentiles():
+    """Spots over more than 1 % of the field set the 99th percentile
+    themselves: the range is the percentiles', as it always was."""
+    image, _ = sparse_spots()
+    rows, cols = np.mgrid[:256, :256]
+    image[(rows % 24 < 8) & (cols % 24 < 8)] += 0.7  # 11 % of the field
+    lo, hi = np.percentile(image[::2, ::2], [1, 99])
+    np.testing.assert_allclose(normalized_intensity(image), np.clip((image - lo) / (hi - lo), 0, 1))
+
+
 # --------------------------------------------------------------------------
 # compute_features
 

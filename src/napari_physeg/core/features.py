@@ -767,14 +767,50 @@ def _chamfer(edges: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
-def _intensity_range(x: np.ndarray) -> tuple[float, float]:
-    """The levels :func:`normalized_intensity` maps to 0 and 1."""
-    lo, hi = np.percentile(_subsample(x), [1.0, 99.0])
+#: A sparse field: its few objects (spots over 2 % of the view or less)
+#: set no percentile; the 99th (1st) lies below (above) the level of most of
+#: their pixels, on their rims. The pixels beyond SPARSE_TAIL noise standard
+#: deviations of the median are the objects' when there are at least
+#: SPARSE_LEAST of them, at a median twice as far (spots that stand clear of
+#: the noise): then the range reaches their SPARSE_QUANTILE. (Spots within 8
+#: deviations keep the clip: it flattens their noise, and their mid-level
+#: lies near it anyway.)
+SPARSE_TAIL = 4.0
+SPARSE_LEAST = 8
+SPARSE_QUANTILE = 0.95
+
+
+def _intensity_range(x: np.ndarray, noise: float | None = None) -> tuple[float, float]:
+    """The levels :func:`normalized_intensity` maps to 0 and 1; ``noise``:
+    the standard deviation of the noise of ``x``'s pixels, when they hide it
+    (a magnified view's, interpolated)."""
+    sample = _subsample(x)
+    lo, hi = np.percentile(sample, [1.0, 99.0])
+    # Clipped at their rims, the few objects of a sparse field became flat
+    # plateaus whose mid-level lay on the blur's foot: the contours of
+    # 3.5-5 px spots ended 0.4-0.8 px outside them.
+    middle, reach = float(np.median(sample)), SPARSE_TAIL * (_noise_sigma(x) if noise is None else noise)
+    if reach > 0:
+        hi = max(hi, middle + _beyond_the_clip(sample[sample > middle + reach] - middle, hi - middle, reach))
+        lo = min(lo, middle - _beyond_the_clip(middle - sample[sample < middle - reach], middle - lo, reach))
     if hi <= lo:
         # Fewer than 1 % of pixels differ (a small spot): fall back to the
         # full range rather than flatten the picture.
         lo, hi = x.min(), x.max()
     return float(lo), float(hi)
+
+
+def _beyond_the_clip(beyond: np.ndarray, clip: float, reach: float) -> float:
+    """How far the objects of a sparse field lie from the median (``beyond``:
+    the distances of the pixels more than ``reach`` from it), when the clip
+    (at ``clip`` from it) cuts through most of them; else 0 (see
+    SPARSE_TAIL)."""
+    if beyond.size < SPARSE_LEAST:
+        return 0.0
+    typical = float(np.median(beyond))
+    if typical <= clip or typical < 2.0 * reach:
+        return 0.0
+    return float(np.quantile(beyond, SPARSE_QUANTILE))
 
 
 def _normalize(x: np.ndarray, out: np.ndarray | None = None, levels: tuple[float, float] | None = None) -> np.ndarray:
@@ -797,9 +833,14 @@ def normalized_intensity(image) -> np.ndarray:
     ``clip((image - p1) / (p99 - p1), 0, 1)`` with ``p1`` and ``p99`` the
     1st and 99th percentiles, so a few hot or dead pixels do not set the
     scale, and 8-bit, 16-bit and float versions of one picture give the same
-    result. For speed the percentiles of images over 16384 pixels are taken
-    on a regular sub-grid of about that many pixels. If the percentiles
-    coincide (fewer than ~1 % of the pixels differ) the min and max are used
+    result. In a sparse field (a few spots over 2 % of the image or less)
+    the 99th (1st) percentile lies on the spots' rims: when most pixels
+    beyond ``SPARSE_TAIL`` (4) noise standard deviations of the median lie
+    beyond it, at least twice that far, the range reaches their
+    ``SPARSE_QUANTILE`` (0.95), so that the spots are not clipped flat. For speed the
+    percentiles of images over 16384 pixels are taken on a regular sub-grid
+    of about that many pixels. If the percentiles coincide (fewer than ~1 %
+    of the pixels differ, in a noiseless image) the min and max are used
     instead; a constant image gives all zeros.
 
     Parameters

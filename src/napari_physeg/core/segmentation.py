@@ -589,12 +589,13 @@ class _FeatureWindow:
     """
 
     def __init__(self, image, drawing, init, *, polarity, weights, max_line_length, isef_b, refine,
-                 shared=None, avoid=None, user_drawing=True, image_noise=None, raw_model=None, evenly_lit=False):
+                 shared=None, avoid=None, user_drawing=True, image_noise=None, pixel_noise=None, raw_model=None,
+                 evenly_lit=False):
         self.image, self.drawing, self.polarity = image, drawing, polarity
         # The noise's standard deviation in the image's units, and the
         # drawing's levels in them, when the image cannot tell them (a
         # magnified view, see _magnified); else measured and read.
-        self.image_noise, self.raw_model = image_noise, raw_model
+        self.image_noise, self.pixel_noise, self.raw_model = image_noise, pixel_noise, raw_model
         self.user_drawing = user_drawing
         self.shared, self.avoid = shared, avoid
         # The plane under the background, read on the whole image (its
@@ -636,7 +637,7 @@ class _FeatureWindow:
             intensity, noise = self.shared.intensity[context], self.shared.noise
         else:
             sub = self.evenly_lit(context)
-            self.levels = _intensity_range(sub)
+            self.levels = _intensity_range(sub, self.pixel_noise)
             normalised = _normalize(sub, levels=self.levels)
             self.noise = _noise_sigma(normalised) if self.image_noise is None else \
                 self.image_noise / max(self.levels[1] - self.levels[0], 1e-300)
@@ -1087,6 +1088,7 @@ def _evolve(
     start=None,
     warn: bool = True,
     image_noise: float | None = None,
+    pixel_noise: float | None = None,
     raw_model: RegionModel | None = None,
     evenly_lit: bool = False,
 ):
@@ -1096,8 +1098,9 @@ def _evolve(
     the drawing ``init`` itself (see :func:`_segment_from`); the drawing then
     lies around the object, never traced on its border. ``warn``: whether
     to warn of the drawing's and the image's flaws (not again on a
-    magnified view, see :func:`_magnified`); ``image_noise`` and
-    ``raw_model``: the noise's standard deviation and the drawing's levels
+    magnified view, see :func:`_magnified`); ``image_noise``,
+    ``pixel_noise`` and ``raw_model``: the noise's standard deviation as
+    the segmentation reads it and in the pixels, and the drawing's levels
     (the image's units), when the image cannot tell them; ``evenly_lit``:
     whether the image's background surface is already taken out (a
     magnified view's: a plane of its own is still fitted, no dome).
@@ -1133,8 +1136,8 @@ def _evolve(
                               weights=weights, max_line_length=max_line_length, isef_b=isef_b,
                               refine=refine and reference == "incremental", shared=features,
                               avoid=None if avoid is None else np.asarray(avoid, dtype=bool),
-                              user_drawing=start is None, image_noise=image_noise, raw_model=raw_model,
-                              evenly_lit=evenly_lit)
+                              user_drawing=start is None, image_noise=image_noise, pixel_noise=pixel_noise,
+                              raw_model=raw_model, evenly_lit=evenly_lit)
     t_features = time.perf_counter()
     if magnify and features.shared is None and (view := _magnified_view(features, options)) is not None:
         return (yield from _magnified(view, features, options, t_start))
@@ -1288,12 +1291,13 @@ def _magnified(view: MagnifiedView, features: _FeatureWindow, options: dict, t_s
     itself."""
     drawing, start, sigma, factor = options["init"], options["start"], options["sigma"], view.factor
     window = features.evenly_lit(view.window)
+    noise = _noise_sigma(window)
     inner = {**options, "image": view.magnified(window), "evenly_lit": True,
              "init": view.inward(drawing),
              "start": None if start is None else view.inward(start),
              "avoid": None if features.avoid is None else view.mask(features.avoid),
              "sigma": None if sigma is None else float(sigma) * factor, "magnify": False, "warn": False,
-             "image_noise": _noise_sigma(window) * _magnified_noise_gain(factor),
+             "image_noise": noise * _magnified_noise_gain(factor), "pixel_noise": noise,
              "raw_model": features.model_in_image_units()}
     run, res = _evolve(**inner), None
     try:
