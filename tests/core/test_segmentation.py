@@ -1074,3 +1074,18 @@ def test_small_spots_of_a_sparse_field_end_on_their_own_edge(radius):
         res = segment(image, np.column_stack([c[0] + 1.3 * radius * np.sin(t), c[1] + 1.3 * radius * np.cos(t)]))
         found, truth = polygon2mask(image.shape, res.contour), np.hypot(rows - c[0], cols - c[1]) <= radius
         assert res.converged and (found & truth).sum() / (found | truth).sum() > 0.88
+
+
+def test_a_circle_well_inside_a_large_disk_reads_the_background_beyond_its_window():
+    """A circle of 0.4 the radius of a 200-px disk, at its centre: the rings
+    the drawing's background is read on reach beyond the window around it,
+    where only the disk's rim was (read as the background, the disk was no
+    object and the contour stalled where it was drawn, IoU 0.16)."""
+    rng = np.random.default_rng(0)
+    rows, cols = np.mgrid[:1024, :1024]
+    disk = np.hypot(rows - 512.3, cols - 511.8) <= 200
+    image = disk + rng.normal(0, 0.05, disk.shape)
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    res = segment(image, np.column_stack([512 + 80 * np.sin(t), 512 + 80 * np.cos(t)]))
+    found = polygon2mask(disk.shape, res.contour)
+    assert res.converged and (found & disk).sum() / (found | disk).sum() > 0.98

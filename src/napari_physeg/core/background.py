@@ -121,8 +121,13 @@ def _plane_of_samples(h: int, w: int, step: int, samples: bytes, curved: bool) -
         # leaves the background's pixels further from it than the plane
         # does (the spread of the residuals grew 1.4-1.6 times on synthetic
         # ellipses a fifth of the image; it is within 1 % on vignetted
-        # confocal slices).
-        if np.ptp(quadratic @ dome - design @ coef) >= uneven and \
+        # confocal slices). Nor can a background vary by more than the
+        # image's range: a dome that does follows an object as large as its
+        # background (a bright disk over half of the image, where the plane
+        # lies between the two levels: the dome rose by 1.6 times the range,
+        # and the disk's inside, evenly lit, read as a dark hole; vignetted
+        # confocal slices' domes vary by 0.4-0.5 of their range).
+        if np.ptp(quadratic @ dome - design @ coef) >= uneven and np.ptp(quadratic @ dome) <= hi - lo and \
                 _spread(values - quadratic @ dome) <= DOME_SPREAD * _spread(values - design @ coef):
             return _in_pixels(dome, centre, scale)
     if np.ptp(design @ coef) < uneven:

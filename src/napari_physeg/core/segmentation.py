@@ -652,6 +652,12 @@ class _FeatureWindow:
         origin = np.array([context[0].start, context[1].start], dtype=float)
         self.model = drawing_levels(intensity, self.drawing - origin, self.polarity, noise,
                                     user_drawing=self.user_drawing)
+        if not self.model.is_visible and context != self._whole_image and self.raw_model is None:
+            # The rings a drawing inside a large object is read on reach up to
+            # 21 times its size, beyond the window: on the window alone, a
+            # circle of 0.4 the radius of a 200-px disk read the disk's rim as
+            # its background, and the contour stalled where it was drawn.
+            return self._read_drawing(self._whole_image)
         if self.raw_model is not None and not self.model.is_visible:
             # A magnified view shows what the image does, and more finely:
             # where its own reading of the drawing sees no object, the
