@@ -28,6 +28,7 @@ bench: setup
 	$(PY) benchmarks/scale.py --scale 0.5 2 3 --invert --slope --vignette --dim
 	$(PY) benchmarks/noise.py
 	$(PY) benchmarks/membranes.py
+	$(PY) benchmarks/fields.py
 	$(PY) benchmarks/tracking.py
 	$(PY) benchmarks/tracking_warped.py
 	$(PY) benchmarks/batch.py

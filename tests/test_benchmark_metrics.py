@@ -23,7 +23,7 @@ def monkeypatch_module():
     mp = pytest.MonkeyPatch()
     yield mp
     mp.undo()
-    for name in ("real", "real_data", "segmentation", "_common", "noise", "scale", "membranes"):
+    for name in ("real", "real_data", "segmentation", "_common", "noise", "scale", "membranes", "fields"):
         sys.modules.pop(name, None)
 
 
@@ -153,3 +153,18 @@ def test_the_membrane_probe_draws_the_cells_it_scores(real, monkeypatch_module):
         core = np.hypot(*(np.indices(image.shape) - centre[:, None, None])) < 8
         assert abs(np.median(image[core]) - inside) < 0.03
         assert abs(np.median(image[:, :20]) - 0.0) < 0.03
+
+
+def test_the_field_probe_draws_sparse_and_crowded_spots(real, monkeypatch_module):
+    """``benchmarks/fields.py``: the spots it scores are where it says, of the radius it says, at
+    least 6 px apart, and a sparse field's cover a quarter to a half of a percent of it."""
+    from fields import spots
+
+    for count in (4, 60):
+        image, centres = spots(5.0, count, seed=1)
+        assert len(centres) == 4 and image.shape == (256, 256)
+        for c in centres:
+            r, col = np.round(c).astype(int)
+            assert image[r, col] > 0.5 and image[r, col + 9] < 0.25
+    sparse, _ = spots(3.5, 4, seed=0)
+    assert 0.0025 < np.mean(sparse > 0.4) < 0.006

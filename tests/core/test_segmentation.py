@@ -1089,3 +1089,24 @@ def test_a_circle_well_inside_a_large_disk_reads_the_background_beyond_its_windo
     res = segment(image, np.column_stack([512 + 80 * np.sin(t), 512 + 80 * np.cos(t)]))
     found = polygon2mask(disk.shape, res.contour)
     assert res.converged and (found & disk).sum() / (found | disk).sum() > 0.98
+
+
+def test_a_contour_growing_across_a_large_disk_grows_its_window_a_few_times(monkeypatch):
+    """A click of radius 40 px at the centre of a 200-px disk grows fivefold:
+    its feature window, a watershed and edges each time, grows with room for
+    a quarter of the contour more, a few times (9 for a 60-px click before,
+    23 for a 160-px click in a 400-px disk: 5 of its 6.5 s)."""
+    from napari_physeg.core import segmentation
+
+    computed = []
+    compute = segmentation._FeatureWindow._compute
+    monkeypatch.setattr(segmentation._FeatureWindow, "_compute",
+                        lambda self, window: computed.append(window) or compute(self, window))
+    rng = np.random.default_rng(0)
+    rows, cols = np.mgrid[:1024, :1024]
+    disk = np.hypot(rows - 512.3, cols - 511.8) <= 200
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    res = segment(disk + rng.normal(0, 0.05, disk.shape), np.column_stack([512 + 40 * np.sin(t), 512 + 40 * np.cos(t)]))
+    found = polygon2mask(disk.shape, res.contour)
+    assert res.converged and (found & disk).sum() / (found | disk).sum() > 0.98
+    assert len(computed) <= 5

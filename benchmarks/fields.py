@@ -1,0 +1,129 @@
+"""Field probe: ``segment()`` and the scikit-image anchors on fields unlike the real images'.
+
+The real images of ``real.py`` are crowded, their objects 8 to 90 px across. Two kinds of field
+they never show, with a known answer:
+
+* **Sparse and crowded spots**: blurred disks of radius 3.5, 5 and 7 px (levels 0.6-1.0 over
+  0.1, blur sigma 1 px, white noise 0.03) on a 256 px field, 4 of them (a quarter to a half of a
+  percent of the field) or 60; three seeds, the first four spots of each. Drawn with a circle
+  1.3 r around and a click 0.4 r inside. A field's density should not move the contours.
+* **Large disks**: a disk of radius 150-300 px on a 1024 px field (7-27 % of it) and one of
+  200 px on a 512 px field (48 %), noise 0.05; drawn with circles inside it (0.3, 0.4 and
+  0.6 R, centred) and around it (1.2 R).
+
+Ours on the whole image; MGAC and morphological Chan-Vese with ``real.py``'s settings on the same
+crops, in one run; IoU and wall-clock time (mean per case, BLAS on one thread):
+
+    python benchmarks/fields.py
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import warnings
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import numpy as np  # noqa: E402
+from scipy import ndimage as ndi  # noqa: E402
+
+import real  # noqa: E402
+import real_data  # noqa: E402
+
+METHODS = ("ours", "MGAC", "MCV")
+LARGE = ((1024, 150), (1024, 200), (1024, 300), (512, 200))  # (field, radius)
+
+
+def circle(centre, radius, n):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.column_stack([centre[0] + radius * np.sin(t), centre[1] + radius * np.cos(t)])
+
+
+def spots(radius: float, count: int, seed: int, size: int = 256):
+    """A field of ``count`` blurred spots of ``radius`` px, at least 6 px apart; the image and
+    the first four spots' centres."""
+    rng = np.random.default_rng(seed)
+    centres = []
+    while len(centres) < count:
+        c = rng.uniform(2 * radius + 4, size - 2 * radius - 4, 2)
+        if all(np.hypot(*(c - d)) > 2 * radius + 6 for d in centres):
+            centres.append(c)
+    rows, cols = np.mgrid[:size, :size]
+    image = np.zeros((size, size))
+    for c, level in zip(centres, rng.uniform(0.6, 1.0, count)):
+        image[np.hypot(rows - c[0], cols - c[1]) <= radius] = level
+    return ndi.gaussian_filter(image, 1.0) + 0.1 + rng.normal(0, 0.03, image.shape), centres[:4]
+
+
+def scored(image, truth, init, kind):
+    """{method: (IoU, seconds)} and our stop reason (BLAS on one thread)."""
+    obj = real_data.Obj("fields", "object", image, truth)
+    ours, _ = real.run_ours(obj, init)
+    anchors, _, _ = real.run_anchors(obj, init, kind)
+    return {"ours": (ours["iou"], ours["time"]), **{m: (anchors[m]["iou"], anchors[m]["time"]) for m in METHODS[1:]}}, \
+        ours["stop"]
+
+
+def spot_rows(seeds: int):
+    rows = []
+    for radius in (3.5, 5.0, 7.0):
+        for count in (4, 60):
+            for seed in range(seeds):
+                image, centres = spots(radius, count, seed)
+                grid = np.mgrid[:image.shape[0], :image.shape[1]]
+                for c in centres:
+                    truth = np.hypot(grid[0] - c[0], grid[1] - c[1]) <= radius
+                    for drawing, factor, n, kind in (("circle 1.3 r", 1.3, 24, "circle"),
+                                                     ("click 0.4 r", 0.4, 12, "inside")):
+                        ious, stop = scored(image, truth, circle(c, factor * radius, n), kind)
+                        rows.append((f"r {radius:g}, {'sparse (4)' if count == 4 else 'crowded (60)'}", drawing,
+                                     ious, stop))
+    return rows
+
+
+def large_rows():
+    rows = []
+    for size, radius in LARGE:
+        centre = (size / 2 + 0.3, size / 2 - 0.2)
+        grid = np.mgrid[:size, :size]
+        truth = np.hypot(grid[0] - centre[0], grid[1] - centre[1]) <= radius
+        image = truth + np.random.default_rng(size + radius).normal(0, 0.05, truth.shape)
+        case = f"R {radius} on {size} px ({truth.mean():.0%})"
+        for factor in (0.3, 0.4, 0.6, 1.2):
+            ious, stop = scored(image, truth, circle(centre, factor * radius, 64), "inside" if factor < 1 else "circle")
+            rows.append((case, f"circle {factor:g} R", ious, stop))
+    return rows
+
+
+def table(rows, first: str) -> str:
+    lines = [f"| {first} | drawing | cases | " + " | ".join(f"{m} IoU" for m in METHODS) + " | "
+             + " | ".join(f"{m} ms" for m in METHODS) + " | ours' stop reasons |",
+             "|---|---|---|" + "---|" * (2 * len(METHODS)) + "---|"]
+    for case in dict.fromkeys(r[0] for r in rows):
+        for drawing in dict.fromkeys(r[1] for r in rows if r[0] == case):
+            mine = [r for r in rows if r[0] == case and r[1] == drawing]
+            stops = {}
+            for r in mine:
+                stops[r[3]] = stops.get(r[3], 0) + 1
+            lines.append(f"| {case} | {drawing} | {len(mine)} | "
+                         + " | ".join(f"{np.mean([r[2][m][0] for r in mine]):.3f}" for m in METHODS) + " | "
+                         + " | ".join(f"{1000 * np.mean([r[2][m][1] for r in mine]):.0f}" for m in METHODS)
+                         + " | " + ", ".join(f"{k} {v}" for k, v in stops.items()) + " |")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=3, help="fields of spots per radius and density")
+    args = ap.parse_args(argv)
+    warnings.simplefilter("ignore")
+    print("Command: `python benchmarks/fields.py`\n")
+    print(table(spot_rows(args.seeds), "spots"))
+    print()
+    print(table(large_rows(), "disk"))
+
+
+if __name__ == "__main__":
+    main()
