@@ -36,11 +36,6 @@ METHODS = ("ours", "MGAC", "MCV")
 LARGE = ((1024, 150), (1024, 200), (1024, 300), (512, 200))  # (field, radius)
 
 
-def circle(centre, radius, n):
-    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    return np.column_stack([centre[0] + radius * np.sin(t), centre[1] + radius * np.cos(t)])
-
-
 def spots(radius: float, count: int, seed: int, size: int = 256):
     """A field of ``count`` blurred spots of ``radius`` px, at least 6 px apart; the image and
     the first four spots' centres."""
@@ -77,7 +72,7 @@ def spot_rows(seeds: int):
                     truth = np.hypot(grid[0] - c[0], grid[1] - c[1]) <= radius
                     for drawing, factor, n, kind in (("circle 1.3 r", 1.3, 24, "circle"),
                                                      ("click 0.4 r", 0.4, 12, "inside")):
-                        ious, stop = scored(image, truth, circle(c, factor * radius, n), kind)
+                        ious, stop = scored(image, truth, real_data.circle(c, factor * radius, n), kind)
                         rows.append((f"r {radius:g}, {'sparse (4)' if count == 4 else 'crowded (60)'}", drawing,
                                      ious, stop))
     return rows
@@ -92,7 +87,8 @@ def large_rows():
         image = truth + np.random.default_rng(size + radius).normal(0, 0.05, truth.shape)
         case = f"R {radius} on {size} px ({truth.mean():.0%})"
         for factor in (0.3, 0.4, 0.6, 1.2):
-            ious, stop = scored(image, truth, circle(centre, factor * radius, 64), "inside" if factor < 1 else "circle")
+            init = real_data.circle(centre, factor * radius, 64)
+            ious, stop = scored(image, truth, init, "inside" if factor < 1 else "circle")
             rows.append((case, f"circle {factor:g} R", ious, stop))
     return rows
 

