@@ -168,3 +168,23 @@ def test_the_field_probe_draws_sparse_and_crowded_spots(real, monkeypatch_module
             assert image[r, col] > 0.5 and image[r, col + 9] < 0.25
     sparse, _ = spots(3.5, 4, seed=0)
     assert 0.0025 < np.mean(sparse > 0.4) < 0.006
+
+
+def test_the_scale_probe_leaves_an_object_alone_as_it_says(real, monkeypatch_module):
+    """``benchmarks/scale.py --alone``: the object's own pixels are kept, its labelled neighbours
+    become its ground (their median within the noise of the background's), and the background
+    far from them is left as it was."""
+    import real_data
+    from scale import alone
+
+    rng = np.random.default_rng(0)
+    image = 0.1 + 0.02 * rng.standard_normal((120, 120))
+    own, other = np.zeros((120, 120), bool), np.zeros((120, 120), bool)
+    own[disk((40, 40), 10)] = True
+    other[disk((80, 80), 12)] = True
+    image[own], image[other] = 0.8, 0.9
+    obj = real_data.Obj("test", "n1", image, own)
+    out = alone(obj, other).image
+    assert np.array_equal(out[own], image[own])
+    assert abs(np.median(out[other]) - 0.1) < 0.01 and abs(out[other].std() - 0.02) < 0.01
+    assert np.array_equal(out[:20, 100:], image[:20, 100:])
