@@ -919,11 +919,10 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     # then the limit applies. Holes of dark texture would make false necks:
     # those up to a quarter of the object's area are filled (a drawing
     # around it is about its size; a click inside it is not).
-    hole_area = 0.25 * (drawn.sum() if model.drawn_around else _area_held(signed > 0, marked | drawn, reach))
     looks_like = signed > 0
-    like = _without_small_holes(looks_like, hole_area, image_sides,
-                                (marked if (marked & looks_like).any() else drawn) & looks_like, drawn)
-    seed = (marked if (marked & like).any() else drawn) & like
+    hole_area = 0.25 * (drawn.sum() if model.drawn_around else _area_held(looks_like, marked | drawn, reach))
+    like = _without_small_holes(looks_like, hole_area, image_sides, _seed(looks_like, marked, drawn), drawn)
+    seed = _seed(like, marked, drawn)
     if not seed.any():
         return None
     # Depth below the object's outline (two objects cut by the image's side
@@ -940,6 +939,12 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     if model.drawn_around and _drawn_across(region, limit):
         limit = _fill(_scaled(drawing, _INSIDE_LIMIT), shape)
     return _smoothed(region & limit, image_sides)
+
+
+def _seed(like: np.ndarray, marked: np.ndarray, drawn: np.ndarray) -> np.ndarray:
+    """The object-like pixels the drawing marks (its middle, for a drawing
+    around; else, or if none lies there, all it holds)."""
+    return (marked if (marked & like).any() else drawn) & like
 
 
 #: A drawing around the object holds most of its own region (a hasty hand
