@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import os
 import warnings
+from collections import Counter
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
@@ -100,9 +101,7 @@ def table(rows, first: str) -> str:
     for case in dict.fromkeys(r[0] for r in rows):
         for drawing in dict.fromkeys(r[1] for r in rows if r[0] == case):
             mine = [r for r in rows if r[0] == case and r[1] == drawing]
-            stops = {}
-            for r in mine:
-                stops[r[3]] = stops.get(r[3], 0) + 1
+            stops = Counter(r[3] for r in mine)
             lines.append(f"| {case} | {drawing} | {len(mine)} | "
                          + " | ".join(f"{np.mean([r[2][m][0] for r in mine]):.3f}" for m in METHODS) + " | "
                          + " | ".join(f"{1000 * np.mean([r[2][m][1] for r in mine]):.0f}" for m in METHODS)

@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import os
 import warnings
+from collections import Counter
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
@@ -118,9 +119,7 @@ def vesicle_lines(rows) -> str:
     out = []
     for drawing in dict.fromkeys(r[0] for r in rows):
         mine = [r for r in rows if r[0] == drawing]
-        stops = {}
-        for r in mine:
-            stops[r[3]] = stops.get(r[3], 0) + 1
+        stops = dict(Counter(r[3] for r in mine))
         sizes = [r[1] for r in mine]
         out.append(f"- vesicles, {drawing}: ours' equivalent radius / r median {np.median(sizes):.2f} "
                    f"({min(sizes):.2f}-{max(sizes):.2f}), {sum(r[2] for r in mine)} of {len(mine)} spread beyond "

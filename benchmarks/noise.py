@@ -26,6 +26,7 @@ import argparse
 import os
 import re
 import warnings
+from collections import Counter
 from dataclasses import replace
 from multiprocessing import Pool
 
@@ -110,9 +111,7 @@ def main(argv=None):
     draws = f" --draws {args.draws}" if args.draws > 1 else ""
     print(f"Command: `python benchmarks/noise.py --noise {' '.join(args.noise)} --every {args.every}{draws}{groups}`\n")
     print(table(rows, noises))
-    stops = {n: {} for n in noises}
-    for r in rows:
-        stops[r[1]][r[3]] = stops[r[1]].get(r[3], 0) + 1
+    stops = {n: dict(Counter(r[3] for r in rows if r[1] == n)) for n in noises}
     print("\n" + "\n".join(f"- ours' stop reasons, {n}: {s}" for n, s in stops.items()))
 
 
