@@ -1076,19 +1076,26 @@ def test_small_spots_of_a_sparse_field_end_on_their_own_edge(radius):
         assert res.converged and (found & truth).sum() / (found | truth).sum() > 0.88
 
 
+def iou_from_a_circle_inside_a_large_disk(radius):
+    """``segment`` from a circle of ``radius`` px at the centre of a 200-px
+    disk on a 1024-px field (noise 0.05): its result and IoU."""
+    rng = np.random.default_rng(0)
+    rows, cols = np.mgrid[:1024, :1024]
+    disk = np.hypot(rows - 512.3, cols - 511.8) <= 200
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    res = segment(disk + rng.normal(0, 0.05, disk.shape),
+                  np.column_stack([512 + radius * np.sin(t), 512 + radius * np.cos(t)]))
+    found = polygon2mask(disk.shape, res.contour)
+    return res, (found & disk).sum() / (found | disk).sum()
+
+
 def test_a_circle_well_inside_a_large_disk_reads_the_background_beyond_its_window():
     """A circle of 0.4 the radius of a 200-px disk, at its centre: the rings
     the drawing's background is read on reach beyond the window around it,
     where only the disk's rim was (read as the background, the disk was no
     object and the contour stalled where it was drawn, IoU 0.16)."""
-    rng = np.random.default_rng(0)
-    rows, cols = np.mgrid[:1024, :1024]
-    disk = np.hypot(rows - 512.3, cols - 511.8) <= 200
-    image = disk + rng.normal(0, 0.05, disk.shape)
-    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
-    res = segment(image, np.column_stack([512 + 80 * np.sin(t), 512 + 80 * np.cos(t)]))
-    found = polygon2mask(disk.shape, res.contour)
-    assert res.converged and (found & disk).sum() / (found | disk).sum() > 0.98
+    res, iou = iou_from_a_circle_inside_a_large_disk(80)
+    assert res.converged and iou > 0.98
 
 
 def test_a_contour_growing_across_a_large_disk_grows_its_window_a_few_times(monkeypatch):
@@ -1102,11 +1109,6 @@ def test_a_contour_growing_across_a_large_disk_grows_its_window_a_few_times(monk
     compute = segmentation._FeatureWindow._compute
     monkeypatch.setattr(segmentation._FeatureWindow, "_compute",
                         lambda self, window: computed.append(window) or compute(self, window))
-    rng = np.random.default_rng(0)
-    rows, cols = np.mgrid[:1024, :1024]
-    disk = np.hypot(rows - 512.3, cols - 511.8) <= 200
-    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
-    res = segment(disk + rng.normal(0, 0.05, disk.shape), np.column_stack([512 + 40 * np.sin(t), 512 + 40 * np.cos(t)]))
-    found = polygon2mask(disk.shape, res.contour)
-    assert res.converged and (found & disk).sum() / (found | disk).sum() > 0.98
+    res, iou = iou_from_a_circle_inside_a_large_disk(40)
+    assert res.converged and iou > 0.98
     assert len(computed) <= 5
