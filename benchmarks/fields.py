@@ -7,6 +7,11 @@ they never show, with a known answer:
   0.1, blur sigma 1 px, white noise 0.03) on a 256 px field, 4 of them (a quarter to a half of a
   percent of the field) or 60; three seeds, the first four spots of each. Drawn with a circle
   1.3 r around and a click 0.4 r inside. A field's density should not move the contours.
+* **Rods** (rod-shaped bacteria): capsules 6 and 10 px wide and 3-6 times as long, at random
+  angles, at least 2 px apart (levels 0.6-1.0 over 0.1, blur sigma 1 px, white noise 0.03) on
+  a 256 px field, 6 or 25 of them; three seeds, the first four rods of each. Drawn with a circle
+  1.2 times half their extent's diagonal (about their length), a box 1.25 times their extent
+  and 2 px, and a click of 0.4 their half-width at their deepest point.
 * **Large disks**: a disk of radius 150-300 px on a 1024 px field (7-27 % of it) and one of
   200 px on a 512 px field (48 %), noise 0.05; drawn with circles inside it (0.3, 0.4 and
   0.6 R, centred) and around it (1.2 R).
@@ -35,6 +40,7 @@ import real_data  # noqa: E402
 
 METHODS = ("ours", "MGAC", "MCV")
 LARGE = ((1024, 150), (1024, 200), (1024, 300), (512, 200))  # (field, radius)
+FIELDS = {"spots": "spots", "rods": "rods", "disks": "disk"}  # the fields and their table's first column
 
 
 def spots(radius: float, count: int, seed: int, size: int = 256):
@@ -51,6 +57,45 @@ def spots(radius: float, count: int, seed: int, size: int = 256):
     for c, level in zip(centres, rng.uniform(0.6, 1.0, count)):
         image[np.hypot(rows - c[0], cols - c[1]) <= radius] = level
     return ndi.gaussian_filter(image, 1.0) + 0.1 + rng.normal(0, 0.03, image.shape), centres[:4]
+
+
+def capsule(shape, centre, angle, length: float, width: float) -> np.ndarray:
+    """The mask of a capsule (a rod) of ``length`` and ``width`` px about ``centre``."""
+    rows, cols = np.mgrid[:shape[0], :shape[1]].astype(float)
+    axis = np.array([np.sin(angle), np.cos(angle)])
+    start = np.asarray(centre, float) - axis * (length - width) / 2
+    t = np.clip((rows - start[0]) * axis[0] + (cols - start[1]) * axis[1], 0, length - width)
+    return np.hypot(rows - start[0] - t * axis[0], cols - start[1] - t * axis[1]) <= width / 2
+
+
+def rods(width: float, count: int, seed: int, size: int = 256):
+    """A field of up to ``count`` rods ``width`` px wide, at least 2 px apart; the image and the
+    first four rods' masks."""
+    rng = np.random.default_rng(seed)
+    masks, taken = [], np.zeros((size, size), bool)
+    for _ in range(2000):
+        if len(masks) == count:
+            break
+        mask = capsule(taken.shape, rng.uniform(30, size - 30, 2), rng.uniform(0, np.pi),
+                       rng.uniform(3, 6) * width, width)
+        if not (ndi.binary_dilation(mask, iterations=2) & taken).any():
+            masks.append(mask)
+            taken |= mask
+    image = np.zeros((size, size))
+    for mask, level in zip(masks, rng.uniform(0.6, 1.0, len(masks))):
+        image[mask] = level
+    return ndi.gaussian_filter(image, 1.0) + 0.1 + rng.normal(0, 0.03, image.shape), masks[:4]
+
+
+def rod_drawings(mask):
+    """{drawing: (contour, kind)}: a circle about the rod's length, a box around it, a click."""
+    rows, cols = np.nonzero(mask)
+    centre, extent = np.array([rows.mean(), cols.mean()]), np.array([np.ptp(rows), np.ptp(cols)], float)
+    depth = ndi.distance_transform_edt(mask)
+    deepest = np.array(np.unravel_index(np.argmax(depth), mask.shape), float)
+    return {"circle 1.2 half-diagonal": (real_data.circle(centre, 0.6 * np.hypot(*extent)), "circle"),
+            "box 1.25 + 2 px": (real_data.rectangle(centre, 0.625 * extent + 2), "box"),
+            "click 0.4 half-width": (real_data.circle(deepest, 0.4 * depth.max(), 12), "inside")}
 
 
 def scored(image, truth, init, kind):
@@ -76,6 +121,19 @@ def spot_rows(seeds: int):
                         ious, stop = scored(image, truth, real_data.circle(c, factor * radius, n), kind)
                         rows.append((f"r {radius:g}, {'sparse (4)' if count == 4 else 'crowded (60)'}", drawing,
                                      ious, stop))
+    return rows
+
+
+def rod_rows(seeds: int):
+    rows = []
+    for width in (6, 10):
+        for count in (6, 25):
+            for seed in range(seeds):
+                image, masks = rods(width, count, seed)
+                for truth in masks:
+                    for drawing, (init, kind) in rod_drawings(truth).items():
+                        ious, stop = scored(image, truth, init, kind)
+                        rows.append((f"w {width} px, {count} rods", drawing, ious, stop))
     return rows
 
 
@@ -111,13 +169,17 @@ def table(rows, first: str) -> str:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, default=3, help="fields of spots per radius and density")
+    ap.add_argument("--seeds", type=int, default=3, help="fields of spots or rods per size and density")
+    ap.add_argument("--fields", nargs="+", choices=FIELDS, default=list(FIELDS), help="which fields to run")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
-    print("Command: `python benchmarks/fields.py`\n")
-    print(table(spot_rows(args.seeds), "spots"))
-    print()
-    print(table(large_rows(), "disk"))
+    print("Command: `python benchmarks/fields.py" + ("" if args.fields == list(FIELDS) else
+                                                    " --fields " + " ".join(args.fields)) + "`")
+    for name in args.fields:
+        rows = {"spots": lambda: spot_rows(args.seeds), "rods": lambda: rod_rows(args.seeds),
+                "disks": large_rows}[name]()
+        print()
+        print(table(rows, FIELDS[name]))
 
 
 if __name__ == "__main__":

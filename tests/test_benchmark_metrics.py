@@ -170,6 +170,27 @@ def test_the_field_probe_draws_sparse_and_crowded_spots(real, monkeypatch_module
     assert 0.0025 < np.mean(sparse > 0.4) < 0.006
 
 
+def test_the_field_probe_draws_rods_apart_and_drawings_about_them(real, monkeypatch_module):
+    """``benchmarks/fields.py``'s rods: a capsule has the area of a rectangle and a disk, the
+    rods it scores lie at least 2 px apart and show in the image, and the drawings are about
+    each rod: the circle holds it, the click lies in it."""
+    from fields import capsule, rod_drawings, rods
+    from scipy import ndimage as ndi
+    from skimage.draw import polygon2mask
+
+    rod = capsule((80, 80), (40, 40), 0.7, 30, 8)
+    assert abs(rod.sum() - (8 * 22 + np.pi * 16)) < 0.05 * rod.sum()
+    image, masks = rods(6, 25, seed=0)
+    assert len(masks) == 4
+    for i, a in enumerate(masks):
+        assert np.median(image[a]) > 0.5
+        for b in masks[i + 1:]:
+            assert not (ndi.binary_dilation(a, iterations=2) & b).any()
+        drawings = rod_drawings(a)
+        assert not (a & ~polygon2mask(a.shape, drawings["circle 1.2 half-diagonal"][0])).any()
+        assert a[polygon2mask(a.shape, drawings["click 0.4 half-width"][0])].all()
+
+
 def test_the_scale_probe_leaves_an_object_alone_as_it_says(real, monkeypatch_module):
     """``benchmarks/scale.py --alone``: the object's own pixels are kept, its labelled neighbours
     become its ground (their median within the noise of the background's), and the background

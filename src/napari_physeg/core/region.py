@@ -281,6 +281,12 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         obj, background = centre, beyond
     elif around:
         obj, background = centre, on_line
+        # A drawing about a thin object (a rod, a circle about its length):
+        # its middle shows the background too, and its median is a mix of
+        # the two levels (see GROUND_SHARE).
+        if (shown := _beside_the_ground(intensity, middle, on_line, floor)) is not None and \
+                _centred(intensity, middle, drawn & ~middle, on_line, shown):
+            obj = shown
         # A drawing far larger than the object: its centre is mostly
         # background too (within a fifth of the way to the other class),
         # and the other class lies mostly at the centre (not a far brighter
@@ -739,6 +745,36 @@ def _other_class(values: np.ndarray, level: float, floor: float) -> tuple[float,
     else:
         other, share = high, 1.0 - below.mean()
     return (other, float(share)) if abs(other - level) > floor else (level, 0.0)
+
+
+#: A drawing around a thin object shows the background in its middle too:
+#: at least GROUND_SHARE of the middle's pixels at the line's level, and an
+#: object that differs from it by GROUND_CONTRAST least contrasts (a faint
+#: object's own dim parts lie at the background's level: the 3D volume's
+#: faint nuclei, 1.7-2.3 least contrasts). Rods 6 px wide drawn around with
+#: a circle about their length were read at a mix of the two levels, and
+#: their contours ended 1-2 px outside (IoU 0.84 -> 0.94).
+GROUND_SHARE = 0.3
+GROUND_CONTRAST = 4.0
+
+#: The width (px) over which a border ramps from one level to the other.
+RAMP_WIDTH = 2
+
+
+def _beside_the_ground(intensity: np.ndarray, middle: np.ndarray, ground: float, floor: float) -> float | None:
+    """The level of what differs from ``ground`` (by more than ``floor``) in
+    ``middle``, read RAMP_WIDTH px away from ``ground``'s pixels (off its
+    edge's ramp), when at least GROUND_SHARE of ``middle`` lies at
+    ``ground``'s level and that level differs from it by GROUND_CONTRAST
+    times ``floor``; else None."""
+    unlike = np.abs(intensity - ground) > floor
+    if middle.sum() < 2 or unlike[middle].mean() > 1 - GROUND_SHARE:
+        return None
+    core = cv2.erode(unlike.view(np.uint8), np.ones((3, 3), np.uint8), iterations=RAMP_WIDTH).view(bool) & middle
+    if not core.any():
+        return None
+    level = _median(intensity[core])
+    return level if abs(level - ground) >= GROUND_CONTRAST * floor else None
 
 
 def _off_centre_level(within: np.ndarray, span: float, on_line: float, outside: float, floor: float) -> float | None:
