@@ -520,3 +520,24 @@ def test_circle_about_a_thin_rod_ends_on_its_edge(angle):
     found = polygon2mask(shape, res.contour)
     assert res.converged and res.polarity == 1
     assert (found & mask).sum() / (found | mask).sum() > 0.93
+
+
+def test_click_grown_along_a_rod_coarsens_its_nodes_as_it_grows():
+    """A click inside a rod 6 px wide and 30 long grows along it to 8 times
+    its length. Its nodes were spaced for a drawing of its own size (the
+    fewest nodes a contour has, on its small circle) and kept that spacing:
+    200 nodes a third of a pixel apart, a larger element to build at every
+    remesh. The spacing grows with the contour, up to the default's."""
+    from skimage.draw import polygon2mask
+
+    from napari_physeg.core import segment
+
+    shape = (96, 96)
+    mask = rod(shape, (48, 48), 0.5, 30, 6)
+    image = ndi.gaussian_filter(np.where(mask, 0.9, 0.1), 1.0)
+    image += 0.03 * np.random.default_rng(0).standard_normal(shape)
+    res = segment(image, circle((48, 48), 1.2, n=12))
+    found = polygon2mask(shape, res.contour)
+    assert res.converged and (found & mask).sum() / (found | mask).sum() > 0.93
+    # Perimeter ~67 px; the magnified view's default spacing is 1 px of the image.
+    assert len(res.contour) < 90, len(res.contour)

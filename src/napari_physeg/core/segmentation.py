@@ -764,8 +764,10 @@ class _ElasticBody:
     """
 
     def __init__(self, nodes, *, spacing, sigma, material, rayleigh, integrator, dt, divergence_limit,
-                 reference, max_step_length, tol):
+                 reference, max_step_length, tol, grown_spacing=None):
         self.spacing, self.sigma, self.material, self.rayleigh = spacing, sigma, material, rayleigh
+        # The spacing a contour that grows may coarsen to (see remesh).
+        self.grown_spacing = spacing if grown_spacing is None else max(spacing, grown_spacing)
         self.integrator, self.dt, self.divergence_limit = integrator, dt, divergence_limit
         self.reference, self.max_step_length, self.tol = reference, float(max_step_length), tol
         self.model_time = 0.0
@@ -860,7 +862,11 @@ class _ElasticBody:
         # Beyond max_nodes the spacing (and the element's width with it)
         # grows: a click with a fine spacing that grows into a large object
         # made thousands of nodes, a dense eigenproblem each for "modal".
-        coarser = perimeter(nodes) / self.max_nodes
+        # Before that, a small drawing's spacing (MIN_NODES on it) grows
+        # with it up to the one it would be drawn with at its new length: a
+        # click grown along a rod kept 200 nodes 0.3 px apart.
+        length = perimeter(nodes)
+        coarser = max(length / self.max_nodes, min(self.grown_spacing, length / MIN_NODES))
         if coarser > self.spacing:
             self.sigma *= coarser / self.spacing
             self.spacing = coarser
@@ -1036,6 +1042,12 @@ def _initial_nodes(init, n_nodes, sigma, sigma_factor):
     return nodes, spacing, sigma_used
 
 
+def _finer_for_its_size(init, n_nodes, sigma) -> bool:
+    """Whether ``init``'s default nodes are closer than DEFAULT_NODE_SPACING
+    because it is too small for MIN_NODES of them (a click)."""
+    return n_nodes is None and sigma is None and perimeter(init) < MIN_NODES * DEFAULT_NODE_SPACING
+
+
 def iter_segment(image, init, **options):
     """:func:`segment` as a generator: one :class:`SegmentationProgress` per time step.
 
@@ -1159,7 +1171,8 @@ def _evolve(
         nodes - features.origin, features.bounds, spacing=spacing, sigma=sigma_used, material=material,
         rayleigh=rayleigh_coefficients(damping_ratio, *reference_frequency_range(spacing, sigma_used, material)),
         integrator=integrator, dt=dt, divergence_limit=10.0 * float(np.hypot(*image.shape)),
-        reference=reference, max_step_length=max_step_length, tol=tol)
+        reference=reference, max_step_length=max_step_length, tol=tol,
+        grown_spacing=DEFAULT_NODE_SPACING if _finer_for_its_size(first, n_nodes, sigma) else None)
     body.cap_by_reach(features.fields[0])
     history = [body.nodes + features.origin]
     # The evolution need only bring the nodes within reach of the refinement
