@@ -12,6 +12,11 @@ they never show, with a known answer:
   a 256 px field, 6 or 25 of them; three seeds, the first four rods of each. Drawn with a circle
   1.2 times half their extent's diagonal (about their length), a box 1.25 times their extent
   and 2 px, and a click of 0.4 their half-width at their deepest point.
+* **Crescents** (curved rods): tubes 6 and 10 px wide along a circle of radius 25 px, over
+  120, 200 or 270 degrees, with round ends (noise and blur as for the rods), one a field, two
+  seeds (the start angle). Drawn with a circle 1.15 times half their extent's diagonal, a box
+  1.2 times their extent and 2 px, a click of 0.4 their half-width half-way along, and a lasso
+  traced 3 px outside them.
 * **Large disks**: a disk of radius 150-300 px on a 1024 px field (7-27 % of it) and one of
   200 px on a 512 px field (48 %), noise 0.05; drawn with circles inside it (0.3, 0.4 and
   0.6 R, centred) and around it (1.2 R).
@@ -40,7 +45,7 @@ import real_data  # noqa: E402
 
 METHODS = ("ours", "MGAC", "MCV")
 LARGE = ((1024, 150), (1024, 200), (1024, 300), (512, 200))  # (field, radius)
-FIELDS = {"spots": "spots", "rods": "rods", "disks": "disk"}  # the fields and their table's first column
+FIELDS = {"spots": "spots", "rods": "rods", "crescents": "crescent", "disks": "disk"}  # the fields and their table's first column
 
 
 def spots(radius: float, count: int, seed: int, size: int = 256):
@@ -98,6 +103,34 @@ def rod_drawings(mask):
             "click 0.4 half-width": (real_data.circle(deepest, 0.4 * depth.max(), 12), "inside")}
 
 
+def crescent(width: float, span: float, seed: int, size: int = 160, radius: float = 25.0):
+    """A tube ``width`` px wide along a circle of ``radius`` about the field's centre, over
+    ``span`` degrees from an angle the seed draws, with round ends; the image and its mask."""
+    rng = np.random.default_rng(seed)
+    rows, cols = np.mgrid[:size, :size].astype(float)
+    centre, start = np.array([size / 2, size / 2]), rng.uniform(0, 2 * np.pi)
+    angle = np.mod(np.arctan2(rows - centre[0], cols - centre[1]) - start, 2 * np.pi)
+    mask = (np.abs(np.hypot(rows - centre[0], cols - centre[1]) - radius) <= width / 2) & \
+        (angle <= np.deg2rad(span))
+    for end in (start, start + np.deg2rad(span)):
+        tip = centre + radius * np.array([np.sin(end), np.cos(end)])
+        mask |= np.hypot(rows - tip[0], cols - tip[1]) <= width / 2
+    image = ndi.gaussian_filter(0.8 * mask, 1.0) + 0.1 + rng.normal(0, 0.03, mask.shape)
+    middle = start + np.deg2rad(span) / 2
+    return image, mask, centre + radius * np.array([np.sin(middle), np.cos(middle)])
+
+
+def crescent_drawings(mask, middle, width):
+    """{drawing: (contour, kind)}: a circle and a box about the crescent, a click half-way
+    along it, a lasso 3 px outside it."""
+    rows, cols = np.nonzero(mask)
+    centre, extent = np.array([rows.mean(), cols.mean()]), np.array([np.ptp(rows), np.ptp(cols)], float)
+    return {"circle 1.15 half-diagonal": (real_data.circle(centre, 0.575 * np.hypot(*extent)), "circle"),
+            "box 1.2 + 2 px": (real_data.rectangle(centre, 0.6 * extent + 2), "box"),
+            "click 0.4 half-width": (real_data.circle(middle, 0.2 * width, 12), "inside"),
+            "lasso 3 px out": (real_data.boundary(mask, 3.0), "freehand")}
+
+
 def scored(image, truth, init, kind):
     """{method: (IoU, seconds)} and our stop reason (BLAS on one thread)."""
     obj = real_data.Obj("fields", "object", image, truth)
@@ -134,6 +167,18 @@ def rod_rows(seeds: int):
                     for drawing, (init, kind) in rod_drawings(truth).items():
                         ious, stop = scored(image, truth, init, kind)
                         rows.append((f"w {width} px, {count} rods", drawing, ious, stop))
+    return rows
+
+
+def crescent_rows(seeds: int):
+    rows = []
+    for width in (6, 10):
+        for span in (120, 200, 270):
+            for seed in range(seeds):
+                image, truth, middle = crescent(width, span, seed)
+                for drawing, (init, kind) in crescent_drawings(truth, middle, width).items():
+                    ious, stop = scored(image, truth, init, kind)
+                    rows.append((f"w {width} px, {span} deg", drawing, ious, stop))
     return rows
 
 
@@ -177,6 +222,7 @@ def main(argv=None):
                                                     " --fields " + " ".join(args.fields)) + "`")
     for name in args.fields:
         rows = {"spots": lambda: spot_rows(args.seeds), "rods": lambda: rod_rows(args.seeds),
+                "crescents": lambda: crescent_rows(max(1, args.seeds - 1)),
                 "disks": large_rows}[name]()
         print()
         print(table(rows, FIELDS[name]))

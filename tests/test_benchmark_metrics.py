@@ -191,6 +191,21 @@ def test_the_field_probe_draws_rods_apart_and_drawings_about_them(real, monkeypa
         assert a[polygon2mask(a.shape, drawings["click 0.4 half-width"][0])].all()
 
 
+def test_the_field_probe_bends_crescents_over_their_span(real, monkeypatch_module):
+    """``benchmarks/fields.py``'s crescents: a tube over ``span`` degrees of a circle has the area
+    of its arc and two half-disk ends, shows in the image, and its click lies on it."""
+    from fields import crescent, crescent_drawings
+    from skimage.draw import polygon2mask
+
+    for span in (120, 270):
+        image, mask, middle = crescent(6, span, seed=0)
+        arc = np.deg2rad(span) * 25 * 6 + np.pi * 9
+        assert abs(mask.sum() - arc) < 0.05 * arc
+        assert np.median(image[mask]) > 0.7 and np.median(image[~mask]) < 0.15
+        click = crescent_drawings(mask, middle, 6)["click 0.4 half-width"][0]
+        assert mask[polygon2mask(mask.shape, click)].all()
+
+
 def test_the_scale_probe_leaves_an_object_alone_as_it_says(real, monkeypatch_module):
     """``benchmarks/scale.py --alone``: the object's own pixels are kept, its labelled neighbours
     become its ground (their median within the noise of the background's), and the background

@@ -541,3 +541,30 @@ def test_click_grown_along_a_rod_coarsens_its_nodes_as_it_grows():
     assert res.converged and (found & mask).sum() / (found | mask).sum() > 0.93
     # Perimeter ~67 px; the magnified view's default spacing is 1 px of the image.
     assert len(res.contour) < 90, len(res.contour)
+
+
+@pytest.mark.parametrize("span", [120, 200])
+def test_lasso_traced_around_a_crescent_reads_its_level_along_it(span):
+    """A rod 6 px wide bent along a circle (a crescent, a curved bacterium),
+    traced with a lasso 3 px outside it. The drawing's middle, its half
+    scaled about its centroid, lay in the crescent's bay, on the
+    background: the object's level read there was a mix, or the
+    background's, and the contour ended 1-2 px outside (IoU 0.69-0.91). A
+    concave drawing's middle is read along it, where it is deepest."""
+    from skimage import measure
+    from skimage.draw import polygon2mask
+
+    from napari_physeg.core import segment
+
+    shape, centre, radius = (160, 160), np.array([80.0, 80.0]), 25
+    rr, cc = np.mgrid[: shape[0], : shape[1]].astype(float)
+    angle = np.mod(np.arctan2(rr - centre[0], cc - centre[1]) - 1.0, 2 * np.pi)
+    mask = (np.abs(np.hypot(rr - centre[0], cc - centre[1]) - radius) <= 3) & (angle <= np.deg2rad(span))
+    for a in (1.0, 1.0 + np.deg2rad(span)):  # round ends
+        end = centre + radius * np.array([np.sin(a), np.cos(a)])
+        mask |= np.hypot(rr - end[0], cc - end[1]) <= 3
+    image = ndi.gaussian_filter(np.where(mask, 0.9, 0.1), 1.0)
+    image += 0.03 * np.random.default_rng(span).standard_normal(shape)
+    lasso = max(measure.find_contours(ndi.binary_dilation(mask, iterations=3).astype(float), 0.5), key=len)[:-1]
+    found = polygon2mask(shape, segment(image, lasso).contour)
+    assert (found & mask).sum() / (found | mask).sum() > 0.95
