@@ -24,7 +24,8 @@ they never show, with a known answer:
 Ours on the whole image; MGAC and morphological Chan-Vese with ``real.py``'s settings on the same
 crops, in one run; IoU and wall-clock time (mean per case, BLAS on one thread):
 
-    python benchmarks/fields.py
+    python benchmarks/fields.py                        # all four fields, about 10 min
+    python benchmarks/fields.py --fields rods crescents
 """
 
 from __future__ import annotations
