@@ -17,6 +17,10 @@ they never show, with a known answer:
   seeds (the start angle). Drawn with a circle 1.15 times half their extent's diagonal, a box
   1.2 times their extent and 2 px, a click of 0.4 their half-width half-way along, and a lasso
   traced 3 px outside them.
+* **Rod colonies** (a known failure, kept to measure it): five rods side by side, 1 or 2 px
+  apart, 6 or 8 px wide and 4-5 times as long (levels 0.7-1.0; blur, noise as above), two
+  seeds, the second and third rods scored. Drawn as the rods are, and with a lasso traced
+  half the gap outside the rod.
 * **Large disks**: a disk of radius 150-300 px on a 1024 px field (7-27 % of it) and one of
   200 px on a 512 px field (48 %), noise 0.05; drawn with circles inside it (0.3, 0.4 and
   0.6 R, centred) and around it (1.2 R).
@@ -24,7 +28,7 @@ they never show, with a known answer:
 Ours on the whole image; MGAC and morphological Chan-Vese with ``real.py``'s settings on the same
 crops, in one run; IoU and wall-clock time (mean per case, BLAS on one thread):
 
-    python benchmarks/fields.py                        # all four fields, about 10 min
+    python benchmarks/fields.py                        # all five fields, about 11 min
     python benchmarks/fields.py --fields rods crescents
 """
 
@@ -46,7 +50,7 @@ import real_data  # noqa: E402
 
 METHODS = ("ours", "MGAC", "MCV")
 LARGE = ((1024, 150), (1024, 200), (1024, 300), (512, 200))  # (field, radius)
-FIELDS = {"spots": "spots", "rods": "rods", "crescents": "crescent", "disks": "disk"}  # the fields and their table's first column
+FIELDS = {"spots": "spots", "rods": "rods", "crescents": "crescent", "colonies": "colony", "disks": "disk"}  # the fields and their table's first column
 
 
 def spots(radius: float, count: int, seed: int, size: int = 256):
@@ -132,6 +136,20 @@ def crescent_drawings(mask, middle, width):
             "lasso 3 px out": (real_data.boundary(mask, 3.0), "freehand")}
 
 
+def colony(gap: float, width: float, seed: int, size: int = 160):
+    """Five rods ``width`` px wide side by side, ``gap`` px apart, at an angle the seed draws;
+    the image and the rods' masks."""
+    rng = np.random.default_rng(seed)
+    angle = rng.uniform(0, np.pi)
+    along, across = np.array([np.sin(angle), np.cos(angle)]), np.array([np.cos(angle), -np.sin(angle)])
+    masks = [capsule((size, size), size / 2 + i * (width + gap) * across + rng.uniform(-4, 4) * along, angle,
+                     rng.uniform(4, 5) * width, width) for i in range(-2, 3)]
+    image = np.zeros((size, size))
+    for mask, level in zip(masks, rng.uniform(0.7, 1.0, len(masks))):
+        image[mask] = level
+    return ndi.gaussian_filter(image, 1.0) + 0.1 + rng.normal(0, 0.03, image.shape), masks
+
+
 def scored(image, truth, init, kind):
     """{method: (IoU, seconds)} and our stop reason (BLAS on one thread)."""
     obj = real_data.Obj("fields", "object", image, truth)
@@ -183,6 +201,53 @@ def crescent_rows(seeds: int):
     return rows
 
 
+def colony_rows(seeds: int):
+    rows = []
+    for gap in (1, 2):
+        for width in (6, 8):
+            for seed in range(seeds):
+                image, masks = colony(gap, width, seed)
+                for truth in masks[1:3]:
+                    drawings = {**rod_drawings(truth),
+                                "lasso half the gap out": (real_data.boundary(truth, gap / 2), "freehand")}
+                    for drawing, (init, kind) in drawings.items():
+                        ious, stop = scored(image, truth, init, kind)
+                        rows.append((f"gap {gap} px, w {width} px", drawing, ious, stop))
+    return rows
+
+
+def colony_figure(path) -> None:
+    """Ours on the second rod of a colony 1 px apart, 6 px wide, from each drawing: truth green,
+    drawing cyan, result red."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from skimage.draw import polygon2mask
+
+    from napari_physeg.core import segment
+
+    image, masks = colony(1, 6, 0)
+    truth = masks[1]
+    drawings = {**rod_drawings(truth), "lasso half the gap out": (real_data.boundary(truth, 0.5), "freehand")}
+    centre = np.argwhere(truth).mean(axis=0)
+    fig, axes = plt.subplots(1, len(drawings), figsize=(4 * len(drawings), 4.3))
+    for ax, (name, (init, _)) in zip(axes, drawings.items()):
+        contour = segment(image, init).contour
+        found = polygon2mask(image.shape, contour)
+        ax.imshow(image, cmap="gray")
+        ax.contour(truth, [0.5], colors="lime", linewidths=1)
+        for line, colour in ((init, "cyan"), (contour, "red")):
+            closed = np.vstack([line, line[:1]])
+            ax.plot(closed[:, 1], closed[:, 0], colour, lw=1)
+        ax.set_xlim(centre[1] - 35, centre[1] + 35)
+        ax.set_ylim(centre[0] + 35, centre[0] - 35)
+        ax.set_title(f"{name}: IoU {(found & truth).sum() / (found | truth).sum():.2f}", fontsize=9)
+        ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+
+
 def large_rows():
     rows = []
     for size, radius in LARGE:
@@ -217,6 +282,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=3, help="fields of spots or rods per size and density")
     ap.add_argument("--fields", nargs="+", choices=FIELDS, default=list(FIELDS), help="which fields to run")
+    ap.add_argument("--colony-figure", metavar="PNG", help="also draw ours on a colony's rod from each drawing")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     print("Command: `python benchmarks/fields.py" + ("" if args.fields == list(FIELDS) else
@@ -224,9 +290,12 @@ def main(argv=None):
     for name in args.fields:
         rows = {"spots": lambda: spot_rows(args.seeds), "rods": lambda: rod_rows(args.seeds),
                 "crescents": lambda: crescent_rows(max(1, args.seeds - 1)),
+                "colonies": lambda: colony_rows(max(1, args.seeds - 1)),
                 "disks": large_rows}[name]()
         print()
         print(table(rows, FIELDS[name]))
+    if args.colony_figure:
+        colony_figure(args.colony_figure)
 
 
 if __name__ == "__main__":

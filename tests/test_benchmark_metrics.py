@@ -206,6 +206,21 @@ def test_the_field_probe_bends_crescents_over_their_span(real, monkeypatch_modul
         assert mask[polygon2mask(mask.shape, click)].all()
 
 
+def test_the_field_probe_packs_a_colony_with_the_gap_it_says(real, monkeypatch_module):
+    """``benchmarks/fields.py``'s colonies: five rods, none overlapping, each the next one's
+    neighbour across a gap of about ``gap`` px (at least 1 px of background between them)."""
+    from fields import colony
+    from scipy import ndimage as ndi
+
+    for gap in (1, 2):
+        image, masks = colony(gap, 6, seed=0)
+        assert len(masks) == 5 and not (np.sum(masks, axis=0) > 1).any()
+        for a, b in zip(masks, masks[1:]):
+            distance = ndi.distance_transform_edt(~a)[b].min()
+            assert gap <= distance <= gap + 1.5, distance
+        assert np.median(image[masks[2]]) > 0.6
+
+
 def test_the_scale_probe_leaves_an_object_alone_as_it_says(real, monkeypatch_module):
     """``benchmarks/scale.py --alone``: the object's own pixels are kept, its labelled neighbours
     become its ground (their median within the noise of the background's), and the background
