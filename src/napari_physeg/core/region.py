@@ -199,13 +199,15 @@ def _line_band(contour: np.ndarray, shape, half_width: int) -> np.ndarray:
 #: A drawing whose area is less than this share of its convex hull's (a
 #: lasso around a crescent) has its middle read along it (see _middle).
 CONCAVE_DRAWING = 0.8
+#: ... unless that middle covers less than this share of the scaled half's area.
+CONCAVE_MIDDLE_SHARE = 0.5
 
 
 def _middle(drawing: np.ndarray, shape) -> np.ndarray:
     """The middle of the drawing: the drawing scaled by half about its
     centroid; for a concave drawing (see CONCAVE_DRAWING), its pixels at least
     half as far from its line as its deepest (the whole drawing's, beyond the
-    image too). A lasso around a crescent-shaped object, scaled, lay in the
+    image too), unless they are a small core (see CONCAVE_MIDDLE_SHARE). A lasso around a crescent-shaped object, scaled, lay in the
     crescent's bay, on the background: read along it, its middle lies on
     the object (a rod bent to a half circle, traced at 3 px: IoU 0.69 ->
     0.99)."""
@@ -220,10 +222,16 @@ def _middle(drawing: np.ndarray, shape) -> np.ndarray:
         return scaled
     depth = cv2.distanceTransform(_fill(drawing - lo, tuple(hi - lo)).view(np.uint8), cv2.DIST_L2,
                                   cv2.DIST_MASK_PRECISE)
+    if depth.max() <= 0:
+        return scaled
+    deep = depth >= 0.5 * depth.max()
+    # A spiky drawing (a star over the object) is deepest in a small core
+    # only, which marks too little of the object: its scaled half stands.
+    if deep.sum() < CONCAVE_MIDDLE_SHARE * cv2.contourArea(_scaled(drawing, 0.5)[:, ::-1].astype(np.float32)):
+        return scaled
     middle = np.zeros(shape, bool)
     a, b = np.maximum(lo, 0), np.minimum(hi, np.array(shape))
-    if np.all(b > a) and depth.max() > 0:
-        deep = depth >= 0.5 * depth.max()
+    if np.all(b > a):
         middle[a[0]:b[0], a[1]:b[1]] = deep[a[0] - lo[0]:b[0] - lo[0], a[1] - lo[1]:b[1] - lo[1]]
     return middle
 
