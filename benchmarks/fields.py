@@ -176,6 +176,12 @@ def spot_rows(seeds: int):
     return rows
 
 
+def drawn_rows(case: str, image, truth, drawings: dict) -> list:
+    """One row per drawing ({name: (contour, kind)}) of ``truth`` on ``image``: case, drawing,
+    {method: (IoU, seconds)}, ours' stop reason."""
+    return [(case, name, *scored(image, truth, init, kind)) for name, (init, kind) in drawings.items()]
+
+
 def rod_rows(seeds: int):
     rows = []
     for width in (6, 10):
@@ -183,9 +189,7 @@ def rod_rows(seeds: int):
             for seed in range(seeds):
                 image, masks = rods(width, count, seed)
                 for truth in masks:
-                    for drawing, (init, kind) in rod_drawings(truth).items():
-                        ious, stop = scored(image, truth, init, kind)
-                        rows.append((f"w {width} px, {count} rods", drawing, ious, stop))
+                    rows += drawn_rows(f"w {width} px, {count} rods", image, truth, rod_drawings(truth))
     return rows
 
 
@@ -195,9 +199,8 @@ def crescent_rows(seeds: int):
         for span in (120, 200, 270):
             for seed in range(seeds):
                 image, truth, middle = crescent(width, span, seed)
-                for drawing, (init, kind) in crescent_drawings(truth, middle, width).items():
-                    ious, stop = scored(image, truth, init, kind)
-                    rows.append((f"w {width} px, {span} deg", drawing, ious, stop))
+                rows += drawn_rows(f"w {width} px, {span} deg", image, truth,
+                                   crescent_drawings(truth, middle, width))
     return rows
 
 
@@ -208,12 +211,13 @@ def colony_rows(seeds: int):
             for seed in range(seeds):
                 image, masks = colony(gap, width, seed)
                 for truth in masks[1:3]:
-                    drawings = {**rod_drawings(truth),
-                                "lasso half the gap out": (real_data.boundary(truth, gap / 2), "freehand")}
-                    for drawing, (init, kind) in drawings.items():
-                        ious, stop = scored(image, truth, init, kind)
-                        rows.append((f"gap {gap} px, w {width} px", drawing, ious, stop))
+                    rows += drawn_rows(f"gap {gap} px, w {width} px", image, truth, colony_drawings(truth, gap))
     return rows
+
+
+def colony_drawings(truth, gap: float) -> dict:
+    """A rod's drawings (see rod_drawings) and a lasso traced half the colony's gap outside it."""
+    return {**rod_drawings(truth), "lasso half the gap out": (real_data.boundary(truth, gap / 2), "freehand")}
 
 
 def colony_figure(path) -> None:
@@ -229,7 +233,7 @@ def colony_figure(path) -> None:
 
     image, masks = colony(1, 6, 0)
     truth = masks[1]
-    drawings = {**rod_drawings(truth), "lasso half the gap out": (real_data.boundary(truth, 0.5), "freehand")}
+    drawings = colony_drawings(truth, 1)
     centre = np.argwhere(truth).mean(axis=0)
     fig, axes = plt.subplots(1, len(drawings), figsize=(4 * len(drawings), 4.3))
     for ax, (name, (init, _)) in zip(axes, drawings.items()):
