@@ -21,6 +21,11 @@ they never show, with a known answer:
   apart, 6 or 8 px wide and 4-5 times as long (levels 0.7-1.0; blur, noise as above), two
   seeds, the second and third rods scored. Drawn as the rods are, and with a lasso traced
   half the gap outside the rod.
+* **Nested levels**: skimage.data's Shepp-Logan phantom with white noise 0.02 (two seeds), its
+  regions of one level that a closed contour can outline (at least 50 px, no holes): ellipses
+  on a grey ground within a bright ring, beside black ellipses that differ from them more than
+  their ground does. Drawn with a circle 1.3 times half their extent, a box 3 px out, and a
+  click of 0.4 their depth at their deepest point.
 * **Large disks**: a disk of radius 150-300 px on a 1024 px field (7-27 % of it) and one of
   200 px on a 512 px field (48 %), noise 0.05; drawn with circles inside it (0.3, 0.4 and
   0.6 R, centred) and around it (1.2 R).
@@ -28,7 +33,7 @@ they never show, with a known answer:
 Ours on the whole image; MGAC and morphological Chan-Vese with ``real.py``'s settings on the same
 crops, in one run; IoU and wall-clock time (mean per case, BLAS on one thread):
 
-    python benchmarks/fields.py                        # all five fields, about 11 min
+    python benchmarks/fields.py                        # all six fields, about 12 min
     python benchmarks/fields.py --fields rods crescents
 """
 
@@ -50,7 +55,8 @@ import real_data  # noqa: E402
 
 METHODS = ("ours", "MGAC", "MCV")
 LARGE = ((1024, 150), (1024, 200), (1024, 300), (512, 200))  # (field, radius)
-FIELDS = {"spots": "spots", "rods": "rods", "crescents": "crescent", "colonies": "colony", "disks": "disk"}  # the fields and their table's first column
+FIELDS = {"spots": "spots", "rods": "rods", "crescents": "crescent", "colonies": "colony", "disks": "disk",
+          "phantom": "phantom level (area)"}  # the fields and their table's first column
 
 
 def spots(radius: float, count: int, seed: int, size: int = 256):
@@ -252,6 +258,44 @@ def colony_figure(path) -> None:
     fig.savefig(path, dpi=80)
 
 
+def phantom(seed: int):
+    """skimage.data's Shepp-Logan phantom (400 x 400) with white noise 0.02, and its regions
+    of one level (0.1 steps) that a closed contour can outline: at least 50 px, no holes (the
+    skull's ring and the grey matter around the inner ellipses are left out)."""
+    from skimage import data as skdata
+
+    levels = skdata.shepp_logan_phantom()
+    image = levels + np.random.default_rng(seed).normal(0, 0.02, levels.shape)
+    regions = []
+    for level in np.unique(np.round(levels, 2)):
+        labels, n = ndi.label(np.isclose(levels, level, atol=0.005))
+        for k in range(1, n + 1):
+            region = labels == k
+            if 50 <= region.sum() < 0.5 * region.size and not (ndi.binary_fill_holes(region) & ~region).any():
+                regions.append((f"{level:.1f} ({region.sum()} px)", region))
+    return image, regions
+
+
+def phantom_drawings(truth) -> dict:
+    """{drawing: (contour, kind)}: a circle 1.3 times half the region's extent, a box 3 px
+    out, and a click of 0.4 its depth at its deepest point."""
+    centre, half = real_data.bounding_box(truth)
+    depth = ndi.distance_transform_edt(truth)
+    deepest = np.array(np.unravel_index(depth.argmax(), depth.shape), float)
+    return {"circle 1.3": (real_data.circle(centre, 1.3 * half.max(), 48), "circle"),
+            "box 3 px out": (real_data.rectangle(centre, half + 3), "box"),
+            "click 0.4 depth": (real_data.circle(deepest, max(1.5, 0.4 * depth.max()), 24), "inside")}
+
+
+def phantom_rows(seeds: int):
+    rows = []
+    for seed in range(seeds):
+        image, regions = phantom(seed)
+        for case, truth in regions:
+            rows += drawn_rows(case, image, truth, phantom_drawings(truth))
+    return rows
+
+
 def large_rows():
     rows = []
     for size, radius in LARGE:
@@ -295,7 +339,7 @@ def main(argv=None):
         rows = {"spots": lambda: spot_rows(args.seeds), "rods": lambda: rod_rows(args.seeds),
                 "crescents": lambda: crescent_rows(max(1, args.seeds - 1)),
                 "colonies": lambda: colony_rows(max(1, args.seeds - 1)),
-                "disks": large_rows}[name]()
+                "disks": large_rows, "phantom": lambda: phantom_rows(max(1, args.seeds - 1))}[name]()
         print()
         print(table(rows, FIELDS[name]))
     if args.colony_figure:

@@ -191,6 +191,28 @@ def test_the_field_probe_draws_rods_apart_and_drawings_about_them(real, monkeypa
         assert a[polygon2mask(a.shape, drawings["click 0.4 half-width"][0])].all()
 
 
+def test_the_field_probe_outlines_the_phantom_s_regions_a_contour_can_hold(real, monkeypatch_module):
+    """``benchmarks/fields.py``'s phantom: ten regions of one level, none with a hole (not the
+    skull's ring), apart; the noise is the one stated; the click lies in its region and the box
+    holds it."""
+    from fields import phantom, phantom_drawings
+    from scipy import ndimage as ndi
+    from skimage import data as skdata
+    from skimage.draw import polygon2mask
+
+    image, regions = phantom(seed=0)
+    assert len(regions) == 10
+    assert abs(np.std(image - skdata.shepp_logan_phantom()) - 0.02) < 0.001
+    cover = np.zeros(image.shape, int)
+    for _, region in regions:
+        assert (ndi.binary_fill_holes(region) == region).all()
+        cover += region
+        drawings = phantom_drawings(region)
+        assert region[polygon2mask(region.shape, drawings["click 0.4 depth"][0])].all()
+        assert not (region & ~polygon2mask(region.shape, drawings["box 3 px out"][0])).any()
+    assert cover.max() == 1
+
+
 def test_the_field_probe_bends_crescents_over_their_span(real, monkeypatch_module):
     """``benchmarks/fields.py``'s crescents: a tube over ``span`` degrees of a circle has the area
     of its arc and two half-disk ends, shows in the image, and its click lies on it."""

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
+from scipy import ndimage as ndi
 from skimage.draw import polygon2mask
 
 from napari_physeg import data
@@ -499,6 +500,41 @@ def test_small_circle_in_the_horse_s_body(centre, radius):
     rump &= mask
     assert res.converged
     assert (found & rump).sum() > 0.95 * rump.sum()
+
+
+def _phantom_ellipse(level, centre):
+    """skimage.data's Shepp-Logan phantom with white noise, and the truth: its
+    connected region at ``level`` (0.1 steps) through ``centre``."""
+    from skimage import data as skdata
+
+    phantom = skdata.shepp_logan_phantom()
+    labels, _ = ndi.label(np.isclose(phantom, level, atol=0.01))
+    image = phantom + 0.02 * np.random.default_rng(0).standard_normal(phantom.shape)
+    return image, labels == labels[centre]
+
+
+@pytest.mark.parametrize("level, centre, drawing", [
+    (0.3, (128, 201), "click"),  # a large ellipse on a grey ground within the bright skull
+    (0.4, (176, 200), 2),        # a box 2 px out about a small one
+    (0.3, (219, 200), 3),        # on a grey ground between black ellipses
+])
+def test_nested_levels_of_the_shepp_logan_phantom(level, centre, drawing):
+    """Three levels and more, nested: an object on an even ground, beyond which
+    lies a level that differs from the object more (the phantom's black
+    ellipses and the dark around the skull). That ground is the background:
+    read as the object's texture, a click inside ended on the skull (IoU
+    0.08); the boxes read their line as lying on the object and spread over
+    the image or half the ground (0.02, 0.41)."""
+    image, truth = _phantom_ellipse(level, centre)
+    rows, cols = np.nonzero(truth)
+    if drawing == "click":
+        init = _circle([rows.mean(), cols.mean()], 0.4 * np.sqrt(truth.sum() / np.pi), 48)
+    else:
+        (r0, c0), (r1, c1) = (rows.min() - drawing, cols.min() - drawing), (rows.max() + drawing, cols.max() + drawing)
+        init = np.array([[r0, c0], [r0, c1], [r1, c1], [r1, c0]], float)
+    res = segment(image, init)
+    assert res.converged
+    assert _iou(res.contour, truth) > 0.9
 
 
 @pytest.mark.parametrize("make", [data.ellipse, data.hand])

@@ -307,7 +307,8 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     # differ from the object more than its background does (the rings hold
     # neighbours unlike the object: a dim nucleus among bright ones).
     around = (np.isnan(outside) or (on_line - centre) * np.sign(outside - centre) >= 0.5 * abs(centre - outside)
-              or abs(on_line - centre) > abs(centre - outside))
+              or abs(on_line - centre) > abs(centre - outside)
+              or _on_even_ground(intensity, drawing, along, on_line, centre, outside, floor))
     # What differs from the line within the drawing: the object, if the
     # drawing is around it; texture, if inside it. (A classes' split is only
     # made when the pixels' spread leaves room for a rule below to use it.)
@@ -453,6 +454,31 @@ def _centred(intensity, middle, rest, level, other) -> bool:
     return bool(middle.any()) and side[middle].mean() > (side[rest].mean() if rest.any() else 0.0)
 
 
+def _on_even_ground(intensity, drawing, along, on_line, centre, outside, floor) -> bool:
+    """Whether the line lies on an even ground that runs on beyond it: its
+    pixels' scatter within ``floor``, at least two floors from ``centre``,
+    the ring just outside it at the line's level, and that level between the
+    centre's and the ``outside``'s.
+
+    So the drawing is around an object that differs from that ground, even
+    when a level further out differs from the centre more: a box about a
+    bright ellipse of the Shepp-Logan phantom, on a grey ground between
+    black ellipses, was read as lying on the object, whose background was
+    the black, and the contour spread over the image. (A line brighter than
+    both a dim centre and the dark outside lies on a bright object whose
+    middle is dim: its chromatin around a nucleolus.)
+    """
+    if _scatter(along) > floor or abs(on_line - centre) < 2 * floor or (on_line - centre) * (outside - on_line) <= 0:
+        return False
+    ring = _ring(intensity, drawing, *_OUTER_RINGS[0])
+    return ring.size > 0 and abs(_median(ring) - on_line) <= floor
+
+
+def _ring(intensity, drawing, lo: float, hi: float) -> np.ndarray:
+    """The pixels of ``intensity`` between ``drawing`` scaled by ``lo`` and by ``hi``."""
+    return intensity[_fill(_scaled(drawing, hi), intensity.shape) & ~_fill(_scaled(drawing, lo), intensity.shape)]
+
+
 def _outside_level(intensity, drawing, centre, on_line, along, within, floor) -> float:
     """The background's level for a drawing made inside the object: that of
     the ring outside it that differs most from the drawing's centre (NaN if
@@ -466,23 +492,28 @@ def _outside_level(intensity, drawing, centre, on_line, along, within, floor) ->
     the drawing's, around a line that does not either and differs from the
     centre less (a small drawing inside a textured object): then until one
     differs from the centre twice as much, for the near rings held the
-    object's texture, not its background.
+    object's texture, not its background. Unless the near rings within the
+    one that differs most are even (see :func:`_step_beyond_even_rings`).
     """
-    shape = intensity.shape
     textured = abs(on_line - centre) <= max(floor, _TEXTURE_SPREADS * _scatter(along))
     outside, best, best_ring, through = np.nan, -1.0, None, False
+    near_rings, best_k = [], -1
     for k, (lo, hi) in enumerate(_OUTER_RINGS + _FAR_RINGS):
         far = k >= len(_OUTER_RINGS)
         if k == len(_OUTER_RINGS):
             near_best = best
+            if (step := _step_beyond_even_rings(drawing, near_rings, best_k, centre, outside, floor)) is not None:
+                return step
             through = (textured and floor < near_best and abs(on_line - centre) <= near_best
                        and near_best <= _TEXTURE_SPREADS * max(_scatter(best_ring), _scatter(within)))
         if far and best > (near_best if through else floor):
             break
-        ring = intensity[_fill(_scaled(drawing, hi), shape) & ~_fill(_scaled(drawing, lo), shape)]
+        ring = _ring(intensity, drawing, lo, hi)
         # Far out the background may be a small part of a ring that still
         # lies mostly on the object: the ring's class furthest from the centre.
         level = _surrounding_class(intensity, drawing, ring, centre, floor) if far else _median(ring)
+        if not far:
+            near_rings.append(ring)
         # Read through near rings that differ from the centre one way, a
         # level the other way is the background only if it surrounds the
         # object (a click on a dark spot of a bright nucleus, whose dark
@@ -493,8 +524,32 @@ def _outside_level(intensity, drawing, centre, on_line, along, within, floor) ->
                 not _surrounded(intensity, drawing, centre, level):
             continue
         if not np.isnan(level) and abs(level - centre) > (2 * near_best if through else best):
-            outside, best, best_ring = level, abs(level - centre), ring
+            outside, best, best_ring, best_k = level, abs(level - centre), ring, k
     return outside
+
+
+def _step_beyond_even_rings(drawing, rings, best_k, centre, outside, floor) -> float | None:
+    """The level beyond the object's border when the near rings about
+    ``drawing`` within the one that differs most from the centre
+    (``rings[best_k]``, at ``outside``) are even (their pixels' scatter within
+    ``floor``): the median of that ring's pixels more than ``floor`` beyond the
+    centre's level. None if they are not, if no near ring differs, or if that
+    ring is narrower than three edge ramps (``RAMP_WIDTH``).
+
+    Even rings show no texture: the object runs on evenly beyond the drawing
+    and the ring that differs straddles its border (its median, a mix of the
+    two sides). Read through as texture, the background became a further,
+    more different level: a click inside an ellipse of the Shepp-Logan
+    phantom, on a grey ground within the bright skull, took the black beyond
+    the ground for the background and ended on the skull (IoU 0.08).
+    """
+    if best_k < 1 or abs(outside - centre) <= floor or _scatter(np.concatenate(rings[:best_k])) > floor:
+        return None
+    lo, hi = _OUTER_RINGS[best_k]
+    if (hi - lo) * 0.5 * np.sqrt(np.ptp(drawing[:, 0]) * np.ptp(drawing[:, 1])) < 3 * RAMP_WIDTH:
+        return None  # a ring this thin holds mostly the edge's ramp (a click on a 6-px rod: 0.96 -> 0.94)
+    beyond = rings[best_k][(rings[best_k] - centre) * np.sign(outside - centre) > floor]
+    return _median(beyond) if beyond.size else outside
 
 
 def _surrounding_class(intensity, drawing, ring, centre, floor) -> float:
