@@ -499,12 +499,12 @@ def _outside_level(intensity, drawing, centre, on_line, along, within, floor) ->
     """
     textured = abs(on_line - centre) <= max(floor, _TEXTURE_SPREADS * _scatter(along))
     outside, best, best_ring, through = np.nan, -1.0, None, False
-    near_rings, best_k = [], -1
+    rings_within, best_k = [], -1
     for k, (lo, hi) in enumerate(_OUTER_RINGS + _FAR_RINGS):
         far = k >= len(_OUTER_RINGS)
         if k == len(_OUTER_RINGS):
             near_best = best
-            if (step := _step_beyond_even_rings(drawing, near_rings, best_k, centre, outside, floor)) is not None:
+            if (step := _step_beyond_even_rings(drawing, rings_within, best_k, centre, outside, floor)) is not None:
                 return step
             through = (textured and floor < near_best and abs(on_line - centre) <= near_best
                        and near_best <= _TEXTURE_SPREADS * max(_scatter(best_ring), _scatter(within)))
@@ -518,10 +518,10 @@ def _outside_level(intensity, drawing, centre, on_line, along, within, floor) ->
         # border too: its class furthest from the centre may be a further
         # level (a small click in the phantom's large ellipse took the black
         # beyond its grey ground for the background and ended on the skull).
-        if far and not through and abs(level - centre) > floor and _scatter(np.concatenate(near_rings)) <= floor \
+        if far and not through and abs(level - centre) > floor and _scatter(np.concatenate(rings_within)) <= floor \
                 and (beyond := _level_off_the_ramp(intensity, drawing, lo, hi, centre, level, floor)) is not None:
             return beyond
-        near_rings.append(ring)
+        rings_within.append(ring)
         # Read through near rings that differ from the centre one way, a
         # level the other way is the background only if it surrounds the
         # object (a click on a dark spot of a bright nucleus, whose dark
