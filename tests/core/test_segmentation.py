@@ -515,6 +515,7 @@ def _phantom_ellipse(level, centre):
 
 @pytest.mark.parametrize("level, centre, drawing", [
     (0.3, (128, 201), "click"),  # a large ellipse on a grey ground within the bright skull
+    (0.3, (128, 201), 5.0),      # a click of 5 px there: its near rings lie on the ellipse
     (0.4, (176, 200), 2),        # a box 2 px out about a small one
     (0.3, (219, 200), 3),        # on a grey ground between black ellipses
 ])
@@ -523,12 +524,14 @@ def test_nested_levels_of_the_shepp_logan_phantom(level, centre, drawing):
     lies a level that differs from the object more (the phantom's black
     ellipses and the dark around the skull). That ground is the background:
     read as the object's texture, a click inside ended on the skull (IoU
-    0.08); the boxes read their line as lying on the object and spread over
-    the image or half the ground (0.02, 0.41)."""
+    0.08, 0.27); the boxes read their line as lying on the object and spread
+    over the image or half the ground (0.02, 0.41)."""
     image, truth = _phantom_ellipse(level, centre)
     rows, cols = np.nonzero(truth)
     if drawing == "click":
         init = _circle([rows.mean(), cols.mean()], 0.4 * np.sqrt(truth.sum() / np.pi), 48)
+    elif isinstance(drawing, float):
+        init = _circle([rows.mean(), cols.mean()], drawing, 24)
     else:
         (r0, c0), (r1, c1) = (rows.min() - drawing, cols.min() - drawing), (rows.max() + drawing, cols.max() + drawing)
         init = np.array([[r0, c0], [r0, c1], [r1, c1], [r1, c0]], float)

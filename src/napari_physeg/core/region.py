@@ -371,6 +371,14 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     if polarity is None:
         polarity = 1 if obj >= background else -1
     elif np.sign(obj - background) not in (0, polarity):
+        if not user_drawing and not around:
+            # A program's drawing lies around a known contour: read as lying
+            # inside an object of the other polarity, it lies on the ground
+            # where the object was, and nothing of the object is there (a
+            # tracked disk that vanished took, at the known polarity, the
+            # level of a neighbour that had moved beside where it was).
+            return RegionModel(int(polarity), float(background), float(background), True, floor,
+                               user_drawing=False)
         # The user knows better: take the levels in the order they say.
         obj, background = (max(obj, background), min(obj, background)) if polarity > 0 else \
             (min(obj, background), max(obj, background))
@@ -470,13 +478,13 @@ def _on_even_ground(intensity, drawing, along, on_line, centre, outside, floor) 
     """
     if _scatter(along) > floor or abs(on_line - centre) < 2 * floor or (on_line - centre) * (outside - on_line) <= 0:
         return False
-    ring = _ring(intensity, drawing, *_OUTER_RINGS[0])
+    ring = intensity[_ring_mask(drawing, intensity.shape, *_OUTER_RINGS[0])]
     return ring.size > 0 and abs(_median(ring) - on_line) <= floor
 
 
-def _ring(intensity, drawing, lo: float, hi: float) -> np.ndarray:
-    """The pixels of ``intensity`` between ``drawing`` scaled by ``lo`` and by ``hi``."""
-    return intensity[_fill(_scaled(drawing, hi), intensity.shape) & ~_fill(_scaled(drawing, lo), intensity.shape)]
+def _ring_mask(drawing, shape, lo: float, hi: float) -> np.ndarray:
+    """The pixels between ``drawing`` scaled by ``lo`` and by ``hi`` about its centroid."""
+    return _fill(_scaled(drawing, hi), shape) & ~_fill(_scaled(drawing, lo), shape)
 
 
 def _outside_level(intensity, drawing, centre, on_line, along, within, floor) -> float:
@@ -492,28 +500,36 @@ def _outside_level(intensity, drawing, centre, on_line, along, within, floor) ->
     the drawing's, around a line that does not either and differs from the
     centre less (a small drawing inside a textured object): then until one
     differs from the centre twice as much, for the near rings held the
-    object's texture, not its background. Unless the near rings within the
-    one that differs most are even (see :func:`_step_beyond_even_rings`).
+    object's texture, not its background. Unless the rings within the one
+    that differs are even: that ring straddles the object's border, and the
+    background is read on its pixels beyond the centre's level (see
+    :func:`_step_beyond_even_rings` and :func:`_level_off_the_ramp`).
     """
     textured = abs(on_line - centre) <= max(floor, _TEXTURE_SPREADS * _scatter(along))
     outside, best, best_ring, through = np.nan, -1.0, None, False
-    near_rings, best_k = [], -1
+    rings_within, best_k = [], -1
     for k, (lo, hi) in enumerate(_OUTER_RINGS + _FAR_RINGS):
         far = k >= len(_OUTER_RINGS)
         if k == len(_OUTER_RINGS):
             near_best = best
-            if (step := _step_beyond_even_rings(drawing, near_rings, best_k, centre, outside, floor)) is not None:
+            if (step := _step_beyond_even_rings(drawing, rings_within, best_k, centre, outside, floor)) is not None:
                 return step
             through = (textured and floor < near_best and abs(on_line - centre) <= near_best
                        and near_best <= _TEXTURE_SPREADS * max(_scatter(best_ring), _scatter(within)))
         if far and best > (near_best if through else floor):
             break
-        ring = _ring(intensity, drawing, lo, hi)
+        ring = intensity[_ring_mask(drawing, intensity.shape, lo, hi)]
         # Far out the background may be a small part of a ring that still
         # lies mostly on the object: the ring's class furthest from the centre.
         level = _surrounding_class(intensity, drawing, ring, centre, floor) if far else _median(ring)
-        if not far:
-            near_rings.append(ring)
+        # The first far ring that differs, beyond even rings, straddles the
+        # border too: its class furthest from the centre may be a further
+        # level (a small click in the phantom's large ellipse took the black
+        # beyond its grey ground for the background and ended on the skull).
+        if far and not through and abs(level - centre) > floor and _scatter(np.concatenate(rings_within)) <= floor \
+                and (beyond := _level_off_the_ramp(intensity, drawing, lo, hi, centre, level, floor)) is not None:
+            return beyond
+        rings_within.append(ring)
         # Read through near rings that differ from the centre one way, a
         # level the other way is the background only if it surrounds the
         # object (a click on a dark spot of a bright nucleus, whose dark
@@ -550,6 +566,16 @@ def _step_beyond_even_rings(drawing, rings, best_k, centre, outside, floor) -> f
         return None  # a ring this thin holds mostly the edge's ramp (a click on a 6-px rod: 0.96 -> 0.94)
     beyond = rings[best_k][(rings[best_k] - centre) * np.sign(outside - centre) > floor]
     return _median(beyond) if beyond.size else outside
+
+
+def _level_off_the_ramp(intensity, drawing, lo, hi, centre, towards, floor) -> float | None:
+    """The median of the pixels of the ring between ``drawing`` scaled by
+    ``lo`` and by ``hi`` that lie more than ``floor`` from ``centre`` toward
+    ``towards`` and at least ``RAMP_WIDTH`` px from any that do not: off the
+    edge's ramp. None if there are none."""
+    beyond = _ring_mask(drawing, intensity.shape, lo, hi) & ((intensity - centre) * np.sign(towards - centre) > floor)
+    off_ramp = cv2.erode(beyond.view(np.uint8), np.ones((2 * RAMP_WIDTH + 1,) * 2, np.uint8)).view(bool)
+    return _median(intensity[off_ramp]) if off_ramp.any() else None
 
 
 def _surrounding_class(intensity, drawing, ring, centre, floor) -> float:
