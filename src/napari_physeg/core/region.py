@@ -273,7 +273,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     RegionModel
     """
     shape = intensity.shape
-    size = float(np.sqrt(max(abs(np.ptp(drawing[:, 0]) * np.ptp(drawing[:, 1])), 1.0)))
+    size = _drawing_size(drawing)
     half_width = int(np.clip(round(0.05 * size), 1, 3))
     line = _line_band(drawing, shape, half_width)
     if not line.any():  # drawn around the whole image: its sides are the line
@@ -482,6 +482,16 @@ def _on_even_ground(intensity, drawing, along, on_line, centre, outside, floor) 
     return ring.size > 0 and abs(_median(ring) - on_line) <= floor
 
 
+def _drawing_size(drawing: np.ndarray) -> float:
+    """The side of the square of the drawing's bounding box's area (at least 1 px)."""
+    return float(np.sqrt(max(np.ptp(drawing[:, 0]) * np.ptp(drawing[:, 1]), 1.0)))
+
+
+def _even(rings: list, floor: float) -> bool:
+    """Whether the pixels of ``rings`` together scatter within ``floor``: no texture."""
+    return _scatter(np.concatenate(rings)) <= floor
+
+
 def _ring_mask(drawing, shape, lo: float, hi: float) -> np.ndarray:
     """The pixels between ``drawing`` scaled by ``lo`` and by ``hi`` about its centroid."""
     return _fill(_scaled(drawing, hi), shape) & ~_fill(_scaled(drawing, lo), shape)
@@ -526,7 +536,7 @@ def _outside_level(intensity, drawing, centre, on_line, along, within, floor) ->
         # border too: its class furthest from the centre may be a further
         # level (a small click in the phantom's large ellipse took the black
         # beyond its grey ground for the background and ended on the skull).
-        if far and not through and abs(level - centre) > floor and _scatter(np.concatenate(rings_within)) <= floor \
+        if far and not through and abs(level - centre) > floor and _even(rings_within, floor) \
                 and (beyond := _level_off_the_ramp(intensity, drawing, lo, hi, centre, level, floor)) is not None:
             return beyond
         rings_within.append(ring)
@@ -559,10 +569,10 @@ def _step_beyond_even_rings(drawing, rings, best_k, centre, outside, floor) -> f
     phantom, on a grey ground within the bright skull, took the black beyond
     the ground for the background and ended on the skull (IoU 0.08).
     """
-    if best_k < 1 or abs(outside - centre) <= floor or _scatter(np.concatenate(rings[:best_k])) > floor:
+    if best_k < 1 or abs(outside - centre) <= floor or not _even(rings[:best_k], floor):
         return None
     lo, hi = _OUTER_RINGS[best_k]
-    if (hi - lo) * 0.5 * np.sqrt(np.ptp(drawing[:, 0]) * np.ptp(drawing[:, 1])) < 3 * RAMP_WIDTH:
+    if (hi - lo) * 0.5 * _drawing_size(drawing) < 3 * RAMP_WIDTH:
         return None  # a ring this thin holds mostly the edge's ramp (a click on a 6-px rod: 0.96 -> 0.94)
     beyond = rings[best_k][(rings[best_k] - centre) * np.sign(outside - centre) > floor]
     return _median(beyond) if beyond.size else outside
@@ -1063,7 +1073,7 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
     # Everything happens near the drawing: within its reach (below) and one
     # drawing size beyond, where neighbours that could take the object lie.
     extent = _scaled(drawing, 1.0 if model.drawn_around else _INSIDE_LIMIT)
-    size = float(np.sqrt(max(np.ptp(drawing[:, 0]) * np.ptp(drawing[:, 1]), 1.0)))
+    size = _drawing_size(drawing)
     box = bounding_window(extent, signed.shape, size + 10)
     lo = np.array([box[0].start, box[1].start])
     hi = np.array([box[0].stop, box[1].stop])
