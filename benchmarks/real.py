@@ -323,6 +323,33 @@ def border_offsets(rows, groups):
             + ", ".join(f"{g} {np.median(per_group[g]):+.1f}" for g in groups if g in per_group)]
 
 
+def drawing_agreement(rows, groups):
+    """Lines: how much the result depends on how the object was drawn, with no truth at all: per
+    object, the least IoU between the regions its drawings ended on (all pairs), as the mean over
+    a group's objects and the share of objects below LOW; for ours and MCV (the one anchor whose
+    regions are kept). A border the image decides is the same from any fair drawing of it."""
+    per = {m: {} for m in ("ours", "MCV")}
+    by_object = {}
+    for r in rows:
+        by_object.setdefault((r["group"], r["obj"].name), []).append(r)
+    for (group, _), same in by_object.items():
+        if len(same) < 2:
+            continue
+        for m in per:
+            masks = [_full_mask(r, m) for r in same]
+            least = min(iou(a, b) for i, a in enumerate(masks) for b in masks[i + 1:])
+            per[m].setdefault(group, []).append(least)
+    lines = ["- agreement between the drawings of one object (no truth: the least IoU between the "
+             "regions its drawings ended on; mean over the objects, and the share of objects below "
+             f"{LOW}), ours / MCV:"]
+    for g in [*groups, "all"]:
+        vals = {m: np.array([v for k, vs in per[m].items() if g in (k, "all") for v in vs]) for m in per}
+        if len(vals["ours"]):
+            lines.append(f"  - {g}: " + " / ".join(f"{vals[m].mean():.3f} ({(vals[m] < LOW).mean():.0%})"
+                                                 for m in per))
+    return lines
+
+
 #: ramp_positions() reads each outline point's edge profile this far either side (px).
 RAMP_REACH = 5.0
 
@@ -719,6 +746,8 @@ def main(argv=None):
     for s in border_offsets(rows, args.groups):
         out(s)
     for s in ramp_positions(rows, args.groups):
+        out(s)
+    for s in drawing_agreement(rows, args.groups):
         out(s)
     out()
     for s in traced_outlines(rows, args.groups):

@@ -75,6 +75,25 @@ def test_an_outline_lies_at_its_height_on_a_linear_ramp(real, radius, height):
     assert real._ramp_height(ndi.gaussian_filter(_ramp_disc(), 1.0), _circle(radius)) == pytest.approx(height, abs=0.05)
 
 
+def test_drawings_that_end_on_one_region_agree_and_one_that_strays_does_not(real):
+    from types import SimpleNamespace
+
+    from skimage.measure import find_contours
+
+    def row(obj, radius, centre=(40.0, 40.0)):
+        contour = find_contours(_disc(radius, centre).astype(float), 0.5)[0]
+        return dict(group="g", obj=obj, contour=contour, mcv_mask=None, box=None)
+
+    same = SimpleNamespace(name="a", image=np.zeros((80, 80)))
+    strays = SimpleNamespace(name="b", image=np.zeros((80, 80)))
+    rows = [row(same, 10), row(same, 10), row(strays, 10), row(strays, 10, (40.0, 50.0))]
+    lines = real.drawing_agreement(rows, ["g"])
+    # Object a: 1.0; object b: two discs of radius 10, 10 px apart, IoU about 0.23.
+    mean = float(lines[1].split(": ")[1].split(" ")[0])
+    assert mean == pytest.approx((1.0 + 0.23) / 2, abs=0.03)
+    assert "(50%)" in lines[1]
+
+
 def test_a_degenerate_outline_has_no_height(real):
     assert np.isnan(real._ramp_height(_ramp_disc(), _circle(20.0, n=4)))
 
