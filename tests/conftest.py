@@ -10,6 +10,7 @@ import importlib.util
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import settings
 
@@ -37,3 +38,19 @@ def dsb(stardist_images):
     """The 2D image and its labels."""
     tifffile = pytest.importorskip("tifffile")
     return tifffile.imread(stardist_images / "img2d.tif"), tifffile.imread(stardist_images / "mask2d.tif")
+
+
+@pytest.fixture(scope="session")
+def u2os():
+    """The widefield image of U2OS nuclei shipped in the mahotas wheel (``make setup`` installs
+    it with ``--no-deps``; only the file is read), shrunk twice by area averaging as the
+    ``u2os`` group of ``benchmarks/real.py`` has it: dim nuclei in broad halos."""
+    spec = importlib.util.find_spec("mahotas")
+    if spec is None:
+        pytest.skip("mahotas' wheel is not installed (make setup installs it)")
+    import cv2
+    from skimage import io
+
+    raw = io.imread(Path(list(spec.submodule_search_locations)[0]) / "demos" / "data" / "nuclear.png")
+    raw = raw[..., 0].astype(np.float32)
+    return cv2.resize(raw, (raw.shape[1] // 2, raw.shape[0] // 2), interpolation=cv2.INTER_AREA).astype(np.float64)

@@ -323,6 +323,10 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         obj, background = centre, beyond
     elif around:
         obj, background = centre, on_line
+        # A lasso drawn close about a blurred object: its line lies on the
+        # tail of the edge's ramp, and the ground beyond it.
+        if (foot := _ramp_foot(intensity, drawing, size, centre, on_line, floor)) is not None:
+            background = foot
         # A drawing about a thin object (a rod, a circle about its length):
         # its middle shows the background too, and its median is a mix of
         # the two levels (see GROUND_SHARE).
@@ -415,12 +419,9 @@ def traced_border_level(intensity: np.ndarray, drawing: np.ndarray, size: float,
     if not np.isfinite(contrast) or contrast <= floor:
         return None
     side = _side_width(size)
-    nodes = resample(positively_oriented(drawing), spacing=1.0)
-    if len(nodes) < 8:
+    samples = _normal_profiles(intensity, drawing, side, side)
+    if samples is None:
         return None
-    offsets = np.arange(-side, side + 1)[None, :, None] * outward_normals(nodes)[:, None, :]
-    points = nodes[:, None, :] + offsets
-    samples = ndi.map_coordinates(intensity, [points[..., 0], points[..., 1]], order=1, mode="nearest")
     sign = np.sign(centre - outside)  # toward the object
     inner, on, outer = sign * samples[:, :side].mean(1), sign * samples[:, side], sign * samples[:, side + 1:].mean(1)
     level = float(np.median(on))
@@ -430,6 +431,19 @@ def traced_border_level(intensity: np.ndarray, drawing: np.ndarray, size: float,
     traced = (on_edge.mean() >= share and on_edge.sum() >= least_length  # the nodes are 1 px apart
               and TRACED_POSITION[0] <= position <= TRACED_POSITION[1])
     return sign * level if traced else None
+
+
+def _normal_profiles(intensity, drawing, inward: int, outward: int) -> np.ndarray | None:
+    """The intensity along the outward normal of each node of ``drawing``
+    (resampled 1 px apart), from ``inward`` px within its line to ``outward``
+    px beyond it, 1 px apart: shape (nodes, inward + outward + 1); None for a
+    drawing of fewer than 8 such nodes."""
+    nodes = resample(positively_oriented(drawing), spacing=1.0)
+    if len(nodes) < 8:
+        return None
+    offsets = np.arange(-inward, outward + 1)[None, :, None] * outward_normals(nodes)[:, None, :]
+    points = nodes[:, None, :] + offsets
+    return ndi.map_coordinates(intensity, [points[..., 0], points[..., 1]], order=1, mode="nearest")
 
 
 #: A drawing that would be read as lying inside its object is traced on the
@@ -935,6 +949,47 @@ def _side_width(size: float) -> int:
     """How far either side of a drawn line its sides are read: a tenth of
     the drawing's ``size``, 1 to _SIDE_WIDTH px."""
     return int(np.clip(round(_SIDE_FRACTION * size), 1, _SIDE_WIDTH))
+
+
+#: A line drawn close around an object lies on the tail of its edge's ramp,
+#: not on its ground, where the intensity still falls from inside the line
+#: to the line and on beyond it: at this share of its nodes or more, the
+#: object's background is read at the ramp's foot (see :func:`_ramp_foot`).
+RAMP_TAIL_SHARE = 0.5
+#: How far beyond the line the foot is looked for, in side widths (see
+#: :func:`_side_width`): a blurred edge's ramp is a few px wide.
+RAMP_FOOT_REACH = 2
+#: The nodes whose profiles are averaged, along the line, against the noise.
+RAMP_PROFILE_NODES = 5
+
+
+def _ramp_foot(intensity, drawing, size, centre, on_line, floor) -> float | None:
+    """The background's level at the foot of the object's edge ramp, if the
+    drawn line lies on the ramp's tail (see :data:`RAMP_TAIL_SHARE`), else
+    None (``size``: the drawing's; ``centre``, ``on_line``: the levels of its
+    middle and of its line; ``floor``: the least contrast).
+
+    Read on the line itself, the background of a lasso drawn tight about a
+    blurred object is the halo's, part way up the ramp: the object's border,
+    halfway between the levels, then lay 2-3 px inside the border that a
+    looser circle about the same object found. Each node reads its own foot,
+    the lowest level within reach beyond it (toward the object's polarity),
+    where its profile falls on both sides of the line; the others keep the
+    line's level (on open ground, or rising toward a neighbour, whose glow is
+    not the object's ramp).
+    """
+    side = _side_width(size)
+    profile = _normal_profiles(intensity, drawing, side, RAMP_FOOT_REACH * side)
+    if profile is None:
+        return None
+    towards = np.sign(centre - on_line)
+    profile = ndi.uniform_filter1d(towards * profile, RAMP_PROFILE_NODES, axis=0, mode="wrap")
+    inner, on, foot = profile[:, :side].mean(1), profile[:, side], profile[:, side + 1:].min(1)
+    tail = (inner - on >= 0.5 * floor) & (on - foot >= 0.5 * floor)
+    if tail.mean() < RAMP_TAIL_SHARE:
+        return None
+    level = towards * float(np.median(np.where(tail, foot, on)))
+    return level if (on_line - level) * towards > 0 else None
 
 
 def _either_side(intensity, drawn, line, size) -> tuple[float, float]:
