@@ -325,8 +325,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         obj, background = centre, on_line
         # A lasso drawn close about a blurred object: its line lies on the
         # tail of the edge's ramp, and the ground beyond it.
-        if (foot := _ramp_foot(intensity, drawing, size, centre, on_line, floor)) is not None:
-            background = foot
+        foot = _ramp_foot(intensity, drawing, size, centre, on_line, floor)
         # A drawing about a thin object (a rod, a circle about its length):
         # its middle shows the background too, and its median is a mix of
         # the two levels (see GROUND_SHARE).
@@ -342,6 +341,8 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
             if abs(centre - on_line) < 0.2 * abs(other - on_line) and \
                     _centred(intensity, middle, drawn & ~middle, on_line, other):
                 obj = other
+        if foot is not None:
+            background = _foot_that_holds(intensity, drawing, obj, on_line, foot, floor, user_drawing)
     elif beyond is not None:
         # Traced on the object's edge (a label's outline, an earlier result):
         # the line lies on the edge's ramp, at neither level. The object is
@@ -990,6 +991,51 @@ def _ramp_foot(intensity, drawing, size, centre, on_line, floor) -> float | None
         return None
     level = towards * float(np.median(np.where(tail, foot, on)))
     return level if (on_line - level) * towards > 0 else None
+
+
+#: A background read lower than the line's (see _ramp_foot) lowers the
+#: object's border level: where a touching neighbour's glow meets the
+#: object's, the two then join in a broader band, and the split at necks
+#: may part them elsewhere (a dim nucleus beside a bright one kept a third of
+#: itself, and its track was lost on the next frame). A lower level can only
+#: grow the object: it holds if the object's region at that level keeps at
+#: least this share of its region at the line's level.
+NESTED_SHARE = 0.9
+
+
+def _foot_that_holds(intensity, drawing, obj, on_line, foot, floor, user_drawing) -> float:
+    """The background level: ``foot``, or halfway to ``on_line``, whichever
+    first keeps the object's region at ``on_line`` (see NESTED_SHARE), else
+    ``on_line`` (``obj``: the object's level; ``floor``: the least contrast)."""
+    # object_region reads a window of about three drawing sizes around it.
+    box = bounding_window(drawing, intensity.shape, 1.5 * _drawing_size(drawing) + 10)
+    intensity, drawing = intensity[box], drawing - np.array([box[0].start, box[1].start])
+
+    def region(background):
+        model = RegionModel(1 if obj > background else -1, obj, background, True, floor, user_drawing=user_drawing)
+        found = object_region(objectness(intensity, model), drawing, model,
+                              stronger=level_beyond_object(intensity, model))
+        return np.zeros(intensity.shape, bool) if found is None else found
+
+    if not _reaches_beyond(intensity, drawing, 0.5 * (obj + foot), np.sign(obj - foot)):
+        return foot  # nothing there to join
+    at_line = region(on_line)
+    for level in (foot, 0.5 * (foot + on_line)):
+        if np.count_nonzero(region(level) & at_line) >= NESTED_SHARE * np.count_nonzero(at_line):
+            return level
+    return on_line
+
+
+def _reaches_beyond(intensity, drawing, border_level, polarity) -> bool:
+    """Whether the pixels beyond ``border_level`` (toward ``polarity``) that
+    the drawing's middle marks reach beyond the drawing and a hasty hand's
+    margin (see hasty_margin)."""
+    drawn = _fill(drawing, intensity.shape)
+    like = (intensity - border_level) * polarity > 0
+    pieces, _ = _label(like)
+    marked = np.unique(pieces[_middle(drawing, intensity.shape) & like])
+    reach = cv2.dilate(drawn.view(np.uint8), _disk(hasty_margin(drawn.sum()))).view(bool)
+    return bool(np.isin(pieces[~reach], marked[marked > 0]).any())
 
 
 def _either_side(intensity, drawn, line, size) -> tuple[float, float]:
