@@ -685,6 +685,25 @@ def test_a_result_started_from_again_stays_where_it_is(dsb):
     assert (a & b).sum() / (a | b).sum() > 0.8
 
 
+@pytest.mark.parametrize("scale", [1.2, 1.5])
+def test_a_saturated_nucleus_started_from_again_does_not_take_its_dim_neighbour(dsb, scale):
+    """A small saturated nucleus (label 130) touching a dim one: its result
+    lies near the top of its steep edge, and started from again, the line
+    was read as inside an object at the line's level that the background
+    encloses (the saturated nucleus and the dim one together), and the
+    contour spread over both (IoU 0.11 with the first result). Just beyond
+    the line lies the background, not more of an object: a line on an edge
+    is not inside one (region._runs_on_beyond)."""
+    image, labels = dsb
+    nucleus = labels == 130
+    centre, radius = np.argwhere(nucleus).mean(0), np.sqrt(nucleus.sum() / np.pi)
+    first, iou = segmented(image, nucleus, circle(centre, scale * radius))
+    again, _ = segmented(image, nucleus, first.contour)
+    a, b = polygon2mask(image.shape, first.contour), polygon2mask(image.shape, again.contour)
+    assert iou > 0.8
+    assert (a & b).sum() / (a | b).sum() > 0.85
+
+
 @pytest.mark.parametrize("label", [60, 9])
 def test_an_outline_traced_among_touching_neighbours_keeps_its_nucleus(dsb, label):
     """Started from its label's outline, a nucleus of the Data Science Bowl

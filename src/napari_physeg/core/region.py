@@ -689,7 +689,11 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, tra
     cover the whole image nothing is concluded. A line read as ``traced`` on
     an edge must lie on that body for at least 0.9 of its length: one traced
     on an object's blurred edge lies partly on its ramp, below the midpoint;
-    one around a spot of texture, on the object.
+    one around a spot of texture, on the object. And the body must run on
+    beyond such a line (see :func:`_runs_on_beyond`): a result on a saturated
+    nucleus' steep edge lies near its top, on the body, but just beyond it
+    lies the background; read as inside the saturated nucleus and its dim
+    neighbour together, the result spread over both when started from again.
     """
     shape = intensity.shape
     least = _ENCLOSING_CONTRAST * max(abs(texture - on_line), floor)
@@ -703,10 +707,19 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, tra
     body, on_body = _marked_piece(intensity, on_line, far, line, extent)
     if body is None or (traced and on_body < 0.9 * line.sum()):
         return None
+    if traced and not _runs_on_beyond(body, line, _fill(drawing, shape)):
+        return None
     enclosed = _enclosed(body, extent)
     if enclosed is False:
         enclosed = _enclosed_apart(body, line, extent)
     return far if enclosed else None
+
+
+def _runs_on_beyond(body: np.ndarray, line: np.ndarray, drawn: np.ndarray) -> bool:
+    """Whether ``body`` runs on beyond the drawn line: it holds at least half
+    the pixels within 2 px outside ``line`` (``drawn``: the pixels it encloses)."""
+    band = cv2.dilate(line.view(np.uint8), _disk(2)).view(bool) & ~line & ~drawn
+    return not band.any() or np.count_nonzero(body & band) >= 0.5 * np.count_nonzero(band)
 
 
 def _enclosed_apart(body: np.ndarray, line: np.ndarray, extent: np.ndarray) -> bool:
