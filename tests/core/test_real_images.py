@@ -734,19 +734,16 @@ def test_a_click_on_a_textured_nucleus_is_not_read_as_traced(stack):
     assert iou > 0.9, iou
 
 
-def test_a_crowded_nucleus_on_identical_frames_is_not_lost(dsb):
-    """track() on two identical frames of the crowded Data Science Bowl
-    field, every nucleus drawn as its label's outline 3 px out. A tracked
-    frame's drawing lies a margin around the previous contour: read as
-    traced on the border (on a saturated nucleus' wide ramp, 3 px out is
-    mid-ramp), the contour grew to it and the nucleus (label 156) was lost."""
+def crowd_drawn_around(dsb):
+    """The middle of the Data Science Bowl crowd, the ids of its labels of
+    150 px or more that do not touch the window's side, and each drawn as its
+    outline 3 px out (as tracking_warped.py draws them)."""
     from skimage import measure
 
-    from napari_physeg.core import LOST, track
     from napari_physeg.core.contour import outward_normals, remove_loops, resample
 
     image, labels = dsb
-    window = (slice(64, 448), slice(64, 448))  # the middle of the crowd
+    window = (slice(64, 448), slice(64, 448))
     image, labels = image[window].astype(float), labels[window]
     sides = np.unique(np.r_[labels[0], labels[-1], labels[:, 0], labels[:, -1]])
     ids = [i for i in np.flatnonzero(np.bincount(labels.ravel()) >= 150) if i and i not in sides]
@@ -754,6 +751,18 @@ def test_a_crowded_nucleus_on_identical_frames_is_not_lost(dsb):
     for i in ids:
         outline = resample(max(measure.find_contours((labels == i).astype(float), 0.5), key=len)[:-1], spacing=2.0)
         inits.append(remove_loops(outline + 3.0 * outward_normals(outline)))
+    return image, labels, ids, inits
+
+
+def test_a_crowded_nucleus_on_identical_frames_is_not_lost(dsb):
+    """track() on two identical frames of the crowded Data Science Bowl
+    field, every nucleus drawn as its label's outline 3 px out. A tracked
+    frame's drawing lies a margin around the previous contour: read as
+    traced on the border (on a saturated nucleus' wide ramp, 3 px out is
+    mid-ramp), the contour grew to it and the nucleus (label 156) was lost."""
+    from napari_physeg.core import LOST, track
+
+    image, labels, ids, inits = crowd_drawn_around(dsb)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         res = track(np.stack([image, image]), inits)
@@ -771,21 +780,10 @@ def test_a_dim_nucleus_beside_a_bright_one_keeps_itself_when_its_ground_is_read_
     in a broad band, the split at necks left the dim one a third of itself
     (IoU 0.22 on seed 1), and its track was lost on the next frame. A lower
     level may only grow the object (region.NESTED_SHARE)."""
-    from skimage import measure
-
     from napari_physeg.core import track
-    from napari_physeg.core.contour import outward_normals, remove_loops, resample
 
-    image, labels = dsb
-    window = (slice(64, 448), slice(64, 448))
-    image, labels = image[window].astype(float), labels[window]
+    image, labels, ids, inits = crowd_drawn_around(dsb)
     noisy = image + np.random.default_rng(seed).normal(0.0, 0.03 * np.percentile(image, 99.9), image.shape)
-    sides = np.unique(np.r_[labels[0], labels[-1], labels[:, 0], labels[:, -1]])
-    ids = [i for i in np.flatnonzero(np.bincount(labels.ravel()) >= 150) if i and i not in sides]
-    inits = []
-    for i in ids:
-        outline = resample(max(measure.find_contours((labels == i).astype(float), 0.5), key=len)[:-1], spacing=2.0)
-        inits.append(remove_loops(outline + 3.0 * outward_normals(outline)))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         res = track(noisy[None], inits)
