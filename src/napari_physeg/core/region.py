@@ -1047,7 +1047,7 @@ def _reaches_beyond(intensity, drawing, border_level, polarity) -> bool:
     like = (intensity - border_level) * polarity > 0
     pieces, _ = _label(like)
     marked = np.unique(pieces[_middle(drawing, intensity.shape) & like])
-    reach = cv2.dilate(drawn.view(np.uint8), _disk(hasty_margin(drawn.sum()))).view(bool)
+    reach = _within_hasty_margin(drawn)
     return bool(np.isin(pieces[~reach], marked[marked > 0]).any())
 
 
@@ -1218,6 +1218,12 @@ def hasty_margin(drawn_area: float) -> int:
     return int(np.clip(round(HASTY_MARGIN * radius), 2, MAX_HASTY_MARGIN))
 
 
+def _within_hasty_margin(drawn: np.ndarray) -> np.ndarray:
+    """The pixels a drawing around the object encloses (``drawn``) and those
+    within its hasty margin beyond it (see hasty_margin)."""
+    return cv2.dilate(drawn.view(np.uint8), _disk(hasty_margin(drawn.sum()))).view(bool)
+
+
 def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
                         image_sides, stronger=None) -> np.ndarray | None:
     """:func:`object_region` on a crop around the drawing."""
@@ -1228,8 +1234,7 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     # times the drawing when drawn inside it (its reach). Growth past that
     # is a leak.
     if model.drawn_around:
-        margin = hasty_margin(drawn.sum())
-        reach = limit = cv2.dilate(drawn.view(np.uint8), _disk(margin)).view(bool)
+        reach = limit = _within_hasty_margin(drawn)
         marked = _middle(drawing, shape)
     else:
         reach = _fill(_scaled(drawing, _INSIDE_REACH), shape)
