@@ -245,23 +245,55 @@ def _signed_distance_to(points, contour, mask):
 
 
 def synthetic_scores_ours(movie, tr):
-    nv, drift = [], []
+    nv = []
     for t in range(1, len(movie.frames)):
         c = tr.contours[0][t]
         nearest = np.argmin(((c[:, None] - movie.outlines[t][None]) ** 2).sum(-1), axis=1)
         nv.append(np.abs(tr.normal_velocity[0][t] - movie.normal_velocity[t][nearest]))
-    first = tr.contours[0][0]
+    nv = np.concatenate(nv)
+    drift = _drift(movie, tr.contours[0], tr.origin[0])
+    return dict(nv_median=np.median(nv), nv_p90=np.percentile(nv, 90), drift_median=np.median(drift),
+                drift_max=np.max(drift))
+
+
+def _drift(movie, contours, origins) -> np.ndarray:
+    """How far (node spacings) every 3rd node of the first contour ends from its material point on
+    the last frame, followed through the correspondences (``origins[t]``: each node of ``contours[t]``'s
+    origin on ``contours[t - 1]``)."""
+    first = contours[0]
     spacing = np.mean(np.hypot(*(np.roll(first, -1, axis=0) - first).T))
+    drift = []
     for i in range(0, len(first), 3):
         point = first[i]
         material = np.argmin(((movie.outlines[0] - point) ** 2).sum(1))
-        for t in range(1, len(movie.frames)):
-            j = np.argmin(((tr.origin[0][t] - point) ** 2).sum(1))
-            point = tr.contours[0][t][j] + (point - tr.origin[0][t][j])
+        for t in range(1, len(contours)):
+            j = np.argmin(((origins[t] - point) ** 2).sum(1))
+            point = contours[t][j] + (point - origins[t][j])
         drift.append(np.hypot(*(point - movie.outlines[-1][material])) / spacing)
-    nv = np.concatenate(nv)
-    return dict(nv_median=np.median(nv), nv_p90=np.percentile(nv, 90), drift_median=np.median(drift),
-                drift_max=np.max(drift))
+    return np.array(drift)
+
+
+def drift_bound(movie, n_nodes: int) -> str:
+    """The drift of the correspondences on the synthetic cell's true outlines (as many nodes as ours),
+    which no segmentation error enters: from their outlines alone (``node_origins``, as track() does),
+    and from the rigid motion their material points make (known to the synthetic movie only) with
+    each node's origin the nearest point of the outline before."""
+    from napari_physeg.core.contour import closest_on_polyline, nearest_node
+    from napari_physeg.core.tracking import node_origins
+
+    outlines = [o[:: max(len(o) // n_nodes, 1)] for o in movie.outlines]
+    from_outlines, from_material = [None], [None]
+    for before, now in zip(outlines[:-1], outlines[1:]):
+        from_outlines.append(node_origins(now, before))
+        # Kabsch: the rotation and shift that best carry the material points of now back onto before.
+        u, _, vt = np.linalg.svd((now - now.mean(0)).T @ (before - before.mean(0)))
+        rotation = (u @ np.diag([1.0, np.sign(np.linalg.det(u @ vt))]) @ vt).T
+        back = (now - now.mean(0)) @ rotation.T + before.mean(0)
+        from_material.append(closest_on_polyline(back, before, nearest_node(back, before), steps=(-2, -1, 0, 1))[0])
+    a, b = _drift(movie, outlines, from_outlines), _drift(movie, outlines, from_material)
+    return (f"- drift on the synthetic cell's true outlines ({len(outlines[0])} nodes), median / max: from the "
+            f"outlines alone (as track() does) {np.median(a):.2f} / {np.max(a):.2f}; with the rigid motion of "
+            f"their material points (which no outline shows) and nearest points {np.median(b):.2f} / {np.max(b):.2f}")
 
 
 def synthetic_scores_masks(movie, masks):
@@ -511,6 +543,7 @@ def main(argv=None):
     out(f"- ours on the CTC movie: {statuses.count(TRACKED)} object-frames tracked, "
         f"{statuses.count('lost')} lost, {statuses.count('left the field of view')} left the field of view; "
         f"segmentation {tr.timings['segmentation']:.1f} s, correspondences {tr.timings['correspondence']:.1f} s")
+    out(drift_bound(movie, len(syn.contours[0][0])))
     out()
     other_drawings(frames, truth, ids, inits, out)
     out()

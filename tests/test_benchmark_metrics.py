@@ -23,7 +23,7 @@ def monkeypatch_module():
     mp = pytest.MonkeyPatch()
     yield mp
     mp.undo()
-    for name in ("real", "real_data", "segmentation", "_common", "noise", "scale", "membranes", "fields"):
+    for name in ("real", "real_data", "segmentation", "_common", "noise", "scale", "membranes", "fields", "tracking"):
         sys.modules.pop(name, None)
 
 
@@ -280,3 +280,25 @@ def test_the_scale_probe_leaves_an_object_alone_as_it_says(real, monkeypatch_mod
     assert np.array_equal(out[own], image[own])
     assert abs(np.median(out[other]) - 0.1) < 0.01 and abs(out[other].std() - 0.02) < 0.01
     assert np.array_equal(out[:20, 100:], image[:20, 100:])
+
+
+def test_the_tracking_drift_is_nought_through_the_material_points_and_counts_a_slip(real, monkeypatch_module):
+    """``benchmarks/tracking.py``: points followed through correspondences that are the material
+    points' own end on them; correspondences that slip one node a frame carry each point one node
+    spacing further a frame."""
+    import tracking as bench
+
+    from napari_physeg import data
+
+    movie = data.deforming_cell(n_frames=6, shape=(96, 96), n_points=240)
+    outlines = list(movie.outlines[:, ::4])
+    exact = [None] + outlines[:-1]
+    assert bench._drift(movie, outlines, exact).max() < 1e-9
+    # Each node's origin is the material point one node back: a point is carried one node on a frame.
+    slipped = [None] + [np.roll(o, 1, axis=0) for o in outlines[:-1]]
+    first, last = outlines[0], outlines[-1]
+    spacing = np.mean(np.hypot(*(np.roll(first, -1, axis=0) - first).T))
+    followed = np.arange(0, len(first), 3)
+    five_on = np.hypot(*(last[(followed + 5) % len(last)] - last[followed]).T) / spacing
+    np.testing.assert_allclose(bench._drift(movie, outlines, slipped), five_on, rtol=1e-9)
+    assert 3.5 < five_on.min() and five_on.max() < 6.5
