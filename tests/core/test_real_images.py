@@ -845,3 +845,33 @@ def test_a_lasso_drawn_close_about_a_nucleus_ends_where_a_loose_circle_does(u2os
     lasso = max(measure.find_contours(ndi.distance_transform_edt(~found), 3.0), key=len)[:-1]
     tight = polygon2mask(u2os.shape, segment(u2os, lasso).contour)
     assert (tight & found).sum() / (tight | found).sum() > 0.9
+
+
+def test_tracks_do_not_depend_on_the_order_the_drawings_are_listed_in(dsb):
+    """track() on a few frames of the crowded Data Science Bowl field,
+    drifting, every nucleus drawn as its outline 3 px out, the drawings
+    listed one way and the other way round. Where touching nuclei's pixels
+    are contested, the one done first has them: done in the order listed,
+    the warped Data Science Bowl movies lost 173 visible nucleus-frames one
+    way and 119 the other. Each object's contour on each frame is now the
+    same either way."""
+    from scipy import ndimage as ndi
+
+    from napari_physeg.core import track
+
+    image, labels, ids, inits = crowd_drawn_around(dsb)
+    rng = np.random.default_rng(0)
+    noise = 0.02 * np.percentile(image, 99.9)
+    frames = np.stack([ndi.shift(image, (1.5 * t, 0.8 * t), order=1, mode="nearest")
+                       + rng.normal(0.0, noise, image.shape) for t in range(3)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        listed = track(frames, inits)
+        reversed_ = track(frames, inits[::-1])
+    n = len(inits)
+    for k in range(n):
+        for t in range(len(frames)):
+            a, b = listed.contours[k][t], reversed_.contours[n - 1 - k][t]
+            assert (a is None) == (b is None), (ids[k], t)
+            if a is not None:
+                np.testing.assert_array_equal(a, b, err_msg=f"label {ids[k]}, frame {t}")
