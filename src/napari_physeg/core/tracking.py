@@ -946,10 +946,9 @@ def _segmenting_order(run: _Run, t: int, step: int) -> list[int]:
     small one. The order stays that of the start frame: ordered on each frame
     by the contours' areas on the frame before instead, a dim nucleus of a
     clump (label 169) was lost from the fifth of the identical frames of the
-    Data Science Bowl movie. Where one looked for
-    again after a gap went while it was not seen is not known: it must not
-    take part of a neighbour that moved next to where it was before that
-    neighbour is done.
+    Data Science Bowl movie. Where one looked for again after a gap went
+    while it was not seen is not known: it must not take part of a neighbour
+    that moved next to where it was before that neighbour is done.
     """
     drawn = [abs(signed_area(init)) for init in run.inits]
     if t == run.start:
