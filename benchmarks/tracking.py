@@ -278,17 +278,16 @@ def drift_bound(movie, n_nodes: int) -> str:
     which no segmentation error enters: from their outlines alone (``node_origins``, as track() does),
     and from the rigid motion their material points make (known to the synthetic movie only) with
     each node's origin the nearest point of the outline before."""
-    from napari_physeg.core.contour import closest_on_polyline, nearest_node
+    from napari_physeg.core.contour import closest_on_polyline, nearest_node, rotation_between, rotation_matrix
     from napari_physeg.core.tracking import node_origins
 
     outlines = [o[:: max(len(o) // n_nodes, 1)] for o in movie.outlines]
     from_outlines, from_material = [None], [None]
     for before, now in zip(outlines[:-1], outlines[1:]):
         from_outlines.append(node_origins(now, before))
-        # Kabsch: the rotation and shift that best carry the material points of now back onto before.
-        u, _, vt = np.linalg.svd((now - now.mean(0)).T @ (before - before.mean(0)))
-        rotation = (u @ np.diag([1.0, np.sign(np.linalg.det(u @ vt))]) @ vt).T
-        back = (now - now.mean(0)) @ rotation.T + before.mean(0)
+        # The rotation and shift that best carry the material points of now back onto before.
+        turn = rotation_between(now - now.mean(0), before - before.mean(0))
+        back = (now - now.mean(0)) @ rotation_matrix(turn).T + before.mean(0)
         from_material.append(closest_on_polyline(back, before, nearest_node(back, before), steps=(-2, -1, 0, 1))[0])
     a, b = _drift(movie, outlines, from_outlines), _drift(movie, outlines, from_material)
     return (f"- drift on the synthetic cell's true outlines ({len(outlines[0])} nodes), median / max: from the "
