@@ -754,21 +754,32 @@ def crowd_drawn_around(dsb):
     return image, labels, ids, inits
 
 
-def test_a_crowded_nucleus_on_identical_frames_is_not_lost(dsb):
-    """track() on two identical frames of the crowded Data Science Bowl
-    field, every nucleus drawn as its label's outline 3 px out. A tracked
-    frame's drawing lies a margin around the previous contour: read as
-    traced on the border (on a saturated nucleus' wide ramp, 3 px out is
-    mid-ramp), the contour grew to it and the nucleus (label 156) was lost."""
+def test_crowded_nuclei_on_identical_frames_stay_where_they_were(dsb):
+    """track() on four identical frames of the crowded Data Science Bowl
+    field, every nucleus drawn as its label's outline 3 px out: a tracker
+    should give the same contours on each.
+
+    - A tracked frame's drawing lies a margin around the previous contour:
+      read as traced on the border (on a saturated nucleus' wide ramp, 3 px
+      out is mid-ramp), the contour grew to it and the nucleus (label 156)
+      was lost.
+    - Drawn anew around each frame's contour, a drawing let a contour
+      against a neighbour in broad contact take a band of it each frame: 7
+      of the 51 contours ended below an IoU of 0.9 with their first (label
+      60 on its neighbour, 0.05). Moved as the object's looks moved, the
+      drawing stays what it was to the object (tracking._carried)."""
     from napari_physeg.core import LOST, track
 
     image, labels, ids, inits = crowd_drawn_around(dsb)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        res = track(np.stack([image, image]), inits)
-    assert 156 in ids
-    assert res.status[ids.index(156)][1] != LOST
-    assert sum(s[1] == LOST for s in res.status) <= 1
+        res = track(np.stack([image] * 4), inits)
+    assert 156 in ids and LOST not in res.status[ids.index(156)]
+    assert sum(LOST in s for s in res.status) <= 1
+    first = [polygon2mask(image.shape, c[0]) for c in res.contours]
+    changed = [i for i, c, a in zip(ids, res.contours, first)
+               if any(b is None or (a & (m := polygon2mask(image.shape, b))).sum() / (a | m).sum() < 0.9 for b in c[1:])]
+    assert len(changed) <= 2, changed
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3, 4])

@@ -765,3 +765,32 @@ def test_small_spots_of_a_sparse_field_are_followed_on_their_own_edges():
             assert res.status[k][t] == TRACKED
             found = polygon_mask(res.contours[k][t], rows.shape)
             assert (found & truths[t][k]).sum() / (found | truths[t][k]).sum() > 0.85
+
+
+@pytest.mark.parametrize("shift", [(0.0, 0.0), (2.3, -1.6), (-5.5, 4.2)])
+def test_an_objects_own_motion_is_read_off_its_looks_to_a_fraction_of_a_pixel(shift):
+    """_look_shift on a textured blob moved by a known sub-pixel shift, in a
+    crowd of others that stay: its own motion, not theirs, within 0.25 px."""
+    from scipy import ndimage as ndi
+
+    from napari_physeg.core.tracking import _look_shift
+
+    rng = np.random.default_rng(3)
+    rr, cc = np.mgrid[:120, :120]
+    still = sum(np.exp(-((rr - r) ** 2 + (cc - c) ** 2) / 60.0) for r, c in [(25, 30), (30, 95), (95, 25), (90, 90)])
+    blob = np.exp(-((rr - 60) ** 2 + (cc - 60) ** 2) / 80.0) * (1 + 0.3 * ndi.gaussian_filter(rng.random(rr.shape), 2))
+    before, after = still + blob, still + ndi.shift(blob, shift, order=3)
+    found = _look_shift(before, after, _circle((60, 60), 12))
+    np.testing.assert_allclose(found, shift, atol=0.25)
+
+
+def test_an_objects_looks_tell_nothing_when_flat_or_moved_beyond_the_search():
+    from scipy import ndimage as ndi
+
+    from napari_physeg.core.tracking import _look_shift
+
+    rr, cc = np.mgrid[:120, :120]
+    blob = np.exp(-((rr - 60) ** 2 + (cc - 60) ** 2) / 80.0)
+    assert _look_shift(np.zeros((120, 120)), blob, _circle((60, 60), 12)) is None
+    # The search reaches one radius (12 px): a 20-px jump is beyond it.
+    assert _look_shift(blob, ndi.shift(blob, (20, 0), order=1), _circle((60, 60), 12)) is None

@@ -44,6 +44,7 @@ from ._validation import check_contour
 from .contour import (area_centroid, as_contour, bounding_window, closest_on_polyline, nearest_node, outward_normals,
                       perimeter, polygon_mask, positively_oriented, remove_loops, resample, rotation_matrix,
                       signed_area)
+from .background import plane_removed
 from .dynamics import DivergenceError
 from .features import _without_missing
 from .matching import match
@@ -75,6 +76,14 @@ MAX_REDRAWS = 3
 #: ... when at least this share of its nodes lie there (a run of nodes: on
 #: the faster movies, a share of 0.05 to 0.2 followed the same nuclei).
 AT_LIMIT_SHARE = 0.1
+
+#: A contour against the limit of a drawing moved with the object grew
+#: there (see _grew_beyond) when, at GREW_SHARE of its nodes there, the
+#: image beyond lies GREW_HEIGHT of the object's contrast beyond the
+#: midpoint of its levels, and short of it on the frame the drawing was
+#: drawn on.
+GREW_SHARE = 0.25
+GREW_HEIGHT = 0.25
 
 #: An object whose contrast (see _contrast) falls below this fraction of
 #: its best within FADE_WINDOW frames has faded: it is lost. Tracked through
@@ -115,6 +124,12 @@ STAGE_SEARCH = 2.0
 #: The normalised correlation at which an object's patch on the frame
 #: before counts as found again on this one (see _stage_shift).
 STAGE_MATCH = 0.5
+
+#: How far, in its radius (4 to 30 px), an object is looked for by its
+#: appearance on the next frame, and how well its patch must match there
+#: (normalised correlation), for its own motion (see _look_shift).
+LOOK_SEARCH = 1.0
+LOOK_MATCH = 0.7
 
 #: What an object not found on a frame weighs against one found there, in
 #: _give_back's comparison: as much as a contour one radius off its
@@ -349,6 +364,39 @@ def _drawing_around(contour: np.ndarray) -> np.ndarray:
     return _grown(contour, _margin(contour))
 
 
+@dataclass(frozen=True)
+class _Drawing:
+    """A tracked object's drawing: its ``line``, and what the frame it was
+    drawn on looked like about it (its intensity on ``patch``, whose first
+    pixel was at ``corner``), before the line moved by ``offset`` with the
+    object (see _carried)."""
+
+    line: np.ndarray
+    patch: np.ndarray
+    corner: np.ndarray
+    offset: np.ndarray
+
+    @classmethod
+    def on(cls, line: np.ndarray, intensity: np.ndarray) -> _Drawing:
+        """``line`` drawn on a frame of ``intensity`` (see FrameFeatures):
+        its patch reaches past the limit the line sets (see _grew_beyond)."""
+        rows, cols = bounding_window(line, intensity.shape, hasty_margin(abs(signed_area(line))) + 4.0)
+        # A copy: a view would keep the whole frame alive while the drawing is carried.
+        return cls(line, intensity[rows, cols].copy(), np.array([rows.start, cols.start]), np.zeros(2))
+
+    def moved(self, shift: np.ndarray) -> _Drawing:
+        return replace(self, line=self.line + shift, offset=self.offset + shift)
+
+    def looked(self, points: np.ndarray) -> np.ndarray:
+        """The intensity of the frame it was drawn on where ``points`` (on
+        this frame) were before it moved (NaN outside its patch)."""
+        at = np.rint(points - self.offset - self.corner).astype(int)
+        inside = np.all((at >= 0) & (at < self.patch.shape), axis=1)
+        out = np.full(len(points), np.nan)
+        out[inside] = self.patch[at[inside, 0], at[inside, 1]]
+        return out
+
+
 def _depth_inside(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Each of ``points``' distance inside the closed ``polygon`` (px; < 0 outside)."""
     xy = np.ascontiguousarray(polygon[:, ::-1], dtype=np.float32)  # OpenCV's (x, y)
@@ -366,44 +414,105 @@ def _against_the_limit(contour: np.ndarray, drawing: np.ndarray) -> bool:
     return bool(np.mean(-inside >= margin - 1.5) >= AT_LIMIT_SHARE)
 
 
-def _redrawn(segment_here, drawing: np.ndarray, predicted: np.ndarray):
-    """``segment_here(drawing, predicted)``, drawn around again (up to
-    MAX_REDRAWS times) while the contour rests against its drawing's limit:
-    a tracked frame's drawing is a guess, and an object that moved further
-    than predicted reaches beyond it. The result and the last drawing."""
-    res = segment_here(drawing, predicted)
+def _redrawn(segment_here, drawing: _Drawing, predicted: np.ndarray, intensity: np.ndarray, by_looks: bool = False):
+    """``segment_here(drawing.line, predicted)``, drawn around again (up to
+    MAX_REDRAWS times, on the frame of ``intensity``) while the contour
+    rests against its drawing's limit: a tracked frame's drawing is a guess,
+    and an object that moved further than predicted reaches beyond it. For
+    a drawing moved ``by_looks`` (see _carried), only where the object grew
+    (see _grew_beyond). The result and the last drawing."""
+    res = segment_here(drawing.line, predicted)
     for _ in range(MAX_REDRAWS):
-        if not (res.converged and _against_the_limit(res.contour, drawing)):
+        if not (res.converged and _against_the_limit(res.contour, drawing.line)):
             break
-        drawing = _drawing_around(res.contour)
-        res = segment_here(drawing, res.contour)
+        if by_looks and not _grew_beyond(res.contour, drawing, intensity):
+            break
+        drawing = _Drawing.on(_drawing_around(res.contour), intensity)
+        res = segment_here(drawing.line, res.contour)
     return res, drawing
 
 
-def _carried(drawing: np.ndarray | None, last: np.ndarray, start: np.ndarray) -> np.ndarray:
+def _grew_beyond(contour: np.ndarray, drawing: _Drawing, intensity: np.ndarray) -> bool:
+    """Whether, where ``contour`` rests against its ``drawing``'s limit, the
+    object grew: at GREW_SHARE of its nodes there, the image 2 px beyond
+    lies GREW_HEIGHT of the object's contrast beyond the midpoint of its
+    levels (inside the contour, on the drawing's line), where the frame the
+    drawing was drawn on lay short of it. There it was the background when
+    the drawing was drawn around the object; a neighbour the contour
+    pressed into was already there (a kidney-shaped nucleus of the Cell
+    Tracking Challenge movie turned a lobe out over frames, a pixel a frame;
+    on identical frames, nothing grows). ``intensity``: this frame's (see
+    FrameFeatures)."""
+    line = drawing.line
+    margin = hasty_margin(abs(signed_area(line)))
+    at_limit = -_depth_inside(line, contour) >= margin - 1.5
+    if not at_limit.any():
+        return False
+    beyond = contour[at_limit] + 2.0 * outward_normals(contour)[at_limit]
+    box = bounding_window(contour, intensity.shape, 1.0)
+    inside = np.argwhere(_inside(contour, box)) + np.array([box[0].start, box[1].start])
+    on_line = resample(line, spacing=1.0)
+    now = _height(*(_sampled(intensity, points) for points in (beyond, inside, on_line)))
+    then = _height(*(drawing.looked(points) for points in (beyond, inside, on_line)))
+    return bool(np.mean((now > GREW_HEIGHT) & ~(then >= 0)) >= GREW_SHARE)
+
+
+def _height(values: np.ndarray, inside: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """``values`` from the midpoint of the levels ``inside`` and on the
+    ``line`` (their medians, NaN ignored), in their contrast: > 0 on the
+    inside's side; NaN where unknown."""
+    inside, line = inside[np.isfinite(inside)], line[np.isfinite(line)]
+    if not (inside.size and line.size) or np.median(inside) == np.median(line):
+        return np.full(len(values), np.nan)
+    a, b = np.median(inside), np.median(line)
+    return (values - 0.5 * (a + b)) / (a - b)
+
+
+def _sampled(image: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``image`` at the pixels nearest ``points`` (clipped to it)."""
+    rows, cols = (np.clip(np.rint(points[:, i]).astype(int), 0, image.shape[i] - 1) for i in range(2))
+    return image[rows, cols]
+
+
+def _carried(drawing: _Drawing | None, last: np.ndarray, start: np.ndarray, intensity: np.ndarray,
+             by_looks: bool = False) -> _Drawing:
     """The drawing to segment from ``start`` in: ``drawing``, that of the
-    frame where the object was last seen (as ``last``), moved as ``start``
-    moved from ``last``, while it still lies around ``start`` as a new one
+    frame where the object was last seen (as ``last``; the user's on the
+    start frame), moved as ``start`` moved from ``last``: always when
+    ``start`` is where the object's looks moved it (``by_looks``, see
+    _look_shift), else while it still lies around ``start`` as a new one
     would (all of ``start`` at least CARRIED_NEAREST of _drawing_around's
     margin inside it, and half of it within CARRIED_MEDIAN margins); else a
-    new one around ``start``.
+    new one around ``start`` (drawn on the frame of ``intensity``).
 
-    The drawing's line reads the object's background. Drawn anew around each
-    frame's contour, on a blurred edge it lay on the ramp at a distance the
-    contour itself set: a contour a little inside the border read a brighter
-    background, whose mid-level lay further inside, frame after frame, and on
-    identical frames the contours crept (on ten identical frames of the Data
-    Science Bowl nuclei, 16 of 51 contours came below an IoU of 0.9 with their
-    first; carried over, 12).
+    The drawing's line reads the object's background, and its limit keeps
+    the contour off what lies beyond, where the object's border is unclear.
+    Drawn anew around each frame's contour, on a blurred edge it lay on the
+    ramp at a distance the contour itself set: a contour a little inside
+    the border read a brighter background, whose mid-level lay further
+    inside, frame after frame, and on identical frames the contours crept;
+    and against a neighbour in broad contact, whose band the contour took up
+    to its limit, a drawing around that contour let it take the next band.
+    Moved with the object's looks, the drawing stays what it was to the
+    object: on the twenty identical frames of the Data Science Bowl nuclei
+    of benchmarks/tracking_warped.py, 7 of 51 contours came below an IoU of
+    0.9 with their first (12 with the drawing drawn anew where it no longer
+    lay around the contour, 16 of 51 on ten frames drawn anew each frame),
+    and over its seven movies identity-switched object-frames went from 162
+    to 59 and visible nuclei with no contour from 162 to 64.
     """
     if drawing is None:
-        return _drawing_around(start)
-    moved = drawing + (area_centroid(start) - area_centroid(last))
+        return _Drawing.on(_drawing_around(start), intensity)
+    moved = drawing.moved(area_centroid(start) - area_centroid(last))
     margin = _margin(start)
-    inside = _depth_inside(moved, start)
-    if inside.min() >= CARRIED_NEAREST * margin and np.median(inside) <= CARRIED_MEDIAN * margin:
+    inside = _depth_inside(moved.line, start)
+    # Moved by the object's looks, a drawing the contour came close to along
+    # a run of nodes is kept (a neighbour it pressed into); one it came
+    # close to all round is not (the object grew).
+    nearest = np.median(inside) if by_looks else inside.min()
+    if nearest >= CARRIED_NEAREST * margin and np.median(inside) <= CARRIED_MEDIAN * margin:
         return moved
-    return _drawing_around(start)
+    return _Drawing.on(_drawing_around(start), intensity)
 
 
 def _inside(contour: np.ndarray, box) -> np.ndarray | None:
@@ -514,10 +623,10 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
     total, done, stop_reason, said = n_obj * n_frames, 0, "completed", []
     with_missing = []  # the frames with NaN pixels
     # Forward from the start frame, then backward from it.
-    start_image = None
+    start_looks = None
     for frame_order in (range(start, n_frames), range(start - 1, -1, -1)):
         step = 1 if frame_order.step > 0 else -1
-        before = start_image
+        before = start_looks
         for t in frame_order:
             try:
                 image = _frame(frames, t)
@@ -539,10 +648,16 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
             shared = replace(FrameFeatures.of(image, options.get("isef_b", 0.7)), missing=missing)
             if missing is not None:
                 with_missing.append(t)
-            run.stage = np.zeros(2) if before is None else _stage_shift(run, before, image, t, step)
-            before = image
+            # The objects' looks with the illumination taken out: a slope of
+            # the background fixed under moving objects drew their matches
+            # toward no motion.
+            looks = plane_removed(image.astype(np.float64, copy=False), shared.plane,
+                                  (slice(0, image.shape[0]), slice(0, image.shape[1])))
+            run.stage = np.zeros(2) if before is None else _stage_shift(run, before, looks, t, step)
+            run.before, run.looks = before, looks
+            before = looks
             if t == start:
-                start_image = image
+                start_looks = looks
             for k in _segment_frame(run, image, shared, t, step):
                 done += 1
                 stop = yield TrackingProgress(t, k, run.contours[k][t], run.status[k][t], done, total)
@@ -733,7 +848,7 @@ class _Seen:
     whole_area: float
     contrasts: dict = field(default_factory=dict)  # frame -> contrast where tracked
     parted: dict = field(default_factory=dict)  # frame -> the two bodies of a contour pinched on its way to being lost there
-    drawing: np.ndarray | None = None  # the drawing its last tracked frame was segmented in (see _carried)
+    drawing: _Drawing | None = None  # the drawing its last tracked frame was segmented in (see _carried)
 
     def copy(self) -> _Seen:
         return replace(self, contrasts=dict(self.contrasts), parted=dict(self.parted))
@@ -759,6 +874,8 @@ class _Run:
     moved: list = field(default_factory=list)  # see _common_motion: of the objects done on the current frame
     stage: np.ndarray = field(default_factory=lambda: np.zeros(2))  # see _stage_shift: of the current frame
     drift: np.ndarray = field(default_factory=lambda: np.zeros(2))  # see _field_drift: of the current frame
+    looks: np.ndarray | None = None  # the current frame, its illumination taken out (see background.plane_removed)
+    before: np.ndarray | None = None  # the same of the frame before, in the direction of travel
 
 
 def _claim_before(run: _Run, k: int, t: int, step: int) -> np.ndarray | None:
@@ -836,14 +953,19 @@ def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, hand
     None) and status."""
     seen, options = run.seen[k], run.options
     if t == run.start:
-        return _found(image, shared, owner, t, k, run.inits[k], None, None, seen, options)
+        return _found(image, shared, owner, t, k, _Drawing.on(run.inits[k], shared.intensity), None, None, seen,
+                      options)
     last, history = _history(run, k, t, step)
     if last is None:  # lost or out of view for more than MAX_GAP frames: stays so
         return None, run.status[k][t - step]
+    look = None
+    if handed is None and last == t - step and run.before is not None:
+        look = _look_shift(run.before, run.looks, history[-1])
     if handed is not None:
         starts = [handed]
     else:
-        # Where it was last seen, moved as the looks of the objects moved
+        # Where it was last seen, moved as its own looks moved (see
+        # _look_shift), if they tell; moved as the looks of the objects moved
         # together (a jittering stage, see _stage_shift), if they did; where
         # its last motion predicts it, moved as the objects done on this
         # frame moved together from theirs, if they did; there; where it was
@@ -852,7 +974,8 @@ def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, hand
         predicted = _predicted(history)
         together = _common_motion(run.moved)
         staged = [history[-1] + run.stage] if run.stage.any() else []
-        starts = staged + [predicted + together, predicted, history[-1]]
+        looked = [] if look is None else [history[-1] + look]
+        starts = looked + staged + [predicted + together, predicted, history[-1]]
     # The last frame's drawing, if it may be carried over (see _carried): not
     # after a gap (the object may be anywhere within reach), nor from the
     # image's side or a margin of no data (as the object moves, the side shows
@@ -864,8 +987,10 @@ def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, hand
         if any(np.allclose(start, other, atol=0.5) for other in tried):
             continue
         tried.append(start)
-        contour, verdict = _found(image, shared, owner, t, k, _carried(drawing, history[-1], start), start,
-                                  history[-1], seen, options)
+        by_looks = look is not None and start is starts[0]
+        contour, verdict = _found(image, shared, owner, t, k, _carried(drawing, history[-1], start, shared.intensity,
+                                                                       by_looks), start, history[-1], seen, options,
+                                  by_looks)
         if verdict != LOST:
             break
     if verdict == TRACKED and handed is None:
@@ -909,15 +1034,7 @@ def _stage_shift(run: _Run, before: np.ndarray, image: np.ndarray, t: int, step:
     last = sorted((run.contours[k][t - step] for k in tracked), key=lambda c: tuple(area_centroid(c)))
     radius = np.median([_radius(c) for c in last])
     reach = int(np.clip(STAGE_SEARCH * radius, 4, 60))
-    maps = []
-    for contour in last:
-        rows, cols = bounding_window(contour, before.shape, 3.0)
-        lo, hi = np.array([rows.start, cols.start]) - reach, np.array([rows.stop, cols.stop]) + reach
-        patch = before[rows, cols].astype(np.float32)
-        if np.any(lo < 0) or np.any(hi > image.shape) or patch.std() < 1e-6 * (1 + abs(patch).max()):
-            continue  # at the image's side, or flat: nothing to match
-        region = image[lo[0]:hi[0], lo[1]:hi[1]].astype(np.float32)
-        maps.append(np.nan_to_num(cv2.matchTemplate(region, patch, cv2.TM_CCOEFF_NORMED)))
+    maps = [found[0] for found in (_look_map(before, image, contour, reach) for contour in last) if found is not None]
     if len(maps) < 2:
         return np.zeros(2)
     peak = np.array(np.unravel_index(np.argmax(np.sum(maps, axis=0)), maps[0].shape))
@@ -928,6 +1045,59 @@ def _stage_shift(run: _Run, before: np.ndarray, image: np.ndarray, t: int, step:
         if score[tuple(best)] >= STAGE_MATCH:
             moved.append(best - reach)
     return _common_motion(moved) if 2 * len(moved) > len(maps) else np.zeros(2)
+
+
+def _look_map(before: np.ndarray, image: np.ndarray, contour: np.ndarray, reach: int,
+              at_side: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
+    """The normalised correlation of ``contour``'s patch on the frame
+    ``before`` (its bounding box and 3 px) with ``image`` at every shift of
+    up to ``reach`` px, and the shift of its first value: a
+    (2 reach + 1)^2 map from (-reach, -reach), or, where the search meets
+    the image's side, only the shifts that keep the patch in the image, if
+    ``at_side`` (else None). None for a flat patch: nothing to match."""
+    rows, cols = bounding_window(contour, before.shape, 3.0)
+    corner = np.array([rows.start, cols.start])
+    lo, hi = corner - reach, np.array([rows.stop, cols.stop]) + reach
+    patch = before[rows, cols].astype(np.float32)
+    if patch.std() < 1e-6 * (1 + abs(patch).max()):
+        return None
+    if np.any(lo < 0) or np.any(hi > image.shape):
+        if not at_side:
+            return None
+        lo, hi = np.maximum(lo, 0), np.minimum(hi, image.shape)
+    region = image[lo[0]:hi[0], lo[1]:hi[1]].astype(np.float32)
+    return np.nan_to_num(cv2.matchTemplate(region, patch, cv2.TM_CCOEFF_NORMED)), lo - corner
+
+
+def _look_shift(before: np.ndarray, image: np.ndarray, contour: np.ndarray) -> np.ndarray | None:
+    """How the object of ``contour`` on the frame ``before`` moved onto
+    ``image`` by its appearance: the best match of its patch (see _look_map)
+    within LOOK_SEARCH radii, to a fraction of a pixel; None where it cannot
+    be told (a flat patch, a best match under LOOK_MATCH, or on the edge of
+    the search within the image: it moved further).
+
+    Its contour's motion cannot tell it: where the object's border is
+    unclear (a neighbour in broad contact), that contour is partly where
+    its drawing limited it, and the drawing drawn around it again let it
+    take a band of the neighbour each frame (see _carried).
+    """
+    reach = int(np.clip(LOOK_SEARCH * _radius(contour), 4, 30))
+    found = _look_map(before, image, contour, reach, at_side=True)
+    if found is None:
+        return None
+    score, first = found
+    peak = np.unravel_index(np.argmax(score), score.shape)
+    shift = np.array(peak) + first
+    if score[peak] < LOOK_MATCH or np.abs(shift).max() >= reach:
+        return None
+    offset = np.zeros(2)
+    for axis in range(2):  # the vertex of the parabola through the peak and its two neighbours
+        if 0 < peak[axis] < score.shape[axis] - 1:
+            step = np.eye(2, dtype=int)[axis]
+            a, b, c = score[tuple(peak - step)], score[peak], score[tuple(peak + step)]
+            curvature = a - 2 * b + c
+            offset[axis] = 0.5 * (a - c) / curvature if curvature < 0 else 0.0
+    return shift + np.clip(offset, -0.5, 0.5)
 
 
 def _segmenting_order(run: _Run, t: int, step: int) -> list[int]:
@@ -1023,10 +1193,11 @@ def _misfit(run: _Run, k: int, t: int, step: int) -> float:
     return float(distance + abs(np.log(abs(signed_area(contour)) / abs(signed_area(last)))))
 
 
-def _found(image, shared, owner, t, k, init, predicted, previous, seen: _Seen, options):
-    """Object ``k`` segmented on frame ``t`` from ``init`` (``previous``: its last contour,
-    None on the start frame, where ``seen`` is filled in); its contour (or
-    None) and status."""
+def _found(image, shared, owner, t, k, drawing: _Drawing, predicted, previous, seen: _Seen, options,
+           by_looks: bool = False):
+    """Object ``k`` segmented on frame ``t`` in ``drawing`` (``previous``: its last contour,
+    None on the start frame, where ``seen`` is filled in; ``by_looks``: see
+    _redrawn); its contour (or None) and status."""
     avoid = (owner >= 0) & (owner != k)
     segment_here = partial(_segment_from, image, features=shared, avoid=avoid if avoid.any() else None,
                            polarity=seen.polarity, **options)
@@ -1037,11 +1208,11 @@ def _found(image, shared, owner, t, k, init, predicted, previous, seen: _Seen, o
             # even say which object or frame.
             warnings.filterwarnings("ignore", message=".*lie outside the image", category=UserWarning)
             if previous is None:
-                res, drawing = segment_here(init, predicted), None  # the next frame draws around the result
+                res = segment_here(drawing.line, predicted)
             else:
-                res, drawing = _redrawn(segment_here, init, predicted)
+                res, drawing = _redrawn(segment_here, drawing, predicted, shared.intensity, by_looks)
     except (ValueError, DivergenceError):
-        return None, LEFT if previous is not None and _touches_side(init, image.shape, shared.missing) else LOST
+        return None, LEFT if previous is not None and _touches_side(drawing.line, image.shape, shared.missing) else LOST
     if not res.converged:
         return None, LOST
     contour = positively_oriented(res.contour)
@@ -1049,6 +1220,7 @@ def _found(image, shared, owner, t, k, init, predicted, previous, seen: _Seen, o
         seen.polarity = "bright" if res.polarity > 0 else "dark"
         seen.whole_area = abs(signed_area(contour))
         seen.contrasts[t] = _contrast(image, contour, res.polarity, avoid)
+        seen.drawing = drawing  # the next frames start from it (see _carried)
         return contour, TRACKED
     verdict = _judge(contour, previous, predicted, seen.whole_area, image.shape, shared.missing)
     if verdict == LOST:
