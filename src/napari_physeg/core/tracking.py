@@ -1212,7 +1212,10 @@ def _found(image, shared, owner, t, k, drawing: _Drawing, predicted, previous, s
             else:
                 res, drawing = _redrawn(segment_here, drawing, predicted, shared.intensity, by_looks)
     except (ValueError, DivergenceError):
-        return None, LEFT if previous is not None and _touches_side(drawing.line, image.shape, shared.missing) else LOST
+        # Not found: gone from the view if it was at the image's side (where
+        # it was to start from; its drawing, moved with it, may reach beyond
+        # the side while the object lies wholly inside).
+        return None, LEFT if previous is not None and _touches_side(predicted, image.shape, shared.missing) else LOST
     if not res.converged:
         return None, LOST
     contour = positively_oriented(res.contour)
