@@ -385,6 +385,7 @@ class _Drawing:
         return cls(line, intensity[rows, cols].copy(), np.array([rows.start, cols.start]), np.zeros(2))
 
     def moved(self, shift: np.ndarray) -> _Drawing:
+        """The drawing moved by ``shift`` with its object (its patch stays where it was drawn)."""
         return replace(self, line=self.line + shift, offset=self.offset + shift)
 
     def looked(self, points: np.ndarray) -> np.ndarray:
