@@ -404,15 +404,20 @@ def _depth_inside(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.array([cv2.pointPolygonTest(xy, (float(x), float(y)), True) for y, x in points])
 
 
-def _against_the_limit(contour: np.ndarray, drawing: np.ndarray) -> bool:
-    """Whether ``contour`` rests against the limit that ``drawing`` sets to
-    its object (the drawing grown by region.hasty_margin px) along at least
-    AT_LIMIT_SHARE of its nodes, rather than on the object's border."""
+def _at_the_limit(contour: np.ndarray, drawing: np.ndarray) -> np.ndarray:
+    """Which nodes of ``contour`` rest against the limit that ``drawing``
+    sets to its object (the drawing grown by region.hasty_margin px)."""
     margin = hasty_margin(abs(signed_area(drawing)))
-    inside = _depth_inside(drawing, contour)
     # Within a pixel and a half of it: the limit is a raster's dilation, and
     # the polish moves the nodes by up to a pixel.
-    return bool(np.mean(-inside >= margin - 1.5) >= AT_LIMIT_SHARE)
+    return -_depth_inside(drawing, contour) >= margin - 1.5
+
+
+def _against_the_limit(contour: np.ndarray, drawing: np.ndarray) -> bool:
+    """Whether ``contour`` rests against its ``drawing``'s limit (see
+    _at_the_limit) along at least AT_LIMIT_SHARE of its nodes, rather than
+    on the object's border."""
+    return bool(np.mean(_at_the_limit(contour, drawing)) >= AT_LIMIT_SHARE)
 
 
 def _redrawn(segment_here, drawing: _Drawing, predicted: np.ndarray, intensity: np.ndarray, by_looks: bool = False):
@@ -444,15 +449,13 @@ def _grew_beyond(contour: np.ndarray, drawing: _Drawing, intensity: np.ndarray) 
     Tracking Challenge movie turned a lobe out over frames, a pixel a frame;
     on identical frames, nothing grows). ``intensity``: this frame's (see
     FrameFeatures)."""
-    line = drawing.line
-    margin = hasty_margin(abs(signed_area(line)))
-    at_limit = -_depth_inside(line, contour) >= margin - 1.5
+    at_limit = _at_the_limit(contour, drawing.line)
     if not at_limit.any():
         return False
     beyond = contour[at_limit] + 2.0 * outward_normals(contour)[at_limit]
     box = bounding_window(contour, intensity.shape, 1.0)
     inside = np.argwhere(_inside(contour, box)) + np.array([box[0].start, box[1].start])
-    on_line = resample(line, spacing=1.0)
+    on_line = resample(drawing.line, spacing=1.0)
     now = _height(*(_sampled(intensity, points) for points in (beyond, inside, on_line)))
     then = _height(*(drawing.looked(points) for points in (beyond, inside, on_line)))
     return bool(np.mean((now > GREW_HEIGHT) & ~(then >= 0)) >= GREW_SHARE)
