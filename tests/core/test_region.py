@@ -586,3 +586,36 @@ def test_spiky_star_over_a_blob_keeps_its_scaled_middle():
     star = np.array(blob.image.shape) / 2 + np.column_stack([radii * np.sin(t), radii * np.cos(t)])
     found = polygon2mask(blob.image.shape, segment(blob.image, star).contour)
     assert (found & blob.mask).sum() / (found | blob.mask).sum() > 0.85
+
+
+def region_with_levels_beyond(image, drawing):
+    """As region_for, with each pixel's level beyond the object's given, as
+    segment() gives it (its valleys and brighter neighbours are read on it)."""
+    model = drawing_levels(image, drawing)
+    return model, object_region(objectness(image, model), drawing, model, stronger=level_beyond_object(image, model))
+
+
+def nuclei_pressed_together(dip, texture=0.0, seed=0):
+    """Two nuclei pressed together along a straight contact: their union is
+    a stadium (no neck), each a plateau that dims by ``dip`` of its level
+    within 5 px of its own edge, so their contact is a shallow valley; with
+    ``texture``, speckles of that contrast 2-3 px across over both."""
+    shape = (100, 140)
+    rows, cols = np.mgrid[: shape[0], : shape[1]]
+    stadium = (((np.abs(rows - 50) <= 16) & (cols >= 34) & (cols <= 106))
+               | disk(shape, (50, 34), 16) | disk(shape, (50, 106), 16))
+    left, right = stadium & (cols < 70), stadium & (cols >= 70)
+    rng = np.random.default_rng(seed)
+    image = sum(m * (1 - dip + dip * np.minimum(ndi.distance_transform_edt(m) / 5, 1)) for m in (left, right))
+    image = image * (1 + texture * ndi.gaussian_filter(rng.standard_normal(shape), 1.0) / 0.28)
+    image = ndi.gaussian_filter(image, 2) + 0.1 + 0.03 * rng.standard_normal(shape)
+    return image, left, right
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_textured_nucleus_is_not_parted_at_its_texture_valleys(seed):
+    """One stadium-shaped nucleus with speckled texture (its valleys a
+    network, whose pieces are no convex bodies) clicked inside: one region."""
+    image, left, right = nuclei_pressed_together(dip=0.0, texture=0.25, seed=seed)
+    _, region = region_with_levels_beyond(image, circle((50, 50), 6))
+    assert overlap(region, left | right) > 0.9
