@@ -1250,9 +1250,6 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     seed = _seed(like, marked, drawn)
     if not seed.any():
         return None
-    if stronger is not None:
-        like = like & ~_beyond_valleys(stronger, like, seed)
-        seed = seed & like
     # Depth below the object's outline (two objects cut by the image's side
     # meet there at a neck too).
     depth = _depth(like)
@@ -1264,6 +1261,10 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
         # for their own size are parted too (small crowded nuclei).
         region = (_split_at_cores(depth, like, seed, None, reach, _side_distance(shape, image_sides), stronger)
                   & _marked_basins(depth, like, seed))
+    if stronger is not None:
+        region = _without_valley_neighbours(region, stronger, like, seed)
+        if not region.any():
+            return None
     if model.drawn_around and _drawn_across(region, limit):
         limit = _fill(_scaled(drawing, _INSIDE_LIMIT), shape)
     return _smoothed(region & limit, image_sides)
@@ -1313,8 +1314,10 @@ def _beyond_valleys(excess: np.ndarray, like: np.ndarray, seed: np.ndarray) -> n
     blob = np.isin(blobs, np.unique(blobs[seed]))
     inscribed = float(_depth(like)[seed].max())
     smallest = np.pi * (STRONGER_CORE * inscribed) ** 2
-    # Room for the object's inscribed disk and a neighbour's smallest body.
-    if blob.sum() < np.pi * inscribed ** 2 + smallest:
+    # Room for the object's inscribed disk and a neighbour's smallest body;
+    # and an object deeper than the valleys are wide (else its own shape
+    # curves the intensity as a valley would).
+    if blob.sum() < np.pi * inscribed ** 2 + smallest or inscribed < 2 * VALLEY_SCALE:
         return beyond
     rows, cols = np.nonzero(blob)
     margin = int(np.ceil(3 * VALLEY_SCALE))  # the Hessian's reach
@@ -1337,6 +1340,21 @@ def _beyond_valleys(excess: np.ndarray, like: np.ndarray, seed: np.ndarray) -> n
     markers = np.where(pieces == ours, 1, np.where(others[pieces], 2, 0)).astype(np.int32)
     beyond[box] = segmentation.watershed(strength, markers, mask=blob) == 2
     return beyond
+
+
+def _without_valley_neighbours(region, excess, like, seed) -> np.ndarray:
+    """``region`` without the neighbours that valleys of intensity part from
+    the object (see _beyond_valleys), and without what that leaves apart
+    from the seed. They only take away: parted at necks and cores again
+    without those neighbours, the depths shift, and a crowded nucleus that
+    kept apart from one neighbour ran into another (identical frames of the
+    Data Science Bowl crowd lost two nuclei)."""
+    beyond = _beyond_valleys(excess, like, seed)
+    if not beyond.any():
+        return region
+    pieces, _ = _label(region & ~beyond)
+    kept = np.unique(pieces[seed])
+    return np.isin(pieces, kept[kept > 0])
 
 
 def _seed(like: np.ndarray, marked: np.ndarray, drawn: np.ndarray) -> np.ndarray:
