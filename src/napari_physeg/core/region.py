@@ -20,7 +20,9 @@ drew (``docs/physics.md`` §3b):
    necks (a watershed of their depth, seeded by the blobs' cores), and the
    blobs the drawing marks are the object (for a drawing inside it, the
    depth basins joined across necks wide for the smaller part too, see
-   :func:`_marked_basins`). Everything else that looks like
+   :func:`_marked_basins`); a neighbour as bright, touching it without a
+   neck, is parted at the valley of intensity along their contact (see
+   :func:`_beyond_valleys`). Everything else that looks like
    the object (a touching neighbour, or, for a drawing around the object,
    anything beyond the drawing) counts as background: neighbours cannot
    capture the contour and texture inside the object cannot trap it.
@@ -1262,7 +1264,7 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
         region = (_split_at_cores(depth, like, seed, None, reach, _side_distance(shape, image_sides), stronger)
                   & _marked_basins(depth, like, seed))
     if stronger is not None:
-        region = _without_valley_neighbours(region, stronger, like, seed)
+        region = _without_valley_neighbours(region, stronger, like, seed, drawn if model.drawn_around else None)
         if not region.any():
             return None
     if model.drawn_around and _drawn_across(region, limit):
@@ -1298,16 +1300,17 @@ def _valleys(excess: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return larger, (larger >= VALLEY_CURVATURE) & (smaller < 0.5 * larger)
 
 
-def _beyond_valleys(excess: np.ndarray, like: np.ndarray, seed: np.ndarray) -> np.ndarray:
+def _beyond_valleys(excess: np.ndarray, like: np.ndarray, seed: np.ndarray, drawn=None) -> np.ndarray:
     """The pixels of ``like`` that belong to neighbours parted from the
     object by valleys of intensity (see VALLEY_SCALE).
 
     Cut along the valleys, the object-like pixels fall into pieces. When the
     piece most of the seed lies in is a body (see VALLEY_BODY_SOLIDITY), the
-    other bodies of its blob that the seed does not touch are neighbours,
-    and each side takes the pixels its flood reaches first, across the
-    valley's ridge. A textured object's valleys make a network: its pieces
-    are not bodies, and nothing is parted.
+    other bodies of its blob that the seed does not touch may be neighbours:
+    each side takes the pixels its flood reaches first, across the valley's
+    ridge. A textured object's valleys make a network: its pieces are not
+    bodies, and nothing is parted. ``drawn``: the pixels a drawing around
+    the object encloses (None for a drawing inside it).
     """
     beyond = np.zeros(like.shape, bool)
     blobs, _ = _label(like)
@@ -1337,19 +1340,36 @@ def _beyond_valleys(excess: np.ndarray, like: np.ndarray, seed: np.ndarray) -> n
     others = body & (touched == 0)
     if not body[ours] or not others.any():
         return beyond
-    markers = np.where(pieces == ours, 1, np.where(others[pieces], 2, 0)).astype(np.int32)
-    beyond[box] = segmentation.watershed(strength, markers, mask=blob) == 2
+    # Each body floods its side of the valleys; a side is a neighbour's when
+    # the object and it make a notched body together (two nuclei pressed
+    # together; a textured nucleus' halves make a convex one), and, for a
+    # drawing around the object, when it lies partly beyond the drawing (a
+    # lobe of the object, or both masses of a dividing cell drawn around,
+    # lie within it).
+    markers = np.where(pieces == ours, 1, np.where(others[pieces], pieces + 1, 0)).astype(np.int32)
+    flood = segmentation.watershed(strength, markers, mask=blob)
+    for side in np.flatnonzero(others) + 1:
+        theirs = flood == side
+        beyond_drawing = drawn is None or (theirs & ~drawn[box]).sum() >= CROSSED_OUTSIDE * theirs.sum()
+        if beyond_drawing and _notched(flood == 1, theirs):
+            beyond[box] |= theirs
     return beyond
 
 
-def _without_valley_neighbours(region, excess, like, seed) -> np.ndarray:
+def _notched(one: np.ndarray, other: np.ndarray) -> bool:
+    """Whether the two touching regions make a body less convex than
+    APART_SOLIDITY together."""
+    return measure.regionprops((one | other).view(np.uint8))[0].solidity < APART_SOLIDITY
+
+
+def _without_valley_neighbours(region, excess, like, seed, drawn=None) -> np.ndarray:
     """``region`` without the neighbours that valleys of intensity part from
     the object (see _beyond_valleys), and without what that leaves apart
     from the seed. They only take away: parted at necks and cores again
     without those neighbours, the depths shift, and a crowded nucleus that
     kept apart from one neighbour ran into another (identical frames of the
     Data Science Bowl crowd lost two nuclei)."""
-    beyond = _beyond_valleys(excess, like, seed)
+    beyond = _beyond_valleys(excess, like, seed, drawn)
     if not beyond.any():
         return region
     pieces, _ = _label(region & ~beyond)
