@@ -741,7 +741,7 @@ def _enclosed_apart(body: np.ndarray, line: np.ndarray, extent: np.ndarray) -> b
         return False
     # The ground between crowded objects parts into pieces that meet them
     # all around too, but concave ones (a star between round nuclei).
-    if measure.regionprops(ndi.binary_fill_holes(piece).view(np.uint8))[0].solidity < APART_SOLIDITY:
+    if not _convex(ndi.binary_fill_holes(piece)):
         return False
     # What runs out of the view is not seen to meet the other level.
     rim = cv2.dilate(piece.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool) & ~piece & extent
@@ -1264,7 +1264,7 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
         region = (_split_at_cores(depth, like, seed, None, reach, _side_distance(shape, image_sides), stronger)
                   & _marked_basins(depth, like, seed))
     if stronger is not None:
-        region = _without_valley_neighbours(region, stronger, like, seed, drawn if model.drawn_around else None)
+        region = _without_valley_neighbours(region, stronger, like, depth, seed, drawn if model.drawn_around else None)
         if not region.any():
             return None
     if model.drawn_around and _drawn_across(region, limit):
@@ -1300,7 +1300,8 @@ def _valleys(excess: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return larger, (larger >= VALLEY_CURVATURE) & (smaller < 0.5 * larger)
 
 
-def _beyond_valleys(excess: np.ndarray, like: np.ndarray, seed: np.ndarray, drawn=None) -> np.ndarray:
+def _beyond_valleys(excess: np.ndarray, like: np.ndarray, depth: np.ndarray, seed: np.ndarray,
+                    drawn=None) -> np.ndarray:
     """The pixels of ``like`` that belong to neighbours parted from the
     object by valleys of intensity (see VALLEY_SCALE).
 
@@ -1309,13 +1310,14 @@ def _beyond_valleys(excess: np.ndarray, like: np.ndarray, seed: np.ndarray, draw
     other bodies of its blob that the seed does not touch may be neighbours:
     each side takes the pixels its flood reaches first, across the valley's
     ridge. A textured object's valleys make a network: its pieces are not
-    bodies, and nothing is parted. ``drawn``: the pixels a drawing around
-    the object encloses (None for a drawing inside it).
+    bodies, and nothing is parted. ``depth``: that of ``like`` (see _depth);
+    ``drawn``: the pixels a drawing around the object encloses (None for a
+    drawing inside it).
     """
     beyond = np.zeros(like.shape, bool)
     blobs, _ = _label(like)
     blob = np.isin(blobs, np.unique(blobs[seed]))
-    inscribed = float(_depth(like)[seed].max())
+    inscribed = float(depth[seed].max())
     smallest = np.pi * (STRONGER_CORE * inscribed) ** 2
     # Room for the object's inscribed disk and a neighbour's smallest body;
     # and an object deeper than the valleys are wide (else its own shape
@@ -1341,7 +1343,7 @@ def _beyond_valleys(excess: np.ndarray, like: np.ndarray, seed: np.ndarray, draw
     if not body[ours] or not others.any():
         return beyond
     # Each body floods its side of the valleys; a side is a neighbour's when
-    # the object and it make a notched body together (two nuclei pressed
+    # the object and it make a notched (not convex) body together (two nuclei pressed
     # together; a textured nucleus' halves make a convex one), and, for a
     # drawing around the object, when it lies partly beyond the drawing (a
     # lobe of the object, or both masses of a dividing cell drawn around,
@@ -1351,25 +1353,25 @@ def _beyond_valleys(excess: np.ndarray, like: np.ndarray, seed: np.ndarray, draw
     for side in np.flatnonzero(others) + 1:
         theirs = flood == side
         beyond_drawing = drawn is None or (theirs & ~drawn[box]).sum() >= CROSSED_OUTSIDE * theirs.sum()
-        if beyond_drawing and _notched(flood == 1, theirs):
+        if beyond_drawing and not _convex((flood == 1) | theirs):
             beyond[box] |= theirs
     return beyond
 
 
-def _notched(one: np.ndarray, other: np.ndarray) -> bool:
-    """Whether the two touching regions make a body less convex than
-    APART_SOLIDITY together."""
-    return measure.regionprops((one | other).view(np.uint8))[0].solidity < APART_SOLIDITY
+def _convex(mask: np.ndarray) -> bool:
+    """Whether the pixels of ``mask`` make one convex body: their solidity
+    at least APART_SOLIDITY."""
+    return measure.regionprops(mask.view(np.uint8))[0].solidity >= APART_SOLIDITY
 
 
-def _without_valley_neighbours(region, excess, like, seed, drawn=None) -> np.ndarray:
+def _without_valley_neighbours(region, excess, like, depth, seed, drawn=None) -> np.ndarray:
     """``region`` without the neighbours that valleys of intensity part from
     the object (see _beyond_valleys), and without what that leaves apart
     from the seed. They only take away: parted at necks and cores again
     without those neighbours, the depths shift, and a crowded nucleus that
     kept apart from one neighbour ran into another (identical frames of the
     Data Science Bowl crowd lost two nuclei)."""
-    beyond = _beyond_valleys(excess, like, seed, drawn)
+    beyond = _beyond_valleys(excess, like, depth, seed, drawn)
     if not beyond.any():
         return region
     pieces, _ = _label(region & ~beyond)
@@ -1401,7 +1403,7 @@ def _drawn_across(region: np.ndarray, limit: np.ndarray) -> bool:
     less than ACROSS_SHARE of the convex body ``region`` (see ACROSS_SHARE)."""
     if (region & limit).sum() >= ACROSS_SHARE * region.sum():
         return False
-    return measure.regionprops(region.view(np.uint8))[0].solidity >= APART_SOLIDITY
+    return _convex(region)
 
 
 #: Around the object, a depth basin of the object-like pixels (basins joined
