@@ -423,6 +423,26 @@ def test_circle_far_larger_than_the_object(make):
     assert _iou(res.contour, obj.mask) > 0.98
 
 
+@pytest.mark.parametrize("gap", [4, 8])
+def test_a_drawing_around_both_masses_of_a_dividing_cell_ends_around_both(gap):
+    """Two blurred disks a few px apart (the masses of a dividing cell), an
+    ellipse drawn around both: the object's region holds both, but the
+    contour pinched in the gap between them and kept one (0 % of the other,
+    started either from the drawing or again from its own result). They are
+    now joined, and the contour holds both either way."""
+    rows, cols = np.mgrid[:90, :110]
+    masses = [(rows - 45) ** 2 + (cols - 55 + side * (13 + gap / 2)) ** 2 <= 13 ** 2 for side in (-1, 1)]
+    image = ndi.gaussian_filter(np.where(masses[0] | masses[1], 0.8, 0.2), 1.5)
+    image += 0.03 * np.random.default_rng(0).standard_normal(image.shape)
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    first = segment(image, np.column_stack([45 + 24 * np.sin(t), 55 + 36 * np.cos(t)])).contour
+    again = segment(image, first).contour
+    for contour in (first, again):
+        held = polygon2mask(image.shape, contour)
+        assert all((held & mass).sum() > 0.95 * mass.sum() for mass in masses)
+        assert held.sum() < 1.25 * (masses[0].sum() + masses[1].sum())
+
+
 @pytest.mark.parametrize("radius, sigma, height", [(12, 3, 0.4), (25, 3, 0.4), (12, 4, 0.4), (25, 4, 0.5)])
 def test_outline_traced_on_a_blurred_edge_stays_on_it(radius, sigma, height):
     """A disk blurred over 10-15 px, its outline traced where the blur is at

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from scipy import ndimage as ndi
+from scipy.spatial import cKDTree
 from skimage import feature, measure, segmentation
 
 from .contour import bounding_window, outward_normals, positively_oriented, resample
@@ -667,7 +668,7 @@ def _enclosed(body: np.ndarray, extent: np.ndarray) -> bool | None:
     """Whether ``body`` reaches neither the outer edge of ``extent`` (within
     the image: cv2.erode keeps the image's sides) nor half its area; None
     where ``extent`` has no such edge (it covers the whole image)."""
-    edge = extent & ~cv2.erode(extent.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+    edge = _rim(extent)
     if not edge.any():
         return None
     return not (body & edge).any() and body.sum() <= 0.5 * extent.sum()
@@ -1269,7 +1270,43 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
             return None
     if model.drawn_around and _drawn_across(region, limit):
         limit = _fill(_scaled(drawing, _INSIDE_LIMIT), shape)
-    return _smoothed(region & limit, image_sides)
+    region = _smoothed(region & limit, image_sides)
+    # A person's drawing around the object holds all of it: bodies of its
+    # own region that lie apart (the two masses of a dividing cell) are
+    # joined, else the contour pinched between them and kept one. (A
+    # program's drawing follows one object: the tracker keeps one daughter.)
+    return _bridged(region, seed, depth) if model.drawn_around and model.user_drawing else region
+
+
+def _bridged(region: np.ndarray, seed: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """``region`` with each of its pieces as large as a body (a disk of
+    STRONGER_CORE times the object's inscribed radius, from ``depth`` under
+    ``seed``) joined to the piece the seed marks most by a bar as wide as
+    that disk's radius, along the shortest way between them."""
+    pieces, n = _label(region)
+    if n < 2 or not (seed & region).any():
+        return region
+    radius = STRONGER_CORE * float(depth[seed].max())
+    area = np.bincount(pieces.ravel(), minlength=n + 1)
+    marked = np.bincount(pieces[seed], minlength=n + 1)
+    marked[0] = 0
+    ours = int(np.argmax(marked))
+    tree = cKDTree(np.argwhere(_rim(pieces == ours)))
+    joined = region.view(np.uint8).copy()
+    for piece in np.flatnonzero(area >= np.pi * radius ** 2):
+        if piece in (0, ours):
+            continue
+        rim = np.argwhere(_rim(pieces == piece))
+        gaps, nearest = tree.query(rim)
+        a, b = rim[np.argmin(gaps)], tree.data[nearest[np.argmin(gaps)]].astype(int)
+        cv2.line(joined, (int(a[1]), int(a[0])), (int(b[1]), int(b[0])), 1, thickness=max(3, round(radius)))
+    return joined.view(bool)
+
+
+def _rim(mask: np.ndarray) -> np.ndarray:
+    """The pixels of ``mask`` on its outline (8-connected to its outside;
+    cv2.erode keeps the array's sides, so not along them)."""
+    return mask & ~cv2.erode(mask.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
 
 
 #: Neighbours as bright as the object may touch it along a broad contact,
