@@ -686,16 +686,19 @@ def test_a_result_started_from_again_stays_where_it_is(dsb):
     assert (a & b).sum() / (a | b).sum() > 0.8
 
 
-@pytest.mark.xfail(strict=True, reason="known (session 45): started again and again, a result creeps outward")
-@pytest.mark.parametrize("label", [9, 22])
-def test_a_result_started_from_again_and_again_settles(dsb, label):
-    """Pressing Segment again on a result should leave it where it settled.
-    A result is read as traced on the border, at its line's own level; each
-    run ends a little further out (the edges and the polish), and the next
-    run reads its border there. Against a touching neighbour nothing stops
-    it: from a circle 1.4 times the nucleus, the areas of five runs in a row
-    were 863, 1029, 1177, 1258, 1378 px (label 9) and 715, 819, 929, 1083,
-    1105 (label 22). See docs/benchmarks.md, session 45, for what was tried."""
+@pytest.mark.parametrize("label, growth", [(9, 1.1), (22, 1.1), (157, 1.03)])
+def test_a_result_started_from_again_and_again_settles(dsb, label, growth):
+    """Pressing Segment again on a result leaves it where it settled. A
+    result is read as traced on the border, at its line's own level. The
+    polish's half-level, read a few px either side of where the contour
+    rests, moved outward with it on the wide ramps, and against a touching
+    neighbour the hasty hand's margin let each run take more of it: from a
+    circle 1.4 times the nucleus, five runs in a row ended at 863, 1029,
+    1177, 1258, 1378 px (label 9), 715, 819, 929, 1083, 1105 (label 22) and
+    448, 455, 474, 492, 496 (label 157, alone). Now the nearer of the line's
+    level and the half-level holds the nodes, and a traced line has no
+    margin (session 46). ``growth``: the most the area may grow from the
+    second run to the fourth (alone, label 157 grew by 8 %)."""
     image, labels = dsb
     nucleus = labels == label
     centre, radius = np.argwhere(nucleus).mean(0), np.sqrt(nucleus.sum() / np.pi)
@@ -705,7 +708,7 @@ def test_a_result_started_from_again_and_again_settles(dsb, label):
         res, _ = segmented(image, nucleus, contour)
         contour = res.contour
         areas.append(polygon2mask(image.shape, contour).sum())
-    assert areas[-1] < 1.1 * areas[1], areas
+    assert areas[-1] < growth * areas[1], areas
 
 
 @pytest.mark.parametrize("scale", [1.2, 1.5])

@@ -56,6 +56,24 @@ def test_a_polygon_is_fitted_to_an_area_rendered_disc(coverage, start):
     assert abs(signed_area(out) / (np.pi * RADIUS**2) - 1) < 5e-4
 
 
+def test_on_a_wide_ramp_a_known_level_is_found_wherever_the_contour_starts():
+    """On a ramp 8 px wide (a blurred nucleus) the half-level read 2.5-4 px
+    either side of the nodes moves with them: from 1 px inside and 0.8 px
+    outside the 0.75 level the polish ends 1 px apart. Given the border's
+    level, the nodes go to its crossing (r = 28) from either side."""
+    r = np.hypot(*(np.indices((128, 128)) - np.array(CENTRE)[:, None, None]))
+    ramp = 10.0 + 100.0 * np.clip((34.0 - r) / 8.0, 0.0, 1.0)
+
+    def radius(nodes):
+        return np.linalg.norm(nodes - CENTRE, axis=1)
+
+    inside, outside = circle(27.0, 80), circle(28.8, 80)
+    assert radius(polish(ramp, outside)).mean() - radius(polish(ramp, inside)).mean() > 0.5
+    for start in (inside, outside):
+        at_level = radius(polish(ramp, start, level=85.0))
+        assert abs(at_level.mean() - 28.0) < 0.05 and at_level.std() < 0.05
+
+
 def test_polish_is_invariant_to_linear_intensity_changes(coverage):
     nodes = circle(RADIUS + 0.4, 50)
     bright = polish(coverage, nodes, polarity=1)

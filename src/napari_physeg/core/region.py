@@ -1237,7 +1237,10 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     # times the drawing when drawn inside it (its reach). Growth past that
     # is a leak.
     if model.drawn_around:
-        reach = limit = _within_hasty_margin(drawn)
+        # A line traced on the border was drawn with care, or is an earlier
+        # result: no margin beyond it, else each run from the last result
+        # took that much more of a look-alike neighbour it touches.
+        reach = limit = drawn if model.border_level is not None else _within_hasty_margin(drawn)
         marked = _middle(drawing, shape)
     else:
         reach = _fill(_scaled(drawing, _INSIDE_REACH), shape)

@@ -172,7 +172,7 @@ def _curvature_radius(nodes: np.ndarray, span: int) -> np.ndarray:
 
 
 def polish(image: np.ndarray, nodes: np.ndarray, *, polarity: int = 0, noise: float | None = None,
-           reach: float = 1.5) -> np.ndarray:
+           reach: float = 1.5, level: float | None = None) -> np.ndarray:
     """Move the nodes of a contour resting on a border onto it, sub-pixel.
 
     Parameters
@@ -190,6 +190,10 @@ def polish(image: np.ndarray, nodes: np.ndarray, *, polarity: int = 0, noise: fl
         None.
     reach : float, optional
         Largest move of a node, and farthest crossing accepted (px).
+    level : float, optional
+        The border's level, in the image's units, when it is known (that of a
+        line traced on it); None for halfway between the levels read 2.5-4 px
+        inside and outside the nodes.
 
     Returns
     -------
@@ -212,6 +216,8 @@ def polish(image: np.ndarray, nodes: np.ndarray, *, polarity: int = 0, noise: fl
     scale = max(float(np.abs(ring).max()), 1e-300)
     if not abs(contrast) > 1e-9 * scale or (polarity and np.sign(contrast) != np.sign(polarity)):
         return nodes
+    if level is not None:  # the crossings of that level, not of the half-level
+        outer = float(level) - 0.5 * contrast
 
     spacing = float(segment_lengths(nodes).mean())
     sigma_noise = _noise_sigma(img) if noise is None else float(noise)
