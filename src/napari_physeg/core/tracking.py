@@ -1305,8 +1305,8 @@ def _correspondences(contours, start, match_options) -> dict:
 def node_origins(contour: np.ndarray, previous: np.ndarray, **match_options) -> np.ndarray:
     """Where each node of ``contour`` came from on ``previous``.
 
-    The rigid part of the motion (rotation and translation, by iterative
-    closest points, point to line) is found first and undone; then the
+    The rigid part of the motion (see _body_motion: the outline fit's
+    rotation, the area centroid's translation) is found first and undone; then the
     nodes are matched by the order-preserving modal matching (every node of
     ``contour`` gets a partner), with a cost on their remaining
     displacement, as the two contours share a frame of reference. Each
@@ -1315,7 +1315,7 @@ def node_origins(contour: np.ndarray, previous: np.ndarray, **match_options) -> 
     keep their place along its membrane, and the normal displacement is not
     rounded to the node spacing.
     """
-    rotation, shift = _rigid_motion(contour, previous)
+    rotation, shift = _body_motion(contour, previous)
     back = contour @ rotation.T + shift
     # One start region is enough between frames (the displacement term
     # already says where the path starts), and a 32-node element for the
@@ -1338,6 +1338,30 @@ def node_origins(contour: np.ndarray, previous: np.ndarray, **match_options) -> 
     if missing.any():  # not expected with method="order": nearest node instead
         partner[missing] = nearest_node(back[missing], previous)
     return closest_on_polyline(back, previous, partner, steps=(-2, -1, 0, 1))[0]
+
+
+def _body_motion(contour: np.ndarray, previous: np.ndarray):
+    """Rotation ``R`` and shift ``T`` that carry the body of ``contour`` back
+    onto that of ``previous`` (``contour @ R.T + T``): the rotation of the
+    outline fit (_rigid_motion), about the area centroids, and the shift that
+    puts the area centroid back on the previous one.
+
+    Why not the outline fit's own shift: a local protrusion moves the fit
+    and the centroid alike (within 3 %), but deformations spread around an
+    elongated body (waves of order 3 and 5) pull the fit 1.4 and 2.2 times
+    as far as the centroid; while the shape changes one way that error has
+    one sign frame after frame, and every origin slides along the membrane
+    with it. On the synthetic deforming cell's true outlines (12 seeds,
+    30 frames) points followed through the origins ended 0.34 node spacings
+    from their material points in the median (0.71 at the worst, in the
+    mean) with the fit's shift, 0.24 (0.63) with the centroid's, 0.16 (0.49)
+    with the material points' own rigid motion. The rest is the rotation:
+    waves of even order turn an elongated outline's fit as they turn its
+    principal axes (those by 0.8 times as much for waves, 1.1 times for
+    local bumps), so neither was kept for the other.
+    """
+    rotation, _ = _rigid_motion(contour, previous)
+    return rotation, area_centroid(previous) - area_centroid(contour) @ rotation.T
 
 
 def _rigid_motion(source: np.ndarray, target: np.ndarray, iterations: int = 30):
