@@ -608,28 +608,37 @@ def _order_dp(C: np.ndarray, nb: int, window: int, repeat: float, skip: float, g
     adv = np.full(width, inf)
     adv_start = np.empty(width, dtype=start.dtype)
     may_gap = np.isfinite(gap)  # the default never leaves a node unmatched: three operations fewer a row
+    vals, pm, rep = (np.empty(width) for _ in range(3))
+    arg = np.empty(width, dtype=ks.dtype)
+    use_rep = np.empty(width, dtype=bool)
+    # Each row is a dozen operations on a few dozen columns: their buffers
+    # are reused, and the choices written as they are made (numpy's call
+    # overhead, not the arithmetic, is most of the time).
     for i in range(1, na):
-        vals = F - ramp
-        pm = np.minimum.accumulate(vals)
-        arg = np.maximum.accumulate(np.where(vals <= pm, ks, 0))
+        np.subtract(F, ramp, out=vals)
+        np.minimum.accumulate(vals, out=pm)
+        np.multiply(vals <= pm, ks, out=arg)
+        np.maximum.accumulate(arg, out=arg)
         np.add(pm[:-1], ramp[1:], out=adv[1:])
         adv[1:] -= skip
-        rep = F + repeat
-        use_rep = rep < adv
+        np.add(F, repeat, out=rep)
+        np.less(rep, adv, out=use_rep)
         D = np.where(use_rep, rep, adv)
         D += C[i]
         from_adv[i, 1:] = arg[:-1]
         ch = choice[i]
-        ch[use_rep] = 1
+        ch[:] = use_rep  # 1 repeat, else 0 advance
+        kept = use_rep  # where the path did not advance
         if may_gap:
             G = F + gap
             use_gap = G < D
             D[use_gap] = G[use_gap]
             ch[use_gap] = 2
+            kept = ch != 0
         F = D
         adv_start[0] = start[0]
         np.take(start, arg[:-1], out=adv_start[1:])
-        start = np.where(ch == 0, adv_start, start)
+        start = np.where(kept, start, adv_start)
     span = ks - start
     end = np.where(span <= nb - 1, F + skip * (nb - 1 - span), inf)
     j = int(np.argmin(end))

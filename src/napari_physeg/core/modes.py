@@ -301,9 +301,18 @@ def _lowest_modes_sparse(nodes, sigma, material, k):
     return lam, np.asarray(phi)
 
 
+def _cubed(values: np.ndarray) -> np.ndarray:
+    """``values ** 3`` as two products: numpy's power of negative bases goes
+    through the scalar ``pow``, 50 times slower (0.2-0.5 ms of each shape's
+    modes, a tracked frame computes one). Only the signs of the sums of cubes
+    are used, which a last-bit difference does not change (a sum within 1e-6
+    of its scale falls back on the largest entry anyway)."""
+    return values * values * values
+
+
 def _canonical_signs(modes: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """:func:`_canonical_sign` of each mode of ``modes`` (nodes, modes, 2)."""
-    moment = weights @ (modes[..., 0] ** 3 + modes[..., 1] ** 3)
+    moment = weights @ (_cubed(modes[..., 0]) + _cubed(modes[..., 1]))
     scale = weights @ (np.abs(modes[..., 0]) ** 3 + np.abs(modes[..., 1]) ** 3)
     signs = np.where(moment > 0, 1.0, -1.0)
     for j in np.flatnonzero(~(np.abs(moment) > 1e-6 * np.maximum(scale, 1e-300))):
@@ -314,7 +323,7 @@ def _canonical_signs(modes: np.ndarray, weights: np.ndarray) -> np.ndarray:
 def _canonical_sign(mode: np.ndarray, weights: np.ndarray) -> float:
     """A sign that does not depend on node numbering: the weighted third moment
     of the modal displacements made positive (largest entry as a fallback)."""
-    s = float(weights @ (mode[:, 0] ** 3 + mode[:, 1] ** 3))
+    s = float(weights @ (_cubed(mode[:, 0]) + _cubed(mode[:, 1])))
     scale = float(weights @ (np.abs(mode[:, 0]) ** 3 + np.abs(mode[:, 1]) ** 3))
     if abs(s) > 1e-6 * max(scale, 1e-300):
         return 1.0 if s > 0 else -1.0

@@ -401,7 +401,9 @@ class _Drawing:
 def _depth_inside(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Each of ``points``' distance inside the closed ``polygon`` (px; < 0 outside)."""
     xy = np.ascontiguousarray(polygon[:, ::-1], dtype=np.float32)  # OpenCV's (x, y)
-    return np.array([cv2.pointPolygonTest(xy, (float(x), float(y)), True) for y, x in points])
+    # Python floats (tolist): numpy's scalars cost more than the test itself.
+    rows_cols = np.asarray(points, dtype=np.float64).tolist()
+    return np.array([cv2.pointPolygonTest(xy, (x, y), True) for y, x in rows_cols])
 
 
 def _at_the_limit(contour: np.ndarray, drawing: np.ndarray) -> np.ndarray:
