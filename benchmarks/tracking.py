@@ -536,7 +536,7 @@ def main(argv=None):
     for name, c, t, s, ts in rows:
         out(f"| {name} | {c['followed']} / {len(ids)} | {c['lost']} | {c['median']:.2f} | {c['p95']:.2f} "
             f"| {1e3 * t / n_obj_frames:.1f} | {s['nv_median']:.3f} / {s['nv_p90']:.3f} "
-            f"| {s['drift_median']:.2f} / {s['drift_max']:.2f} | {1e3 * ts / 30:.0f} |")
+            f"| {s['drift_median']:.2f} / {s['drift_max']:.2f} | {1e3 * ts / 30:.1f} |")
     out()
     statuses = [s for k in range(len(ids)) for s in tr.status[k]]
     out(f"- ours on the CTC movie: {statuses.count(TRACKED)} object-frames tracked, "
