@@ -28,13 +28,13 @@ from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
 from .features import (_as_image, _check_2d, _intensity_range, _noise_sigma, _normalize, _without_missing,
-                       chamfer_distance, shen_castan_edges)
+                       chamfer_distance, normalized_intensity, shen_castan_edges)
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .magnify import MagnifiedView, magnification
 from .materials import Material, get_material, suggested_stiffness
 from .region import (RegionModel, _disk, _fill, _least_contrast, _scaled, drawing_levels, level_beyond_object,
                      object_region, objectness)
-from .subpixel import polish
+from .subpixel import level_along, polish
 
 __all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "FrameFeatures", "region_features"]
 
@@ -533,7 +533,6 @@ class FrameFeatures:
     noise: float | None = None  # standard deviation of the noise in intensity (None: unknown)
     plane: np.ndarray | None = None  # the background's plane in the image's units (see background_plane)
     missing: np.ndarray | None = None  # the image's NaN pixels, no data: no contour enters them (None: none)
-    levels: tuple[float, float] | None = None  # the evenly lit image's levels intensity maps to 0 and 1
 
     @classmethod
     def of(cls, image, isef_b: float = 0.7) -> FrameFeatures:
@@ -541,9 +540,7 @@ class FrameFeatures:
         image = _as_image(image)
         plane = background_plane(image)
         image = plane_removed(image, plane, (slice(0, image.shape[0]), slice(0, image.shape[1])))
-        levels = _intensity_range(image)
-        return cls(*_edges_and_intensity(_normalize(image, levels=levels), isef_b), plane=plane, missing=missing,
-                   levels=levels)
+        return cls(*_edges_and_intensity(normalized_intensity(image), isef_b), plane=plane, missing=missing)
 
 
 #: White noise's standard deviation is multiplied by 1 / (2 sqrt(pi) sigma)
@@ -639,7 +636,7 @@ class _FeatureWindow:
         intensity range ``context`` is normalised to and its noise there
         (the frame's own when the features are shared)."""
         if self.shared is not None:
-            self.levels, self.noise = self.shared.levels, None
+            self.levels, self.noise = None, None
             intensity, noise = self.shared.intensity[context], self.shared.noise
         else:
             sub = self.evenly_lit(context)
@@ -750,8 +747,9 @@ def _polished(features: _FeatureWindow, nodes: np.ndarray) -> np.ndarray:
     and the region force's balance, half-way between the two, stands.
 
     For a drawing traced on the border, each node goes to the nearer (the
-    further in) of two readings: the crossing of the line's own level and
-    that of the half-level. The half-level is read 2.5-4 px either side of
+    further in) of two readings: the crossing of the line's own level (as
+    the polish reads levels, see subpixel.level_along) and that of the
+    half-level. The half-level is read 2.5-4 px either side of
     where the contour rests, and on the wide ramps of blurred nuclei it
     moves with it: a result started from again ended a little further out
     each time (+10 % in area over four runs for an isolated nucleus). The
@@ -765,8 +763,8 @@ def _polished(features: _FeatureWindow, nodes: np.ndarray) -> np.ndarray:
                        -0.5, features.bounds)
 
     polished = polished_at(None)
-    if features.model.border_level is not None and features.levels is not None:
-        on_line = polished_at(features.model_in_image_units().border_level)
+    if features.model.border_level is not None:
+        on_line = polished_at(level_along(image, features.drawing - features.origin))
         normals = outward_normals(nodes)
         further_in = ((on_line - nodes) * normals).sum(1) < ((polished - nodes) * normals).sum(1)
         polished = np.where(further_in[:, None], on_line, polished)
