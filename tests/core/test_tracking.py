@@ -50,16 +50,22 @@ def test_origins_follow_the_turning_body(movie, tracked):
     degrees, about 3 node spacings at its tips, in these 12 frames)."""
     first = tracked.contours[0][0]
     spacing = np.mean(np.hypot(*(np.roll(first, -1, axis=0) - first).T))
+    steps = [(tracked.contours[0][t], tracked.origin[0][t]) for t in range(1, 12)]
     drift = []
     for i in range(0, len(first), 7):
-        point = first[i]
-        material = np.argmin(((movie.outlines[0] - point) ** 2).sum(1))
-        for t in range(1, 12):
-            origins, contour = tracked.origin[0][t], tracked.contours[0][t]
-            j = np.argmin(((origins - point) ** 2).sum(1))
-            point = contour[j] + (point - origins[j])  # the node, plus the offset along the membrane
-        drift.append(np.hypot(*(point - movie.outlines[11][material])) / spacing)
+        material = np.argmin(((movie.outlines[0] - first[i]) ** 2).sum(1))
+        drift.append(np.hypot(*(_followed(first[i], steps) - movie.outlines[11][material])) / spacing)
     assert np.median(drift) < 1.0 and np.max(drift) < 2.0
+
+
+def _followed(point, steps):
+    """Where ``point`` goes through ``steps``, pairs of a contour and its
+    nodes' origins on the one before: the node whose origin is nearest,
+    plus the point's offset from that origin along the membrane."""
+    for contour, origins in steps:
+        j = np.argmin(((origins - point) ** 2).sum(1))
+        point = contour[j] + (point - origins[j])
+    return point
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -73,13 +79,9 @@ def test_origins_on_the_true_outlines_stay_on_their_material_points(seed):
     outlines = [o[::8] for o in cell.outlines]  # the material points in correspondence
     spacing = np.mean(np.hypot(*(np.roll(outlines[0], -1, axis=0) - outlines[0]).T))
     origins = [node_origins(now, before) for before, now in zip(outlines[:-1], outlines[1:])]
-    drift = []
-    for i in range(0, len(outlines[0]), 3):
-        point = outlines[0][i]
-        for t in range(1, len(outlines)):
-            j = np.argmin(((origins[t - 1] - point) ** 2).sum(1))
-            point = outlines[t][j] + (point - origins[t - 1][j])
-        drift.append(np.hypot(*(point - outlines[-1][i])) / spacing)
+    steps = list(zip(outlines[1:], origins))
+    drift = [np.hypot(*(_followed(outlines[0][i], steps) - outlines[-1][i])) / spacing
+             for i in range(0, len(outlines[0]), 3)]
     assert np.median(drift) < 0.3 and np.max(drift) < 1.25
 
 
