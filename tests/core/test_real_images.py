@@ -941,3 +941,24 @@ def test_a_line_traced_around_both_masses_of_a_dividing_cell_keeps_both(stack, z
     outline = max(measure.find_contours(ndi.binary_dilation(truth).astype(float), 0.5), key=len)[:-1]
     _, iou = segmented(image[z], truth, outline)
     assert iou > 0.6, iou
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason="known (session 47): the bright gaps between a packed colony's rods are "
+                   "holes of the dark object-like pixels, filled as texture is; the colony is then one solid body, "
+                   "too deep to part where the rods touch (docs/benchmarks.md, session 47)")
+def test_a_click_inside_a_rod_of_a_packed_colony_outlines_that_rod(ecoli_colony):
+    """A click (a circle of 4 px at its deepest point) inside each of the 17 rods
+    of a phase-contrast E. coli microcolony, packed side by side: each should
+    give its rod. Session 47's code scores 0.02-0.90, 0.33 on average: most
+    clicks take several rods or a piece of one. (Keeping holes at the
+    background's level open parted them, but cut the cameraman's coat apart
+    and a bay into a confocal nucleus: not kept.)"""
+    image, labels = ecoli_colony
+    ious = []
+    for label in np.unique(labels)[1:]:
+        rod = labels == label
+        deepest = np.unravel_index(ndi.distance_transform_edt(rod).argmax(), rod.shape)
+        t = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+        found = polygon2mask(image.shape, segment(image, np.asarray(deepest) + 4 * np.c_[np.sin(t), np.cos(t)]).contour)
+        ious.append((found & rod).sum() / (found | rod).sum())
+    assert np.mean(ious) > 0.8
