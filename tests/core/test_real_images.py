@@ -962,3 +962,37 @@ def test_a_click_inside_a_rod_of_a_packed_colony_outlines_that_rod(ecoli_colony)
         found = polygon2mask(image.shape, segment(image, np.asarray(deepest) + 4 * np.c_[np.sin(t), np.cos(t)]).contour)
         ious.append((found & rod).sum() / (found | rod).sum())
     assert np.mean(ious) > 0.8
+
+
+@pytest.mark.parametrize("drawing", ["circle", "click"])
+def test_a_dim_nucleus_in_a_field_whose_range_bright_nuclei_set(hela_frame, drawing):
+    """A dim nucleus of the HeLa movie (label 181 of frame 19), a hundredth of
+    the image's range above the ground, three times the pixel noise: bright
+    mitotic nuclei set the range. Drawn around (1.25 times its size) or
+    clicked inside, it is the object. Its contrast was under a floor of 2 % of
+    the range, so the drawing was read as lying inside a dark object, the
+    ground, and the contour spread over the ground between the nuclei (IoU
+    0.00, reported converged)."""
+    image, labels = hela_frame
+    nucleus = labels == 181
+    centre = np.argwhere(nucleus).mean(0)
+    radius = np.sqrt(nucleus.sum() / np.pi) * (1.25 if drawing == "circle" else 0.4)
+    res, iou = segmented(image, nucleus, circle(centre, radius))
+    assert res.polarity == 1
+    assert iou > 0.7, iou
+
+
+def test_a_contour_spread_to_the_reach_of_a_drawing_inside_is_reported_leaked(hela_frame, monkeypatch):
+    """The same dim nucleus, with the floor of contrast it was invisible
+    under (2 % of the range): the circle is read as lying inside a dark
+    object, the ground, and the contour spreads over the ground between the
+    nuclei until the farthest a drawing inside an object may reach (25 times
+    its size) holds it. That is no border: "leaked", not "converged"."""
+    from napari_physeg.core import region
+
+    monkeypatch.setattr(region, "MIN_CONTRAST", 0.02)
+    image, labels = hela_frame
+    nucleus = labels == 181
+    res, iou = segmented(image, nucleus, circle(np.argwhere(nucleus).mean(0), 1.25 * np.sqrt(nucleus.sum() / np.pi)))
+    assert iou < 0.1 and res.polarity == -1  # the situation, as it was
+    assert res.stop_reason == "leaked" and not res.converged

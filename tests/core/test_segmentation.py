@@ -1179,3 +1179,32 @@ def test_a_contour_growing_across_a_large_disk_grows_its_window_a_few_times(monk
     res, iou = iou_from_a_circle_inside_a_large_disk(40)
     assert res.converged and iou > 0.98
     assert len(computed) <= 5
+
+
+@pytest.mark.parametrize("radius", [3, 5, 13])
+@pytest.mark.parametrize("contrast", [0.006, 0.012])
+def test_a_dim_object_among_bright_ones_stands_out_of_the_noise(contrast, radius):
+    """A disk a hundredth of the image's range or less above the ground, in a
+    lattice of bright disks that set the range (fluorescence with mitotic
+    cells), with noise at a sixth of its contrast; clicked inside or drawn
+    around (1.3 times its radius). What tells a contrast is the noise (and a
+    grey level or so, for noiseless images), not a share of the range: the
+    dim disk is the object. Under a floor of 2 % of the range, the drawing
+    was read as lying inside a dark object, the ground, and the contour
+    spread over it (IoU 0.02 and below). Clicked inside, the disk and the
+    piece of ground about it, between four bright disks, were read as a
+    dark spot of texture in a bright object, up to a fifth of the bright
+    level (the piece lies mostly at the ground's level: it is the ground)."""
+    rng = np.random.default_rng(3)
+    yy, xx = np.mgrid[:270, :270]
+    image = np.zeros(yy.shape)
+    for row in range(20, 270, 45):
+        for col in range(20, 270, 45):
+            image[(yy - row) ** 2 + (xx - col) ** 2 <= 12**2] = 1.0
+    dim = (yy - 132) ** 2 + (xx - 132) ** 2 <= 10**2  # midway between four bright disks
+    image[dim] = contrast
+    image += rng.normal(0.0, contrast / 6, image.shape)
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    res = segment(image, np.c_[132 + radius * np.sin(t), 132 + radius * np.cos(t)])
+    assert res.polarity == 1 and res.converged
+    assert iou(res.contour, dim) > 0.9

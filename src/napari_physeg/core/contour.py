@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 
+import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist, pdist
@@ -344,6 +345,14 @@ def closest_on_polyline(points: np.ndarray, curve: np.ndarray, near: np.ndarray,
     best = dist.argmin(0)  # the first of equally close ones
     every = np.arange(len(points))
     return candidates[best, every], dist[best, every]
+
+
+def depth_inside(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Each of ``points``' distance inside the closed ``polygon`` (px; < 0 outside)."""
+    xy = np.ascontiguousarray(polygon[:, ::-1], dtype=np.float32)  # OpenCV's (x, y)
+    # Python floats (tolist): numpy's scalars cost more than the test itself.
+    rows_cols = np.asarray(points, dtype=np.float64).tolist()
+    return np.array([cv2.pointPolygonTest(xy, (x, y), True) for y, x in rows_cols])
 
 
 def nearest_node(points: np.ndarray, nodes: np.ndarray) -> np.ndarray:

@@ -22,7 +22,7 @@ from scipy.spatial.distance import pdist
 
 from .background import background_plane, plane_removed
 from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, crosses_itself,
-                      cut_pinches, densify, nearest_node, nodes_for_spacing, outward_normals, pair_indices,
+                      cut_pinches, densify, depth_inside, nearest_node, nodes_for_spacing, outward_normals, pair_indices,
                       pairs_within, perimeter, polygon_mask, remove_loops, resample, segment_lengths, signed_area)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
@@ -32,8 +32,8 @@ from .features import (_as_image, _check_2d, _intensity_range, _noise_sigma, _no
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .magnify import MagnifiedView, magnification
 from .materials import Material, get_material, suggested_stiffness
-from .region import (RegionModel, _disk, _fill, _least_contrast, _scaled, drawing_levels, level_beyond_object,
-                     object_region, objectness)
+from .region import (_INSIDE_LIMIT, RegionModel, _disk, _fill, _least_contrast, _scaled, drawing_levels,
+                     level_beyond_object, object_region, objectness)
 from .subpixel import level_along, polish
 
 __all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "FrameFeatures", "region_features"]
@@ -95,8 +95,9 @@ class SegmentationResult:
         ``"converged"`` (at rest, at least 70 % of the nodes on an edge or an
         object/background switch), ``"stalled"`` (at rest elsewhere: nothing
         in reach pulls it), ``"leaked"`` (at rest along all four sides of the
-        image, which the drawing did not reach: nothing told the object from
-        its surroundings), ``"oscillating"`` (it kept moving without progress
+        image, which the drawing did not reach, or, from a drawing read as
+        lying inside the object, along the farthest it may reach, 25 times the
+        drawing's size: nothing told the object from its surroundings), ``"oscillating"`` (it kept moving without progress
         over 200 steps: nothing holds it, e.g. noise or shading without a
         border), ``"max_steps"`` (it kept moving: still travelling, or swinging
         about the border) or ``"cancelled"``. At rest means no node
@@ -473,6 +474,29 @@ def _took_the_whole_image(contour: np.ndarray, drawing: np.ndarray, shape) -> bo
     ``drawing`` (clipped to the image) did not: it spread over the whole
     image, the image's sides holding it where no border of the object did."""
     return _sides_met(contour, shape) == 4 and _sides_met(drawing, shape) < 4
+
+
+#: A contour from a drawing read as lying inside its object that rests
+#: within this many px of the farthest reach such a drawing is given
+#: (region._INSIDE_LIMIT times its size) along at least this share of its
+#: nodes off the image's sides was held there by that reach, not by a border.
+AT_REACH_PX = 1.5
+AT_REACH_SHARE = 0.5
+
+
+def _held_by_the_reach(contour: np.ndarray, drawing: np.ndarray, model: RegionModel, shape) -> bool:
+    """Whether ``contour``, grown from a ``drawing`` that ``model`` reads as
+    inside its object, rests along the farthest reach such a drawing is
+    given: the object's look-alike spread that far (the ground between
+    nuclei, for a dim nucleus whose levels the drawing did not tell). The
+    image's sides, which hold an object cut by them, are left out."""
+    if model.drawn_around:
+        return False
+    off_sides = np.all((contour > 1.0) & (contour < np.array(shape, dtype=float) - 2.0), axis=1)
+    if not off_sides.any():
+        return False
+    at_reach = np.abs(depth_inside(_scaled(drawing, _INSIDE_LIMIT), contour[off_sides])) <= AT_REACH_PX
+    return bool(np.mean(at_reach) >= AT_REACH_SHARE)
 
 
 def _sides_met(contour: np.ndarray, shape, within: float = 1.0) -> int:
@@ -1248,7 +1272,8 @@ def _evolve(
         # on the raw image and fit the polygon to it (see subpixel.polish).
         nodes = _polished(features, nodes)
     nodes = nodes + features.origin
-    if stop_reason == "converged" and _took_the_whole_image(nodes, init, image.shape):
+    if stop_reason == "converged" and (_took_the_whole_image(nodes, init, image.shape)
+                                       or _held_by_the_reach(nodes, drawing, features.model, image.shape)):
         stop_reason = "leaked"
     if not np.array_equal(history[-1], nodes):
         history.append(nodes.copy())

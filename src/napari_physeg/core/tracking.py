@@ -41,9 +41,9 @@ from scipy.spatial import cKDTree
 
 from ._drain import drain
 from ._validation import check_contour
-from .contour import (area_centroid, as_contour, bounding_window, closest_on_polyline, nearest_node, outward_normals,
-                      perimeter, polygon_mask, positively_oriented, remove_loops, resample, rotation_matrix,
-                      signed_area)
+from .contour import (area_centroid, as_contour, bounding_window, closest_on_polyline, depth_inside, nearest_node,
+                      outward_normals, perimeter, polygon_mask, positively_oriented, remove_loops, resample,
+                      rotation_matrix, signed_area)
 from .background import plane_removed
 from .dynamics import DivergenceError
 from .features import _without_missing
@@ -398,21 +398,13 @@ class _Drawing:
         return out
 
 
-def _depth_inside(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Each of ``points``' distance inside the closed ``polygon`` (px; < 0 outside)."""
-    xy = np.ascontiguousarray(polygon[:, ::-1], dtype=np.float32)  # OpenCV's (x, y)
-    # Python floats (tolist): numpy's scalars cost more than the test itself.
-    rows_cols = np.asarray(points, dtype=np.float64).tolist()
-    return np.array([cv2.pointPolygonTest(xy, (x, y), True) for y, x in rows_cols])
-
-
 def _at_the_limit(contour: np.ndarray, drawing: np.ndarray) -> np.ndarray:
     """Which nodes of ``contour`` rest against the limit that ``drawing``
     sets to its object (the drawing grown by region.hasty_margin px)."""
     margin = hasty_margin(abs(signed_area(drawing)))
     # Within a pixel and a half of it: the limit is a raster's dilation, and
     # the polish moves the nodes by up to a pixel.
-    return -_depth_inside(drawing, contour) >= margin - 1.5
+    return -depth_inside(drawing, contour) >= margin - 1.5
 
 
 def _against_the_limit(contour: np.ndarray, drawing: np.ndarray) -> bool:
@@ -511,7 +503,7 @@ def _carried(drawing: _Drawing | None, last: np.ndarray, start: np.ndarray, inte
         return _Drawing.on(_drawing_around(start), intensity)
     moved = drawing.moved(area_centroid(start) - area_centroid(last))
     margin = _margin(start)
-    inside = _depth_inside(moved.line, start)
+    inside = depth_inside(moved.line, start)
     # Moved by the object's looks, a drawing the contour came close to along
     # a run of nodes is kept (a neighbour it pressed into); one it came
     # close to all round is not (the object grew).
