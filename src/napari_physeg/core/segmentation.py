@@ -22,8 +22,9 @@ from scipy.spatial.distance import pdist
 
 from .background import background_plane, plane_removed
 from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, crosses_itself,
-                      cut_pinches, densify, depth_inside, nearest_node, nodes_for_spacing, outward_normals, pair_indices,
-                      pairs_within, perimeter, polygon_mask, remove_loops, resample, segment_lengths, signed_area)
+                      cut_pinches, densify, depth_inside, nearest_node, nodes_for_spacing, outward_normals,
+                      pair_indices, pairs_within, perimeter, polygon_mask, remove_loops, resample, segment_lengths,
+                      signed_area)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
@@ -97,10 +98,11 @@ class SegmentationResult:
         in reach pulls it), ``"leaked"`` (at rest along all four sides of the
         image, which the drawing did not reach, or, from a drawing read as
         lying inside the object, along the farthest it may reach, 25 times the
-        drawing's size: nothing told the object from its surroundings), ``"oscillating"`` (it kept moving without progress
-        over 200 steps: nothing holds it, e.g. noise or shading without a
-        border), ``"max_steps"`` (it kept moving: still travelling, or swinging
-        about the border) or ``"cancelled"``. At rest means no node
+        drawing's size: nothing told the object from its surroundings),
+        ``"oscillating"`` (it kept moving without progress over 200 steps:
+        nothing holds it, e.g. noise or shading without a border),
+        ``"max_steps"`` (it kept moving: still travelling, or swinging about
+        the border) or ``"cancelled"``. At rest means no node
         strayed more than ``patience * tol`` px over the last ``patience``
         steps, or the area per length and the centroid neither drifted nor
         strayed by more than half a pixel over 15 steps.
