@@ -958,10 +958,14 @@ def test_a_click_inside_a_rod_of_a_packed_colony_outlines_that_rod(ecoli_colony)
     for label in np.unique(labels)[1:]:
         rod = labels == label
         deepest = np.unravel_index(ndi.distance_transform_edt(rod).argmax(), rod.shape)
-        t = np.linspace(0, 2 * np.pi, 32, endpoint=False)
-        found = polygon2mask(image.shape, segment(image, np.asarray(deepest) + 4 * np.c_[np.sin(t), np.cos(t)]).contour)
+        found = polygon2mask(image.shape, segment(image, circle(deepest, 4, 32)).contour)
         ious.append((found & rod).sum() / (found | rod).sum())
     assert np.mean(ious) > 0.8
+
+
+def circle_about(mask, factor):
+    """A circle about ``mask``'s centroid, ``factor`` times its equivalent radius."""
+    return circle(np.argwhere(mask).mean(0), factor * np.sqrt(mask.sum() / np.pi))
 
 
 @pytest.mark.parametrize("drawing", ["circle", "click"])
@@ -975,9 +979,7 @@ def test_a_dim_nucleus_in_a_field_whose_range_bright_nuclei_set(hela_frame, draw
     0.00, reported converged)."""
     image, labels = hela_frame
     nucleus = labels == 181
-    centre = np.argwhere(nucleus).mean(0)
-    radius = np.sqrt(nucleus.sum() / np.pi) * (1.25 if drawing == "circle" else 0.4)
-    res, iou = segmented(image, nucleus, circle(centre, radius))
+    res, iou = segmented(image, nucleus, circle_about(nucleus, 1.25 if drawing == "circle" else 0.4))
     assert res.polarity == 1
     assert iou > 0.7, iou
 
@@ -993,6 +995,6 @@ def test_a_contour_spread_to_the_reach_of_a_drawing_inside_is_reported_leaked(he
     monkeypatch.setattr(region, "MIN_CONTRAST", 0.02)
     image, labels = hela_frame
     nucleus = labels == 181
-    res, iou = segmented(image, nucleus, circle(np.argwhere(nucleus).mean(0), 1.25 * np.sqrt(nucleus.sum() / np.pi)))
+    res, iou = segmented(image, nucleus, circle_about(nucleus, 1.25))
     assert iou < 0.1 and res.polarity == -1  # the situation, as it was
     assert res.stop_reason == "leaked" and not res.converged

@@ -1204,7 +1204,6 @@ def test_a_dim_object_among_bright_ones_stands_out_of_the_noise(contrast, radius
     dim = (yy - 132) ** 2 + (xx - 132) ** 2 <= 10**2  # midway between four bright disks
     image[dim] = contrast
     image += rng.normal(0.0, contrast / 6, image.shape)
-    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
-    res = segment(image, np.c_[132 + radius * np.sin(t), 132 + radius * np.cos(t)])
+    res = segment(image, _circle((132, 132), radius))
     assert res.polarity == 1 and res.converged
     assert iou(res.contour, dim) > 0.9

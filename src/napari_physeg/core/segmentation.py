@@ -494,18 +494,25 @@ def _held_by_the_reach(contour: np.ndarray, drawing: np.ndarray, model: RegionMo
     image's sides, which hold an object cut by them, are left out."""
     if model.drawn_around:
         return False
-    off_sides = np.all((contour > 1.0) & (contour < np.array(shape, dtype=float) - 2.0), axis=1)
+    low, high = _near_sides(contour, shape)
+    off_sides = ~(low | high).any(axis=1)
     if not off_sides.any():
         return False
     at_reach = np.abs(depth_inside(_scaled(drawing, _INSIDE_LIMIT), contour[off_sides])) <= AT_REACH_PX
     return bool(np.mean(at_reach) >= AT_REACH_SHARE)
 
 
+def _near_sides(contour: np.ndarray, shape, within: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Which of ``contour``'s coordinates lie within ``within`` px of the
+    image's low sides (top, left) and of its high ones (bottom, right)."""
+    last = np.array(shape, dtype=float) - 1.0
+    return contour <= within, contour >= last - within
+
+
 def _sides_met(contour: np.ndarray, shape, within: float = 1.0) -> int:
     """How many of the image's four sides ``contour`` comes within ``within`` px of."""
-    low, high = contour.min(axis=0), contour.max(axis=0)
-    last = np.array(shape, dtype=float) - 1.0
-    return int(np.sum(low <= within)) + int(np.sum(high >= last - within))
+    low, high = _near_sides(contour, shape, within)
+    return int(low.any(axis=0).sum()) + int(high.any(axis=0).sum())
 
 
 def _rest_reason(field: ForceField, nodes: np.ndarray) -> str:
