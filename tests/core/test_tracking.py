@@ -155,6 +155,21 @@ def _circle(centre, radius, n=48):
     return np.column_stack([centre[0] + radius * np.sin(t), centre[1] + radius * np.cos(t)])
 
 
+def test_an_object_cut_by_the_side_grows_to_at_most_its_whole():
+    """A cell seen whole (315 px) moves into the image's side, which cuts it
+    (259 px); then a large bright body comes in along the side and touches
+    it. The side hides part of an object it cuts, so its contour may grow
+    from one frame to the next by more than an object not at the side (a
+    sliver may become the whole), but not beyond twice the whole: the
+    contour that spread over the newcomer (1119 px) was reported tracked."""
+    centres = [[(48, 60 + 5 * t)] for t in range(7)] + [[(48, 90)]] * 2
+    frames = _disk_movie(centres, radius=10)
+    frames[7:, 10:90, 82:] = 0.8
+    tr = track(frames, _circle((48, 60), 14))
+    assert tr.status[0] == [TRACKED] * 7 + [LOST] * 2
+    assert abs(signed_area(tr.contours[0][6])) < abs(signed_area(tr.contours[0][5]))  # cut by the side
+
+
 def test_touching_objects_repel_and_never_overlap():
     """Two cells that come into contact: each keeps its own pixels."""
     centres = [[(48, 30 + 1.5 * t), (48, 66 - 1.5 * t)] for t in range(6)]  # 36 px apart, then 21

@@ -552,19 +552,25 @@ def _touches_side(contour: np.ndarray, shape, missing: np.ndarray | None = None)
     return bool(missing[near[..., 0], near[..., 1]].any())
 
 
-def _judge(contour, previous, predicted, whole_area, shape, missing=None) -> str:
+def _judge(contour, previous, predicted, whole_area, shape, missing=None, seen_whole: bool = False) -> str:
     """Is ``contour`` the object seen on ``previous`` (and ``predicted`` on
     this frame), or has it gone? (``missing``: the frame's pixels that hold
-    no data, see _touches_side.)"""
+    no data, see _touches_side; ``seen_whole``: whether ``whole_area`` is
+    that of a contour the image's side did not cut.)"""
     area, prev_area = abs(signed_area(contour)), abs(signed_area(previous))
     at_side, was_at_side = _touches_side(contour, shape, missing), _touches_side(previous, shape, missing)
     if at_side and area < LEFT_FRACTION * whole_area:
         return LEFT
     # The image's side hides part of an object it cuts: one that moves in
     # shows more of itself (a sliver may become the whole), one that moves
-    # out less; neither is a sign of another object.
+    # out less; neither is a sign of another object. But an object seen
+    # whole shows at most that whole (a crowd nucleus of 152 px cut by the
+    # side took in a neighbour coming into view, 353 px, reported tracked).
     least = 0.0 if at_side else prev_area / MAX_AREA_CHANGE
-    most = np.inf if was_at_side else MAX_AREA_CHANGE * prev_area
+    if not was_at_side:
+        most = MAX_AREA_CHANGE * prev_area
+    else:
+        most = MAX_AREA_CHANGE * max(whole_area, prev_area) if seen_whole else np.inf
     if not least <= area <= most:
         return LOST
     # A contour that holds no pixel of where the object was predicted has
@@ -844,6 +850,7 @@ class _Seen:
 
     polarity: str
     whole_area: float
+    seen_whole: bool = False  # whether whole_area is of a contour the image's side did not cut
     contrasts: dict = field(default_factory=dict)  # frame -> contrast where tracked
     parted: dict = field(default_factory=dict)  # frame -> the two bodies of a contour pinched on its way to being lost there
     drawing: _Drawing | None = None  # the drawing its last tracked frame was segmented in (see _carried)
@@ -1220,10 +1227,11 @@ def _found(image, shared, owner, t, k, drawing: _Drawing, predicted, previous, s
     if previous is None:
         seen.polarity = "bright" if res.polarity > 0 else "dark"
         seen.whole_area = abs(signed_area(contour))
+        seen.seen_whole = not _touches_side(contour, image.shape, shared.missing)
         seen.contrasts[t] = _contrast(image, contour, res.polarity, avoid)
         seen.drawing = drawing  # the next frames start from it (see _carried)
         return contour, TRACKED
-    verdict = _judge(contour, previous, predicted, seen.whole_area, image.shape, shared.missing)
+    verdict = _judge(contour, previous, predicted, seen.whole_area, image.shape, shared.missing, seen.seen_whole)
     if verdict == LOST:
         # Pinched in two on its way (a division, or a neighbour it took in
         # let go), it kept one body: see _warn_divided.
@@ -1240,7 +1248,7 @@ def _found(image, shared, owner, t, k, drawing: _Drawing, predicted, previous, s
     if verdict == TRACKED:
         seen.drawing = drawing
     if verdict == TRACKED and not _touches_side(contour, image.shape, shared.missing):
-        seen.whole_area = abs(signed_area(contour))
+        seen.whole_area, seen.seen_whole = abs(signed_area(contour)), True
     return (contour if verdict == TRACKED else None), verdict
 
 
