@@ -832,3 +832,42 @@ def test_an_objects_looks_tell_nothing_when_flat_or_moved_beyond_the_search():
     assert _look_shift(np.zeros((120, 120)), blob, _circle((60, 60), 12)) is None
     # The search reaches one radius (12 px): a 20-px jump is beyond it.
     assert _look_shift(blob, ndi.shift(blob, (20, 0), order=1), _circle((60, 60), 12)) is None
+
+
+@pytest.fixture
+def warped(monkeypatch):
+    """benchmarks/tracking_warped.py, imported from the benchmarks' folder, and forgotten after."""
+    import sys
+    from pathlib import Path
+
+    names = ("tracking_warped", "tracking", "real_data", "_common")
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    for name in names:
+        monkeypatch.delitem(sys.modules, name, raising=False)
+    import tracking_warped
+
+    yield tracking_warped
+    for name in names:
+        sys.modules.pop(name, None)
+
+
+def test_touching_nuclei_of_a_warped_real_field_keep_their_own(dsb, warped):
+    """Four nuclei of the Data Science Bowl image (labels 100 and 128 touch)
+    in a 96-px window of the warped movie of benchmarks/tracking_warped.py
+    ("DSB elastic": a smooth field that changes over time, a drift,
+    bleaching and noise), each drawn around as a user would. Each part of a
+    warped field moves its own way: claimed where the field as a whole
+    drifted, a nucleus left a band of its own unclaimed, which its touching
+    neighbour, done first, took, a band a frame (6 object-frames on another
+    nucleus' label, 3 visible nucleus-frames lost, 3 under two contours).
+    Claimed by their own steady motions, none."""
+    image, labels = dsb[0].astype(np.float64), dsb[1].astype(np.int32)
+    _, elastic = warped.MOVIES["DSB elastic"]
+    window = warped.Warp(**{**elastic.__dict__, "window": (156, 56, 96, 96)})
+    frames, truth, whole = warped.warp_movie(image, labels, window)
+    ids = warped.objects(truth[0])
+    inits = [warped.tracking.drawn_around(warped.real_data.largest_filled(truth[0] == i)) for i in ids]
+    masks, _, _ = warped.run_ours_masks(frames, inits)
+    summary = warped.summarise(warped.score(masks, truth, whole, ids), ids)
+    assert len(ids) == 4
+    assert (summary["switches"], summary["lost"], summary["duplicates"]) == (0, 0, 0), summary
