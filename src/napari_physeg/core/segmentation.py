@@ -1386,8 +1386,8 @@ def _magnified(view: MagnifiedView, features: _FeatureWindow, options: dict, t_s
     run, res = _evolve(**inner), None
     try:
         state = next(run)
-        while not view.reaches_a_cut(view.outward(state.contour)):
-            stop = yield SegmentationProgress(state.step, view.outward(state.contour), state.phase)
+        while not view.reaches_a_cut(contour := view.outward(state.contour)):
+            stop = yield SegmentationProgress(state.step, contour, state.phase)
             state = run.send(stop)
         run.close()
     except StopIteration as done:
