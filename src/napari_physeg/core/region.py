@@ -1345,6 +1345,13 @@ VALLEY_CURVATURE = 0.03
 #: convex (its solidity at least this) and as large as a disk of
 #: STRONGER_CORE times the object's inscribed radius (see _beyond_valleys).
 VALLEY_BODY_SOLIDITY = 0.85
+#: A body that valleys part from the object and that lies at least this
+#: share beyond a drawing around the object is a neighbour the drawing
+#: crosses (see _beyond_valleys).
+VALLEY_CROSSED_SHARE = 0.5
+#: The share of the object's own side of the valleys that may lie beyond a
+#: drawing that holds it (see _holds): the pixels along the flood's edge.
+HELD_SLACK = 0.05
 
 
 def _valleys(excess: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1404,15 +1411,29 @@ def _beyond_valleys(excess: np.ndarray, like: np.ndarray, depth: np.ndarray, see
     # together; a textured nucleus' halves make a convex one), and, for a
     # drawing around the object, when it lies partly beyond the drawing (a
     # lobe of the object, or both masses of a dividing cell drawn around,
-    # lie within it).
+    # lie within it). When the drawing holds the object's own side, a side
+    # mostly beyond it is a neighbour the drawing crosses, notched or not
+    # (two nuclei pressed flat along a broad contact make a body as convex as
+    # one nucleus: a box cut the one it crossed along its line).
     markers = np.where(pieces == ours, 1, np.where(others[pieces], pieces + 1, 0)).astype(np.int32)
     flood = segmentation.watershed(strength, markers, mask=blob)
+    holds_ours = drawn is not None and _holds(_within_hasty_margin(drawn)[box], flood == 1)
     for side in np.flatnonzero(others) + 1:
         theirs = flood == side
-        beyond_drawing = drawn is None or (theirs & ~drawn[box]).sum() >= CROSSED_OUTSIDE * theirs.sum()
-        if beyond_drawing and not _convex((flood == 1) | theirs):
+        outside = 1.0 if drawn is None else (theirs & ~drawn[box]).sum() / theirs.sum()
+        crossed = holds_ours and outside >= VALLEY_CROSSED_SHARE
+        if crossed or (outside >= CROSSED_OUTSIDE and not _convex((flood == 1) | theirs)):
             beyond[box] |= theirs
     return beyond
+
+
+def _holds(held: np.ndarray, body: np.ndarray) -> bool:
+    """Whether a drawing around the object holds ``body``: all but
+    HELD_SLACK of it within ``held``, the pixels the drawing encloses and
+    those within a hasty hand's margin (see _within_hasty_margin). A drawing
+    partly beyond the image's side, or across the object, does not hold it
+    and tells nothing of its extent."""
+    return (body & ~held).sum() <= HELD_SLACK * body.sum()
 
 
 def _convex(mask: np.ndarray) -> bool:
