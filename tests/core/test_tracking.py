@@ -871,3 +871,28 @@ def test_touching_nuclei_of_a_warped_real_field_keep_their_own(dsb, warped):
     summary = warped.summarise(warped.score(masks, truth, whole, ids), ids)
     assert len(ids) == 4
     assert (summary["switches"], summary["lost"], summary["duplicates"]) == (0, 0, 0), summary
+
+
+def test_labels_numbered_per_frame_are_linked_and_a_division_ends_the_track(warped):
+    """benchmarks/real_data.linked_labels, which makes the real HeLa movie's truth tracks:
+    a nucleus that moves a few px keeps its number; one that divides (two labels of the next
+    frame nearest it) ends, and both daughters are new; one that jumps further than the
+    link distance, or whose area doubles, is new too."""
+    from skimage.draw import disk
+
+    def frame(centres, radii):
+        out = np.zeros((100, 160), np.int32)
+        for label, (centre, radius) in enumerate(zip(centres, radii), start=1):
+            out[disk(centre, radius, shape=out.shape)] = label
+        return out
+
+    # Per frame numbering differs: the shipped labels are numbered anew on every frame.
+    first = frame([(20, 20), (50, 80), (80, 140), (20, 140)], [6, 8, 6, 6])
+    second = frame([(50, 70), (50, 92), (22, 24), (80, 110), (20, 140)], [7, 7, 6, 6, 9])
+    linked = warped.real_data.linked_labels(np.stack([first, second]), 25.0, 1.6)
+    assert np.array_equal(linked[0], first)
+    ids = {label: int(np.bincount(linked[1][second == label]).argmax()) for label in range(1, 6)}
+    assert ids[3] == 1  # moved 4.5 px: the same nucleus
+    assert len({ids[1], ids[2], ids[4], ids[5]} | {1, 2, 3, 4}) == 8  # all others are new
+    # The daughters are new even when one of them lies nearer than any other label.
+    assert ids[1] != 2 and ids[2] != 2
