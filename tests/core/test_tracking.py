@@ -427,6 +427,27 @@ def test_an_object_that_fades_away_is_lost_one_that_bleaches_is_not():
     assert bleached.status[0] == [TRACKED] * 24
 
 
+@pytest.mark.parametrize("brightening, followed", [(1 / 0.36, True), (1.0, False)],
+                         ids=["signal kept: condensed", "signal lost: a part"])
+def test_a_nucleus_that_condenses_is_followed_one_that_shrinks_to_a_part_is_lost(brightening, followed):
+    """A nucleus entering mitosis gathers its chromatin into a brighter body
+    of a third of its area: its signal (contrast times area) is kept, and it
+    is the same object (the real HeLa movie lost such nuclei). A contour on a
+    body of that size that keeps only its share of the signal is not the
+    object (a part of it, or a speck where it vanished): lost, as before."""
+    rr, cc = np.mgrid[:96, :96]
+    rng = np.random.default_rng(0)
+
+    def frame(radius, contrast):
+        return 0.2 + contrast * ((rr - 48) ** 2 + (cc - 48) ** 2 <= radius**2) + 0.01 * rng.standard_normal(rr.shape)
+
+    frames = np.stack([frame(15, 0.2)] * 3 + [frame(9, 0.2 * brightening)] * 2)
+    tr = track(frames, _circle((48, 48), 19))
+    assert tr.status[0] == [TRACKED] * 3 + [TRACKED if followed else LOST] * 2
+    if followed:
+        assert abs(np.sqrt(abs(signed_area(tr.contours[0][4])) / np.pi) - 9) < 1
+
+
 def test_an_object_that_moves_out_of_the_image_has_left_the_field_of_view():
     centres = [[(48, 60 + 8 * t)] for t in range(7)]  # out by the right side
     tr = track(_disk_movie(centres), _circle((48, 60), 16))
