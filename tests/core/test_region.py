@@ -619,3 +619,22 @@ def test_a_textured_nucleus_is_not_parted_at_its_texture_valleys(seed):
     image, left, right = nuclei_pressed_together(dip=0.0, texture=0.25, seed=seed)
     _, region = region_with_levels_beyond(image, circle((50, 50), 6))
     assert overlap(region, left | right) > 0.9
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_holes_are_filled_as_scipy_fills_them(seed):
+    """region._filled, OpenCV's labels of what is not the mask, gives
+    scipy.ndimage.binary_fill_holes' answer (a hole: a 4-connected piece of
+    the rest that does not reach the array's side), on masks of every
+    density and size down to one pixel."""
+    from napari_physeg.core.region import _filled
+
+    rng = np.random.default_rng(seed)
+    for _ in range(200):
+        shape = tuple(rng.integers(1, 30, 2))
+        mask = rng.random(shape) < rng.uniform(0.1, 0.9)
+        if rng.random() < 0.5:
+            mask = ndi.binary_dilation(mask)
+        assert np.array_equal(_filled(mask), ndi.binary_fill_holes(mask))
+    ring = disk((21, 21), (10, 10), 8) & ~disk((21, 21), (10, 10), 4)
+    assert np.array_equal(_filled(ring), disk((21, 21), (10, 10), 8))
