@@ -81,7 +81,7 @@ frame of the switch, one per nucleus) into ``docs/images/tracking_warped_worst.p
     make bench        # or: .venv/bin/python benchmarks/tracking_warped.py [--quick] [--write]
 
 ``--quick`` runs three movies of 10 frames (DSB drift, U2OS, confocal) in about 20 s; the whole
-run takes about 2 minutes on the 2-core machine of the tables.
+run takes about 6 minutes on the 2-core machine of the tables.
 """
 
 from __future__ import annotations
