@@ -63,7 +63,7 @@ LEFT = "left the field of view"
 #: (its contrast times its area; a fluorophore does not vanish in a frame)
 #: is the object condensed: a nucleus entering mitosis gathers its chromatin
 #: into a bright body of half its area or less (the real HeLa movie's, at 0.45
-#: of their area, kept 0.75-0.8 of their signal, and were lost), where a
+#: of their area, kept three quarters of their signal, and were lost), where a
 #: contour left on a part of the object, or on a speck where it vanished,
 #: keeps only its share of the signal.
 MAX_AREA_CHANGE = 2.0
