@@ -359,8 +359,9 @@ def switch_cases(name, frames, truth, masks, ids, summary, n=3):
             box = (slice(max(rr.min() - 12, 0), rr.max() + 13), slice(max(cc.min() - 12, 0), cc.max() + 13))
             crops.append(dict(t=u, image=frames[u][box], own=(truth[u] == ids[k])[box],
                               labels=truth[u][box], mask=None if m is None else m[box]))
+        source = MOVIES[name][0].__name__ if name in MOVIES else name  # the DSB movies share their nuclei
         cases.append(dict(title=f"{name}, object {k} (label {ids[k]}): {int(switched[k].sum())} frames switched",
-                          crops=crops, t=t, count=int(switched[k].sum()), nucleus=(MOVIES[name][0].__name__ if name in MOVIES else name, ids[k])))
+                          crops=crops, t=t, count=int(switched[k].sum()), nucleus=(source, ids[k])))
     return cases
 
 
