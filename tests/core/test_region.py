@@ -638,3 +638,31 @@ def test_holes_are_filled_as_scipy_fills_them(seed):
         assert np.array_equal(_filled(mask), ndi.binary_fill_holes(mask))
     ring = disk((21, 21), (10, 10), 8) & ~disk((21, 21), (10, 10), 4)
     assert np.array_equal(_filled(ring), disk((21, 21), (10, 10), 8))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_valley_hessian_is_scikit_images(seed):
+    """region._hessian, OpenCV's separable filters, gives
+    skimage.feature.hessian_matrix's Gaussian-derivative Hessian (the one
+    the valleys were tuned on) to rounding, on smooth and rough images of
+    every shape down to a single row, and a valley line lies along a dark
+    groove and nowhere else."""
+    from skimage.feature import hessian_matrix
+
+    from napari_physeg.core.region import VALLEY_SCALE, _hessian, _valleys
+
+    rng = np.random.default_rng(seed)
+    for _ in range(20):
+        shape = tuple(rng.integers(1, 90, 2))
+        image = rng.normal(size=shape)
+        if rng.random() < 0.5:
+            image = image.cumsum(0).cumsum(1)
+        expected = hessian_matrix(image, sigma=VALLEY_SCALE, order="rc", use_gaussian_derivatives=True,
+                                  mode="reflect")
+        for ours, theirs in zip(_hessian(image, VALLEY_SCALE), expected):
+            assert np.allclose(ours, theirs, rtol=0, atol=1e-12 * np.abs(image).max())
+    cols = np.arange(60)
+    groove = np.ones((50, 60)) - 0.5 * np.exp(-0.5 * ((cols - 30) / 2.0) ** 2)
+    _, valley = _valleys(groove)
+    assert valley[:, 28:33].all(axis=1)[10:40].all()
+    assert not valley[:, :20].any() and not valley[:, 41:].any()

@@ -39,7 +39,7 @@ import cv2
 import numpy as np
 from scipy import ndimage as ndi
 from scipy.spatial import cKDTree
-from skimage import feature, measure, segmentation
+from skimage import measure, segmentation
 
 from .contour import bounding_window, outward_normals, positively_oriented, resample
 from .features import _noise_sigma
@@ -1358,10 +1358,31 @@ def _valleys(excess: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """How strongly each pixel of ``excess`` (the level beyond the object's,
     in units of its contrast) lies in a valley, and the valley lines (see
     VALLEY_SCALE)."""
-    hessian = feature.hessian_matrix(excess.astype(np.float64), sigma=VALLEY_SCALE, order="rc",
-                                     use_gaussian_derivatives=True, mode="reflect")
-    larger, smaller = feature.hessian_matrix_eigvals(hessian) * VALLEY_SCALE ** 2
+    rr, rc, cc = _hessian(excess.astype(np.float64), VALLEY_SCALE)
+    # The eigenvalues of the symmetric 2 x 2 Hessian, in closed form.
+    mean, radius = 0.5 * (rr + cc), np.hypot(0.5 * (rr - cc), rc)
+    larger, smaller = (mean + radius) * VALLEY_SCALE ** 2, (mean - radius) * VALLEY_SCALE ** 2
     return larger, (larger >= VALLEY_CURVATURE) & (smaller < 0.5 * larger)
+
+
+def _hessian(image: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The Hessian's (rr, rc, cc) images of ``image`` at scale ``sigma``, as
+    ``skimage.feature.hessian_matrix(..., use_gaussian_derivatives=True,
+    mode="reflect")`` computes them (two Gaussian first derivatives of sigma
+    / sqrt(2), truncated at 8 sigma), with OpenCV's separable filter: the same
+    values to 1e-14, 10-20 times faster (it was 4 % of a tracked frame)."""
+    scale = sigma / np.sqrt(2.0)
+    x = np.arange(-int(8.0 * scale + 0.5), int(8.0 * scale + 0.5) + 1, dtype=np.float64)
+    smooth = np.exp(-0.5 / scale ** 2 * x ** 2)
+    smooth /= smooth.sum()
+    # Correlation kernels (OpenCV correlates): the derivative of the Gaussian, reversed.
+    slope = (x / scale ** 2) * smooth
+
+    def filtered(values, along_rows, along_cols):
+        return cv2.sepFilter2D(values, cv2.CV_64F, along_cols, along_rows, borderType=cv2.BORDER_REFLECT)
+
+    d_rows, d_cols = filtered(image, slope, smooth), filtered(image, smooth, slope)
+    return filtered(d_rows, slope, smooth), filtered(d_rows, smooth, slope), filtered(d_cols, smooth, slope)
 
 
 def _beyond_valleys(excess: np.ndarray, like: np.ndarray, depth: np.ndarray, seed: np.ndarray,
