@@ -381,7 +381,8 @@ def area_centroid(contour) -> np.ndarray:
     formula); the mean of the nodes when it encloses no area."""
     contour = np.asarray(contour, dtype=np.float64)
     r, c = contour[:, 0], contour[:, 1]
-    r1, c1 = np.roll(r, -1), np.roll(c, -1)
+    # The next node's coordinates (np.roll's, without its overhead: this runs often on small arrays).
+    r1, c1 = np.concatenate((r[1:], r[:1])), np.concatenate((c[1:], c[:1]))
     cross = r * c1 - r1 * c
     area = 0.5 * cross.sum()
     if abs(area) < 1e-12:
