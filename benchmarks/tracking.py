@@ -368,34 +368,40 @@ def bad_frames(frames, truth, ids, inits, starts, out, frame=10):
         out(f"| {name} | {cells[0]} | {cells[1]} |")
 
 
-def stage_jitter(frames, truth, ids, inits, out, amplitudes=(3, 6, 10)):
-    """The CTC movie on a jittering stage: each frame a crop of the movie's frame, 2 x 10 px
-    smaller, at a random offset of up to +-a px (real content comes in at the sides) from the
-    middle; the truth moves with it. One run each. And the same movie registered, as a user
-    would before tracking: each crop put back where it was taken, in a frame of the movie's size
-    whose margin the crop did not cover holds no data (NaN, as ``scipy.ndimage.shift`` with
-    ``cval=np.nan`` leaves it); ours only (Otsu's threshold does not take NaN)."""
-    margin = max(amplitudes)
-    h, w = frames.shape[1] - 2 * margin, frames.shape[2] - 2 * margin
-    out(f"Stage jitter: each frame of the CTC movie cropped to {h} x {w} px at a random offset of up to "
-        "+-a px a frame (one run each; the drawings on frame 0 as in the main table, cropped); and "
-        "registered back, its margins NaN:")
+def stage_jitter(frames, truth, ids, inits, out, amplitudes=(3, 6, 10, 20, 30, 45)):
+    """The CTC movie on a jittering stage: each frame a crop of the movie's frame, 2 x m px
+    smaller (m the larger of a and 10), at a random offset of up to +-a px (real content comes in
+    at the sides) from the middle; the truth moves with it, and the nuclei whose frame-0 drawing lies
+    wholly outside the first crop are left out. One run each. And the same movie
+    registered, as a user would before tracking: each crop put back where it was taken, in a
+    frame of the movie's size whose margin the crop did not cover holds no data (NaN, as
+    ``scipy.ndimage.shift`` with ``cval=np.nan`` leaves it); ours only (Otsu's threshold does not
+    take NaN)."""
+    out("Stage jitter: each frame of the CTC movie cropped by m = max(a, 10) px all round at a random offset "
+        "of up to +-a px a frame (one run each; the drawings on frame 0 as in the main table, cropped, those "
+        "wholly outside the first crop dropped); and registered back, its margins NaN:")
     out()
     out("| a (px) | ours: followed / frames lost / median (px) | threshold + laptrack | ours, registered |")
     out("|---|---|---|---|")
     for a in amplitudes:
+        margin = max(a, 10)
+        h, w = frames.shape[1] - 2 * margin, frames.shape[2] - 2 * margin
         rng = np.random.default_rng(a)
         offsets = margin + np.vstack([[0, 0], rng.integers(-a, a + 1, (len(frames) - 1, 2))])
         movie = np.stack([f[r:r + h, c:c + w] for f, (r, c) in zip(frames, offsets)])
         moved = {k: {t: p - offsets[t] for t, p in truth[k].items()} for k in truth}
-        drawn = [i - offsets[0] for i in inits]
-        starts = [moved[k][0] for k in ids]
-        cells = [score_cell(centroids, moved, ids, movie.shape[1:])
+        kept = [j for j, init in enumerate(inits)
+                if np.any(np.all((init - offsets[0] >= 0) & (init - offsets[0] < (h, w)), axis=1))]
+        kept_ids = [ids[j] for j in kept]
+        drawn = [inits[j] - offsets[0] for j in kept]
+        starts = [moved[k][0] for k in kept_ids]
+        cells = [score_cell(centroids, moved, kept_ids, movie.shape[1:])
                  for centroids in (run_ours(movie, drawn)[0], run_threshold_laptrack(movie, starts)[0])]
         registered = np.full(frames.shape, np.nan)
         for t, (r, c) in enumerate(offsets):
             registered[t, r:r + h, c:c + w] = movie[t]
-        cells.append(score_cell(run_ours(registered, [i + offsets[0] for i in drawn])[0], truth, ids, frames.shape[1:]))
+        cells.append(score_cell(run_ours(registered, [i + offsets[0] for i in drawn])[0], truth, kept_ids,
+                                frames.shape[1:]))
         out(f"| {a} | {cells[0]} | {cells[1]} | {cells[2]} |")
 
 

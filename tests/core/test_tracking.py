@@ -685,6 +685,36 @@ def test_objects_on_a_jittering_stage_are_followed():
 
 
 
+def test_objects_on_a_stage_that_jumps_beyond_the_looks_reach_are_followed():
+    """Three cells on a stage that jumps 40-60 px between frames, four to
+    six of their radii: beyond where their looks are searched (two radii),
+    the whole frame's shift (read coarsely by phase correlation) says where
+    to search them. Without it every cell was lost at the first jump."""
+    jumps = [(0, 0), (45, -40), (-52, 44), (40, 55), (-58, -41), (47, -50)]
+    offsets = np.cumsum(jumps, axis=0) + 70
+    cells = [(34, 34), (34, 62), (62, 48)]
+    centres = [[(r + o[0], c + o[1]) for r, c in cells] for o in offsets]
+    tr = track(_disk_movie(centres, radius=9, shape=(256, 256), noise=0.05), [_circle(c, 12.5) for c in centres[0]])
+    assert tr.status == [[TRACKED] * len(jumps)] * 3
+    for k in range(3):
+        assert np.all(np.hypot(*(tr.centroids(k) - [c[k] for c in centres]).T) < 1.0)
+
+
+@pytest.mark.parametrize("shift", [(0, 0), (3, -2), (37, 61), (-90, 20)])
+def test_a_frames_shift_is_read_by_phase_correlation_to_the_binnings_precision(shift):
+    """_frame_shift: how a textured frame's content moved (its own copy
+    rolled), to within the binning factor (a 300 x 500 frame is read at
+    1 / 4), whichever way and however far, short of half the frame."""
+    from scipy import ndimage as ndi
+
+    from napari_physeg.core.tracking import _frame_shift
+
+    rng = np.random.default_rng(0)
+    before = ndi.gaussian_filter(rng.normal(size=(300, 500)), 3.0)
+    after = np.roll(before, shift, axis=(0, 1))
+    assert np.abs(_frame_shift(before, after) - shift).max() <= 4
+
+
 @pytest.mark.parametrize("case", ["stage", "one vanished", "two of three vanished", "each its own way", "still"])
 def test_the_stage_shift_is_read_off_the_objects_that_move_together(case):
     """_stage_shift: the shift of a jittering stage, read off the looks of

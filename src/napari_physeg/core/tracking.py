@@ -1073,6 +1073,13 @@ def _stage_shift(run: _Run, before: np.ndarray, image: np.ndarray, t: int, step:
     not. Each object then moves by its own peak near there, if it matches
     well. The motion predicted from the frames before is left out: on a
     jittering stage it adds the last jump to the next.
+
+    A stage that jumps further (a multi-position acquisition that does not
+    come back to the same place, a movie not registered) moves the whole
+    frame: its shift, read coarsely on the whole frames (see _frame_shift),
+    is where the looks are searched first when it lies beyond half that
+    reach; the looks must confirm it (the CTC movie on a stage jumping
+    +-30 px a frame lost every nucleus at the first jump).
     """
     tracked = [k for k in range(len(run.inits)) if run.status[k][t - step] == TRACKED]
     if len(tracked) < 2:
@@ -1081,7 +1088,19 @@ def _stage_shift(run: _Run, before: np.ndarray, image: np.ndarray, t: int, step:
     last = sorted((run.contours[k][t - step] for k in tracked), key=lambda c: tuple(area_centroid(c)))
     radius = np.median([_radius(c) for c in last])
     reach = int(np.clip(STAGE_SEARCH * radius, 4, 60))
-    maps = [found[0] for found in (_look_map(before, image, contour, reach) for contour in last) if found is not None]
+    far = _frame_shift(before, image)
+    if np.abs(far).max() > reach / 2:
+        shift = _shift_by_looks(before, image, last, reach, far)
+        if shift.any():
+            return shift
+    return _shift_by_looks(before, image, last, reach, np.zeros(2, dtype=int))
+
+
+def _shift_by_looks(before, image, contours, reach: int, around: np.ndarray) -> np.ndarray:
+    """The shift the looks of ``contours`` on the frame ``before`` agree on
+    within ``reach`` px of ``around`` on ``image`` (see _stage_shift), or none."""
+    maps = [found[0] for found in (_look_map(before, image, contour, reach, around=around) for contour in contours)
+            if found is not None]
     if len(maps) < 2:
         return np.zeros(2)
     peak = np.array(np.unravel_index(np.argmax(np.sum(maps, axis=0)), maps[0].shape))
@@ -1090,21 +1109,43 @@ def _stage_shift(run: _Run, before: np.ndarray, image: np.ndarray, t: int, step:
         near = score[max(peak[0] - 2, 0):peak[0] + 3, max(peak[1] - 2, 0):peak[1] + 3]
         best = np.array(np.unravel_index(np.argmax(near), near.shape)) + np.maximum(peak - 2, 0)
         if score[tuple(best)] >= STAGE_MATCH:
-            moved.append(best - reach)
+            moved.append(best - reach + around)
     return _common_motion(moved) if 2 * len(moved) > len(maps) else np.zeros(2)
 
 
+#: The frames' shift is read on copies binned to at most this many pixels
+#: along their longer side (see _frame_shift): a stage's jump moves the whole
+#: field, which a few pixels' precision locates for the looks to refine.
+FRAME_SHIFT_SIDE = 128
+
+
+def _frame_shift(before: np.ndarray, image: np.ndarray) -> np.ndarray:
+    """How the content of the frame ``before`` moved onto ``image`` as a
+    whole (integer px, to the binning's precision): the peak of their phase
+    correlation, on copies binned to FRAME_SHIFT_SIDE px (2 ms a frame)."""
+    factor = max(1, int(np.ceil(max(before.shape) / FRAME_SHIFT_SIDE)))
+    size = (max(before.shape[1] // factor, 1), max(before.shape[0] // factor, 1))
+    small = [cv2.resize(np.nan_to_num(frame.astype(np.float32)), size, interpolation=cv2.INTER_AREA)
+             for frame in (before, image)]
+    spectrum = np.fft.fft2(small[1]) * np.conj(np.fft.fft2(small[0]))
+    correlation = np.abs(np.fft.ifft2(spectrum / np.maximum(np.abs(spectrum), 1e-12)))
+    peak = np.array(np.unravel_index(np.argmax(correlation), correlation.shape))
+    # Shifts past half the frame wrap around: they are the negative ones.
+    peak = np.where(peak > np.array(correlation.shape) // 2, peak - np.array(correlation.shape), peak)
+    return (peak * factor).astype(int)
+
+
 def _look_map(before: np.ndarray, image: np.ndarray, contour: np.ndarray, reach: int,
-              at_side: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
+              at_side: bool = False, around=(0, 0)) -> tuple[np.ndarray, np.ndarray] | None:
     """The normalised correlation of ``contour``'s patch on the frame
     ``before`` (its bounding box and 3 px) with ``image`` at every shift of
-    up to ``reach`` px, and the shift of its first value: a
-    (2 reach + 1)^2 map from (-reach, -reach), or, where the search meets
+    up to ``reach`` px from ``around`` (integer px), and the shift of its first value: a
+    (2 reach + 1)^2 map from ``around`` - (reach, reach), or, where the search meets
     the image's side, only the shifts that keep the patch in the image, if
     ``at_side`` (else None). None for a flat patch: nothing to match."""
     rows, cols = bounding_window(contour, before.shape, 3.0)
     corner = np.array([rows.start, cols.start])
-    lo, hi = corner - reach, np.array([rows.stop, cols.stop]) + reach
+    lo, hi = corner + around - reach, np.array([rows.stop, cols.stop]) + around + reach
     patch = before[rows, cols].astype(np.float32)
     if patch.std() < 1e-6 * (1 + abs(patch).max()):
         return None
