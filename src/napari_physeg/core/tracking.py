@@ -1122,13 +1122,13 @@ FRAME_SHIFT_SIDE = 128
 def _frame_shift(before: np.ndarray, image: np.ndarray) -> np.ndarray:
     """How the content of the frame ``before`` moved onto ``image`` as a
     whole (integer px, to the binning's precision): the peak of their phase
-    correlation, on copies binned to FRAME_SHIFT_SIDE px (2 ms a frame)."""
+    correlation, on copies binned to FRAME_SHIFT_SIDE px (1-2 ms a frame)."""
     factor = max(1, int(np.ceil(max(before.shape) / FRAME_SHIFT_SIDE)))
     size = (max(before.shape[1] // factor, 1), max(before.shape[0] // factor, 1))
-    small = [cv2.resize(np.nan_to_num(frame.astype(np.float32)), size, interpolation=cv2.INTER_AREA)
+    small = [np.nan_to_num(cv2.resize(np.asarray(frame, dtype=np.float64), size, interpolation=cv2.INTER_AREA))
              for frame in (before, image)]
-    spectrum = np.fft.fft2(small[1]) * np.conj(np.fft.fft2(small[0]))
-    correlation = np.abs(np.fft.ifft2(spectrum / np.maximum(np.abs(spectrum), 1e-12)))
+    spectrum = np.fft.rfft2(small[1]) * np.conj(np.fft.rfft2(small[0]))
+    correlation = np.fft.irfft2(spectrum / np.maximum(np.abs(spectrum), 1e-12), s=small[0].shape)
     peak = np.array(np.unravel_index(np.argmax(correlation), correlation.shape))
     # Shifts past half the frame wrap around: they are the negative ones.
     peak = np.where(peak > np.array(correlation.shape) // 2, peak - np.array(correlation.shape), peak)
