@@ -38,6 +38,7 @@ from functools import partial
 import cv2
 import numpy as np
 from scipy.spatial import cKDTree
+from skimage import registration
 
 from ._drain import drain
 from ._validation import check_contour
@@ -1127,12 +1128,9 @@ def _frame_shift(before: np.ndarray, image: np.ndarray) -> np.ndarray:
     size = (max(before.shape[1] // factor, 1), max(before.shape[0] // factor, 1))
     small = [np.nan_to_num(cv2.resize(np.asarray(frame, dtype=np.float64), size, interpolation=cv2.INTER_AREA))
              for frame in (before, image)]
-    spectrum = np.fft.rfft2(small[1]) * np.conj(np.fft.rfft2(small[0]))
-    correlation = np.fft.irfft2(spectrum / np.maximum(np.abs(spectrum), 1e-12), s=small[0].shape)
-    peak = np.array(np.unravel_index(np.argmax(correlation), correlation.shape))
-    # Shifts past half the frame wrap around: they are the negative ones.
-    peak = np.where(peak > np.array(correlation.shape) // 2, peak - np.array(correlation.shape), peak)
-    return (peak * factor).astype(int)
+    # The shift that registers ``before`` onto ``image`` is how its content moved.
+    shift = registration.phase_cross_correlation(small[1], small[0], normalization="phase")[0]
+    return (np.round(shift) * factor).astype(int)
 
 
 def _look_map(before: np.ndarray, image: np.ndarray, contour: np.ndarray, reach: int,
