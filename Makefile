@@ -15,7 +15,8 @@ demo: setup
 
 # Refresh the README's pictures from a demo run.
 figures: demo
-	cp demo_output/segmentation.png demo_output/matching_simulation.png demo_output/simulation.gif docs/images/
+	cp demo_output/segmentation.png demo_output/matching_simulation.png demo_output/simulation.gif \
+	   demo_output/tracking_nuclei.png docs/images/
 
 test: setup
 	$(PY) -m pytest -p no:cacheprovider tests
