@@ -23,7 +23,8 @@ def monkeypatch_module():
     mp = pytest.MonkeyPatch()
     yield mp
     mp.undo()
-    for name in ("real", "real_data", "segmentation", "_common", "noise", "scale", "membranes", "fields", "tracking"):
+    for name in ("real", "real_data", "segmentation", "_common", "noise", "scale", "membranes", "fields", "tracking",
+                 "label_levels"):
         sys.modules.pop(name, None)
 
 
@@ -302,3 +303,28 @@ def test_the_tracking_drift_is_nought_through_the_material_points_and_counts_a_s
     five_on = np.hypot(*(last[(followed + 5) % len(last)] - last[followed]).T) / spacing
     np.testing.assert_allclose(bench._drift(movie, outlines, slipped), five_on, rtol=1e-9)
     assert 3.5 < five_on.min() and five_on.max() < 6.5
+
+
+@pytest.fixture(scope="module")
+def label_levels(monkeypatch_module):
+    monkeypatch_module.syspath_prepend(str(BENCHMARKS))
+    import label_levels
+
+    return label_levels
+
+
+def test_a_border_on_a_blurred_disk_lies_half_way_up_its_ramp_and_lower_outside(label_levels):
+    import cv2
+
+    truth = np.zeros((120, 120), bool)
+    truth[disk((60, 60), 25)] = True
+    image = cv2.GaussianBlur(0.1 + 0.8 * truth, (0, 0), 2.5)
+    obj_level, background = label_levels.levels(image, truth)
+    assert obj_level == pytest.approx(0.9, abs=0.01) and background == pytest.approx(0.1, abs=0.01)
+    at_half = label_levels.border_level(image, truth, obj_level, background)
+    assert at_half == pytest.approx(0.5, abs=0.05)
+    wider, narrower = np.zeros_like(truth), np.zeros_like(truth)
+    wider[disk((60, 60), 27)] = True
+    narrower[disk((60, 60), 23)] = True
+    assert label_levels.border_level(image, wider, obj_level, background) < at_half - 0.15
+    assert label_levels.border_level(image, narrower, obj_level, background) > at_half + 0.15
