@@ -33,6 +33,7 @@ The image border is not background: :mod:`.forces` reads the object-ness as
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import cv2
@@ -1217,11 +1218,54 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
     # The crop's sides that are the image's: those where it meets an image side.
     sides = (image_sides[0] and lo[0] == 0, image_sides[1] and hi[0] == signed.shape[0],
              image_sides[2] and lo[1] == 0, image_sides[3] and hi[1] == signed.shape[1])
-    local = _object_region_near(signed[box], drawing - lo, model, sides, None if stronger is None else stronger[box])
+    local = _recalled_region_near(signed[box], drawing - lo, model, sides, None if stronger is None else stronger[box])
     if local is None:
         return None
     region[box] = local
     return region
+
+
+#: The last few questions object_region answered on a crop, with their
+#: answers, most recent last (see _recalled_region_near).
+_RECENT_REGIONS: list = []
+_RECENT_REGIONS_SIZE = 3
+_RECENT_REGIONS_LOCK = threading.Lock()
+
+
+def _recalled_region_near(signed, drawing, model, image_sides, stronger=None) -> np.ndarray | None:
+    """:func:`_object_region_near`, or its answer when the same question (the
+    same pixels, drawing, levels and sides) is among the last few asked.
+
+    drawing_levels finds the object's region at each background level it
+    tries (see _foot_that_holds), and the features of the window then ask
+    for the region at the level it kept, on the same pixels when the window
+    holds the crop: on the CTC movie, one question in seven was such a
+    repeat. The answer is read-only to the callers (object_region copies it).
+    """
+    question = (signed, drawing, model, tuple(image_sides), stronger)
+    with _RECENT_REGIONS_LOCK:
+        for asked, answer in _RECENT_REGIONS:
+            if _same_question(asked, question):
+                return answer
+    answer = _object_region_near(signed, drawing, model, image_sides, stronger)
+    # Copies: the callers go on to change their images (region_features marks
+    # the pixels of other objects in ``signed``).
+    asked = (signed.copy(), drawing.copy(), model, tuple(image_sides), None if stronger is None else stronger.copy())
+    with _RECENT_REGIONS_LOCK:
+        _RECENT_REGIONS.append((asked, answer))
+        del _RECENT_REGIONS[:-_RECENT_REGIONS_SIZE]
+    return answer
+
+
+def _same_question(a, b) -> bool:
+    """Whether two questions to :func:`_object_region_near` (signed, drawing,
+    model, image_sides, stronger) are the same, value for value."""
+    (signed_a, drawing_a, model_a, sides_a, stronger_a), (signed_b, drawing_b, model_b, sides_b, stronger_b) = a, b
+    if model_a != model_b or sides_a != sides_b or (stronger_a is None) != (stronger_b is None):
+        return False
+    return (signed_a.shape == signed_b.shape and drawing_a.shape == drawing_b.shape
+            and np.array_equal(drawing_a, drawing_b) and np.array_equal(signed_a, signed_b)
+            and (stronger_a is None or np.array_equal(stronger_a, stronger_b)))
 
 
 #: A drawing around the object may cut into it (a hasty hand): the
