@@ -1853,6 +1853,23 @@ def _basin_groups(depth: np.ndarray, like: np.ndarray, neck: float = NECK) -> np
     or small either is (a fraction of the object's depth alone would spare
     small neighbours, or split off large lobes).
     """
+    # Off ``like`` (and its depth) every label is 0: the basins are found on
+    # the box of its pixels and a pixel about it, which holds every maximum
+    # and every neighbour they are compared with, in the same raster order
+    # (the same labels). Its object-like pixels are often a tenth of the
+    # window, and the watershed's set-up costs by the pixel.
+    groups = np.zeros(like.shape, np.int64)
+    inside = like | (depth > 0)
+    if not inside.any():
+        return groups
+    left, top, width, height = cv2.boundingRect(inside.view(np.uint8))
+    box = (slice(max(top - 1, 0), top + height + 1), slice(max(left - 1, 0), left + width + 1))
+    groups[box] = _basin_groups_within(depth[box], like[box], neck)
+    return groups
+
+
+def _basin_groups_within(depth: np.ndarray, like: np.ndarray, neck: float) -> np.ndarray:
+    """:func:`_basin_groups` on a window that holds ``like`` and its depth."""
     peaks = (depth > 0) & (depth >= cv2.dilate(depth, np.ones((3, 3), np.uint8)))
     markers, n = _label(peaks)
     basins = segmentation.watershed(-depth, markers, mask=like)
@@ -1876,10 +1893,13 @@ def _basin_groups(depth: np.ndarray, like: np.ndarray, neck: float = NECK) -> np
 
 
 def _label_maxima(values: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
-    """The largest of ``values`` under each label ``0..n-1`` (0 where none)."""
-    # ufunc.at is fast only when the output has the values' own dtype.
+    """The largest of ``values`` under each label ``1..n-1`` (0 where none,
+    and for label 0, the background: the depths this reads are 0 there)."""
+    # ufunc.at is fast only when the output has the values' own dtype; and
+    # the labelled pixels are often a tenth of the window.
+    labelled = labels > 0
     peak = np.zeros(n, values.dtype)
-    np.maximum.at(peak, labels.ravel(), values.ravel())
+    np.maximum.at(peak, labels[labelled], values[labelled])
     return peak
 
 
