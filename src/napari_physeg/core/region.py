@@ -1066,10 +1066,11 @@ def _reaches_beyond(intensity, drawing, border_level, polarity) -> bool:
     margin (see hasty_margin)."""
     drawn = _fill(drawing, intensity.shape)
     like = (intensity - border_level) * polarity > 0
-    pieces, _ = _label(like)
-    marked = np.unique(pieces[_middle(drawing, intensity.shape) & like])
+    pieces, n = _label(like)
+    marked = _flags(pieces[_middle(drawing, intensity.shape) & like], n)
+    marked[0] = False
     reach = _within_hasty_margin(drawn)
-    return bool(np.isin(pieces[~reach], marked[marked > 0]).any())
+    return bool(marked[pieces[~reach]].any())
 
 
 def _either_side(intensity, drawn, line, size) -> tuple[float, float]:
@@ -1653,8 +1654,8 @@ def _split_at_cores(depth, like, blobs, seed, drawn, reach, side_distance=None, 
         if ours.size:
             core_blob = np.zeros(n + 1, blobs.dtype)
             core_blob[cores.ravel()] = blobs.ravel()
-            lobes = lobes[np.isin(core_blob[lobes], core_blob[ours])]
-            lobes = lobes[~np.isin(lobes, ours)]
+            lobes = lobes[_flags(core_blob[ours], n_blobs)[core_blob[lobes]]]
+            lobes = lobes[~_flags(ours, n)[lobes]]
             joined = _across_no_neck(lobes, cores, ours, depth, like)
             behind_a_neck = np.setdiff1d(lobes, joined)
             if centred and behind_a_neck.size:
