@@ -1068,7 +1068,6 @@ def _reaches_beyond(intensity, drawing, border_level, polarity) -> bool:
     like = (intensity - border_level) * polarity > 0
     pieces, n = _label(like)
     marked = _flags(pieces[_middle(drawing, intensity.shape) & like], n)
-    marked[0] = False
     reach = _within_hasty_margin(drawn)
     return bool(marked[pieces[~reach]].any())
 
@@ -1532,9 +1531,7 @@ def _without_valley_neighbours(region, excess, like, blobs, depth, seed, drawn=N
     if not beyond.any():
         return region
     pieces, n = _label(region & ~beyond)
-    kept = _flags(pieces[seed], n)
-    kept[0] = False
-    return kept.take(pieces)
+    return _flags(pieces[seed], n).take(pieces)
 
 
 def _seed(like: np.ndarray, marked: np.ndarray, drawn: np.ndarray) -> np.ndarray:
@@ -1947,9 +1944,7 @@ def _cores(depth: np.ndarray, seed: np.ndarray, reach: np.ndarray, side_distance
     inscribed = float(depth[seed].max())
     for fraction in CORE_DEPTHS:
         cores, n = _label(depth > fraction * inscribed)
-        marked = _flags(cores[seed], n)
-        marked[0] = False
-        marked = marked.take(cores)
+        marked = _flags(cores[seed], n).take(cores)
         if (marked & reach).sum() >= 0.8 * marked.sum():
             break
         if side_distance is not None and not (side_distance[marked] <= fraction * inscribed + 1.5).any():
@@ -1981,16 +1976,19 @@ def _label(mask: np.ndarray) -> tuple[np.ndarray, int]:
 
 
 def _flags(labels: np.ndarray, n: int) -> np.ndarray:
-    """One flag per label ``0..n``: whether it is among ``labels``.
+    """One flag per label ``0..n``: whether it is among ``labels``; never for
+    0, the background of a label image.
 
-    Indexed by a label image, the flags are its pixels whose label is among
-    ``labels``: ``np.isin(image, labels)``, in one pass over the image
-    (np.isin took 4 % of a tracked frame, most of it on label images).
+    Indexed by a label image, the flags are its labelled pixels whose label
+    is among ``labels``: ``np.isin(image, labels[labels > 0])``, in one pass
+    over the image (np.isin took 4 % of a tracked frame, most of it on label
+    images).
     ``flags.take(image)`` reads them at half the cost of ``flags[image]``
     (numpy's fancy indexing by OpenCV's int32 labels takes a slow path).
     """
     flags = np.zeros(n + 1, bool)
     flags[labels] = True
+    flags[0] = False
     return flags
 
 
