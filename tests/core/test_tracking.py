@@ -715,6 +715,24 @@ def test_a_frames_shift_is_read_by_phase_correlation_to_the_binnings_precision(s
     assert np.abs(_frame_shift(before, after) - shift).max() <= 4
 
 
+@pytest.mark.parametrize("blank", ["before", "after", "both"])
+def test_a_blank_frame_shows_no_shift_and_no_warning(blank):
+    """_frame_shift with a dropped (blank) frame on either side: no motion,
+    and nothing warned from inside scikit-image's phase correlation."""
+    import warnings
+
+    from scipy import ndimage as ndi
+
+    from napari_physeg.core.tracking import _frame_shift
+
+    textured = ndi.gaussian_filter(np.random.default_rng(0).normal(size=(120, 150)), 3.0)
+    before = np.zeros_like(textured) if blank in ("before", "both") else textured
+    after = np.zeros_like(textured) if blank in ("after", "both") else np.roll(textured, (5, -7), axis=(0, 1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.array_equal(_frame_shift(before, after), [0, 0])
+
+
 @pytest.mark.parametrize("case", ["stage", "one vanished", "two of three vanished", "each its own way", "still"])
 def test_the_stage_shift_is_read_off_the_objects_that_move_together(case):
     """_stage_shift: the shift of a jittering stage, read off the looks of

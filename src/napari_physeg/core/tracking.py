@@ -1128,6 +1128,10 @@ def _frame_shift(before: np.ndarray, image: np.ndarray) -> np.ndarray:
     size = (max(before.shape[1] // factor, 1), max(before.shape[0] // factor, 1))
     small = [np.nan_to_num(cv2.resize(np.asarray(frame, dtype=np.float64), size, interpolation=cv2.INTER_AREA))
              for frame in (before, image)]
+    if not all(np.ptp(frame) > 0 for frame in small):
+        # A flat frame (a dropped, blank one) shows no motion; scikit-image
+        # would also warn that it cannot measure its error against an empty one.
+        return np.zeros(2, int)
     # The shift that registers ``before`` onto ``image`` is how its content moved.
     shift = registration.phase_cross_correlation(small[1], small[0], normalization="phase")[0]
     return (np.round(shift) * factor).astype(int)
