@@ -1,4 +1,5 @@
-"""What both benchmarks need: a median timer and a description of the machine."""
+"""What the benchmarks and the demo share: a median timer, a description of the machine, the
+docs' sections, and the tracking figures and scores both draw."""
 
 from __future__ import annotations
 
@@ -60,3 +61,29 @@ def write_section(name: str, lines, heading: str, doc: str = "benchmarks.md") ->
         text = text.rstrip() + f"\n\n## {heading}\n\n" + block + "\n"
     doc.write_text(text)
     return doc
+
+
+def normal_velocity_errors(movie, result, k: int = 0) -> np.ndarray:
+    """|tracked - true| normal velocity (px/frame) of every node of object ``k`` of a tracking
+    ``result`` of a synthetic ``movie`` (``napari_physeg.data.deforming_cell``), each node
+    against the nearest true material point, frames 1 on."""
+    errors = []
+    for t in range(1, len(movie.frames)):
+        c = result.contours[k][t]
+        nearest = np.argmin(((c[:, None] - movie.outlines[t][None]) ** 2).sum(-1), axis=1)
+        errors.append(np.abs(result.normal_velocity[k][t] - movie.normal_velocity[t][nearest]))
+    return np.concatenate(errors)
+
+
+def plot_membrane_maps(fig, axes, result, k: int, n_arc: int = 200) -> None:
+    """Object ``k``'s protrusion/retraction and curvature maps (arc position from the carried
+    origin x frame) on the two ``axes`` of ``fig``, each scaled to its 98th percentile."""
+    for ax, quantity, cmap, label in ((axes[0], "normal_velocity", "RdBu_r", "normal velocity (px/frame)"),
+                                      (axes[1], "curvature", "PiYG", "curvature (1/px)")):
+        image = result.membrane_map(k, quantity, n_arc=n_arc)
+        lim = max(float(np.nanpercentile(np.abs(image), 98)), 1e-6) if np.isfinite(image).any() else 1.0
+        im = ax.imshow(image.T, aspect="auto", cmap=cmap, vmin=-lim, vmax=lim, origin="lower",
+                       extent=(-0.5, image.shape[0] - 0.5, 0, 1))
+        ax.set_xlabel("frame")
+        ax.set_ylabel("arc position (carried origin)")
+        fig.colorbar(im, ax=ax, label=label)

@@ -62,7 +62,7 @@ from scipy import ndimage as ndi  # noqa: E402
 from skimage import feature, filters, measure, segmentation  # noqa: E402
 
 import real_data  # noqa: E402
-from _common import machine, report, write_section  # noqa: E402
+from _common import machine, normal_velocity_errors, plot_membrane_maps, report, write_section  # noqa: E402
 from napari_physeg import data  # noqa: E402
 from napari_physeg.core import TRACKED, track  # noqa: E402
 from napari_physeg.core.contour import outward_normals, polygon_mask, remove_loops, resample, signed_area  # noqa: E402
@@ -245,12 +245,7 @@ def _signed_distance_to(points, contour, mask):
 
 
 def synthetic_scores_ours(movie, tr):
-    nv = []
-    for t in range(1, len(movie.frames)):
-        c = tr.contours[0][t]
-        nearest = np.argmin(((c[:, None] - movie.outlines[t][None]) ** 2).sum(-1), axis=1)
-        nv.append(np.abs(tr.normal_velocity[0][t] - movie.normal_velocity[t][nearest]))
-    nv = np.concatenate(nv)
+    nv = normal_velocity_errors(movie, tr)
     drift = _drift(movie, tr.contours[0], tr.origin[0])
     return dict(nv_median=np.median(nv), nv_p90=np.percentile(nv, 90), drift_median=np.median(drift),
                 drift_max=np.max(drift))
@@ -476,15 +471,7 @@ def kymograph_figure(tr, path):
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    for ax, quantity, cmap, label in ((axes[0], "normal_velocity", "RdBu_r", "normal velocity (px/frame)"),
-                                      (axes[1], "curvature", "PiYG", "curvature (1/px)")):
-        image = tr.membrane_map(0, quantity, n_arc=200)
-        lim = np.nanpercentile(np.abs(image), 98)
-        im = ax.imshow(image.T, aspect="auto", cmap=cmap, vmin=-lim, vmax=lim, origin="lower",
-                       extent=(-0.5, image.shape[0] - 0.5, 0, 1))
-        ax.set_xlabel("frame")
-        ax.set_ylabel("arc position (carried origin)")
-        fig.colorbar(im, ax=ax, label=label)
+    plot_membrane_maps(fig, axes, tr, 0)
     fig.suptitle("membrane maps of the synthetic deforming cell (track(), 30 frames)")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
