@@ -189,10 +189,13 @@ class RegionModel:
         return self.contrast > self.least_contrast
 
 
-def _fill(contour: np.ndarray, shape) -> np.ndarray:
-    """Polygon mask (OpenCV, 1/16 px vertex precision)."""
+def _fill(contour: np.ndarray, shape, corner=(0, 0)) -> np.ndarray:
+    """Polygon mask (OpenCV, 1/16 px vertex precision) of an array of
+    ``shape`` whose first pixel is pixel ``corner`` (row, col) of
+    ``contour``'s frame: the same pixels as the mask of the whole frame
+    there (the vertices are rounded first, then moved by whole pixels)."""
     mask = np.zeros(shape, dtype=np.uint8)
-    pts = np.round(contour[:, ::-1] * 16).astype(np.int32)
+    pts = np.round(contour[:, ::-1] * 16).astype(np.int32) - 16 * np.array(corner[::-1], dtype=np.int32)
     cv2.fillPoly(mask, [pts], 1, lineType=cv2.LINE_8, shift=4)
     return mask.view(bool)
 
@@ -501,7 +504,7 @@ def _on_even_ground(intensity, drawing, along, on_line, centre, outside, floor) 
     """
     if _scatter(along) > floor or abs(on_line - centre) < 2 * floor or (on_line - centre) * (outside - on_line) <= 0:
         return False
-    ring = intensity[_ring_mask(drawing, intensity.shape, *_OUTER_RINGS[0])]
+    ring = _ring(intensity, drawing, *_OUTER_RINGS[0])
     return ring.size > 0 and abs(_median(ring) - on_line) <= floor
 
 
@@ -518,6 +521,18 @@ def _even(rings: list, floor: float) -> bool:
 def _ring_mask(drawing, shape, lo: float, hi: float) -> np.ndarray:
     """The pixels between ``drawing`` scaled by ``lo`` and by ``hi`` about its centroid."""
     return _fill(_scaled(drawing, hi), shape) & ~_fill(_scaled(drawing, lo), shape)
+
+
+def _ring(intensity, drawing, lo: float, hi: float) -> np.ndarray:
+    """``intensity[_ring_mask(drawing, intensity.shape, lo, hi)]``, read on
+    the bounding box of the ring's outer polygon: the near rings are a small
+    part of the window the drawing is read on (a tenth for the first)."""
+    outer = _scaled(drawing, hi)
+    box = bounding_window(outer, intensity.shape, 1.0)
+    shape, corner = (box[0].stop - box[0].start, box[1].stop - box[1].start), (box[0].start, box[1].start)
+    if min(shape) <= 0:
+        return intensity[:0, 0]
+    return intensity[box][_fill(outer, shape, corner) & ~_fill(_scaled(drawing, lo), shape, corner)]
 
 
 def _outside_level(intensity, drawing, centre, on_line, along, within, floor) -> float:
@@ -551,7 +566,7 @@ def _outside_level(intensity, drawing, centre, on_line, along, within, floor) ->
                        and near_best <= _TEXTURE_SPREADS * max(_scatter(best_ring), _scatter(within)))
         if far and best > (near_best if through else floor):
             break
-        ring = intensity[_ring_mask(drawing, intensity.shape, lo, hi)]
+        ring = _ring(intensity, drawing, lo, hi)
         # Far out the background may be a small part of a ring that still
         # lies mostly on the object: the ring's class furthest from the centre.
         level = _surrounding_class(intensity, drawing, ring, centre, floor) if far else _median(ring)
