@@ -282,18 +282,25 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
     size = np.sqrt(max(region.sum(), 1) / np.pi)
     rim = int(np.clip(round(0.1 * size), 1, 3))
     gate = int(np.ceil(EDGE_GATE * rim))
-    r8 = region.view(np.uint8)
+    # Every mask below lies within the gate of the region: they are made on
+    # its bounding box and that margin (and a pixel), not on the whole window.
+    left, top, width, height = cv2.boundingRect(region.view(np.uint8))
+    box = (slice(max(top - gate - 1, 0), top + height + gate + 1),
+           slice(max(left - gate - 1, 0), left + width + gate + 1))
+    r8 = region[box].view(np.uint8)
     interior = cv2.erode(r8, _disk(rim + 1)).view(bool)
     band = cv2.dilate(r8, _disk(gate)).view(bool) & ~interior
-    edges = np.where(band, edges, 0.0)
+    gated = np.zeros(edges.shape, np.result_type(edges, 0.0))
+    gated[box] = np.where(band, edges[box], 0.0)
+    edges = gated
     # Where the edge detector found no border (its thresholds follow the
     # strongest edges in view: a dim object among bright ones has none), the
     # region's own outline stands in, so the distance force pulls toward the
     # object and not toward the nearest edge found elsewhere (or the image's side).
-    outline = region & ~cv2.erode(r8, _disk(1)).view(bool)
-    near_edge = cv2.dilate((edges > 0).view(np.uint8), _disk(rim + 1)).view(bool)
-    edges[outline & ~near_edge] = 1.0
-    signed[cv2.erode(r8, _disk(rim)).view(bool)] = 1.0
+    outline = region[box] & ~cv2.erode(r8, _disk(1)).view(bool)
+    near_edge = cv2.dilate((edges[box] > 0).view(np.uint8), _disk(rim + 1)).view(bool)
+    edges[box][outline & ~near_edge] = 1.0
+    signed[box][cv2.erode(r8, _disk(rim)).view(bool)] = 1.0
     return signed.astype(np.float32), edges, model.polarity
 
 
