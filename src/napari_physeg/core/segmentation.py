@@ -357,9 +357,15 @@ def _anchor(signed: np.ndarray, drawing: np.ndarray) -> np.ndarray:
     the user said the object is. Where a pinch parts the contour, the piece
     that holds them is the object, not the larger one (a neighbour that a
     generous drawing took in whole)."""
-    own = signed > 0
     for factor in (0.5, 1.0):
-        points = np.argwhere(_fill(_scaled(drawing, factor), signed.shape) & own)
+        # On the scaled drawing's box: the window may be many times its size.
+        scaled = _scaled(drawing, factor)
+        box = bounding_window(scaled, signed.shape, 1.0)
+        corner = (box[0].start, box[1].start)
+        shape = (box[0].stop - corner[0], box[1].stop - corner[1])
+        if min(shape) <= 0:
+            continue
+        points = np.argwhere(_fill(scaled, shape, corner) & (signed[box] > 0)) + corner
         if len(points):
             return points[:: -(-len(points) // ANCHOR_POINTS)].astype(np.float64)
     return np.zeros((0, 2))
