@@ -289,15 +289,19 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     line = _line_band(drawing, shape, half_width)
     if not line.any():  # drawn around the whole image: its sides are the line
         line = _line_band(np.clip(drawing, 0, np.array(shape) - 1), shape, half_width)
-    along = intensity[line]
+    # The line, the middle and the drawn pixels lie within a pixel or two of
+    # the drawing's box, a small part of the window it is read on: their
+    # pixels are read there (the same, in the same order).
+    box = bounding_window(drawing, shape, half_width + 2)
+    along = intensity[box][line[box]]
     on_line = _median(along)
     middle = _middle(drawing, shape)
-    centre = _median(intensity[middle])
+    centre = _median(intensity[box][middle[box]])
     if np.isnan(centre):  # a drawing too thin to have a centre
         centre = on_line
     floor = _least_contrast(intensity, noise)
     drawn = _fill(drawing, shape)
-    within = intensity[drawn]
+    within = intensity[box][drawn[box]]
     within = within[:: max(1, within.size // _MAX_SAMPLES)]
     outside = _outside_level(intensity, drawing, centre, on_line, along, within, floor)
     border = traced_border_level(intensity, drawing, size, centre, outside, floor) if user_drawing else None
@@ -1301,7 +1305,7 @@ def hasty_margin(drawn_area: float) -> int:
 def _within_hasty_margin(drawn: np.ndarray) -> np.ndarray:
     """The pixels a drawing around the object encloses (``drawn``) and those
     within its hasty margin beyond it (see hasty_margin)."""
-    return cv2.dilate(drawn.view(np.uint8), _disk(hasty_margin(drawn.sum()))).view(bool)
+    return cv2.dilate(drawn.view(np.uint8), _disk(hasty_margin(np.count_nonzero(drawn)))).view(bool)
 
 
 def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
@@ -1328,7 +1332,8 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     # those up to a quarter of the object's area are filled (a drawing
     # around it is about its size; a click inside it is not).
     looks_like = signed > 0
-    hole_area = 0.25 * (drawn.sum() if model.drawn_around else _area_held(looks_like, marked | drawn, reach))
+    held = np.count_nonzero(drawn) if model.drawn_around else _area_held(looks_like, marked | drawn, reach)
+    hole_area = 0.25 * held
     like = _without_small_holes(looks_like, hole_area, image_sides, _seed(looks_like, marked, drawn), drawn)
     seed = _seed(like, marked, drawn)
     if not seed.any():
@@ -1471,7 +1476,7 @@ def _beyond_valleys(excess: np.ndarray, like: np.ndarray, blobs, depth: np.ndarr
     # Room for the object's inscribed disk and a neighbour's smallest body;
     # and an object deeper than the valleys are wide (else its own shape
     # curves the intensity as a valley would).
-    if blob.sum() < np.pi * inscribed ** 2 + smallest or inscribed < 2 * VALLEY_SCALE:
+    if np.count_nonzero(blob) < np.pi * inscribed ** 2 + smallest or inscribed < 2 * VALLEY_SCALE:
         return beyond
     left, top, width, height = cv2.boundingRect(blob.view(np.uint8))
     margin = int(np.ceil(3 * VALLEY_SCALE))  # the Hessian's reach
@@ -1527,7 +1532,7 @@ def _holds(held: np.ndarray, body: np.ndarray) -> bool:
     those within a hasty hand's margin (see _within_hasty_margin). A drawing
     partly beyond the image's side, or across the object, does not hold it
     and tells nothing of its extent."""
-    return (body & ~held).sum() <= HELD_SLACK * body.sum()
+    return np.count_nonzero(body & ~held) <= HELD_SLACK * np.count_nonzero(body)
 
 
 def _convex(mask: np.ndarray) -> bool:
@@ -1572,7 +1577,7 @@ ACROSS_SHARE = 1 / 3
 def _drawn_across(region: np.ndarray, limit: np.ndarray) -> bool:
     """Whether a drawing around the object, whose limit is ``limit``, holds
     less than ACROSS_SHARE of the convex body ``region`` (see ACROSS_SHARE)."""
-    if (region & limit).sum() >= ACROSS_SHARE * region.sum():
+    if np.count_nonzero(region & limit) >= ACROSS_SHARE * np.count_nonzero(region):
         return False
     return _convex(region)
 
@@ -1961,7 +1966,7 @@ def _cores(depth: np.ndarray, seed: np.ndarray, reach: np.ndarray, side_distance
     for fraction in CORE_DEPTHS:
         cores, n = _label(depth > fraction * inscribed)
         marked = _flags(cores[seed], n).take(cores)
-        if (marked & reach).sum() >= 0.8 * marked.sum():
+        if np.count_nonzero(marked & reach) >= 0.8 * np.count_nonzero(marked):
             break
         if side_distance is not None and not (side_distance[marked] <= fraction * inscribed + 1.5).any():
             break
@@ -1974,7 +1979,7 @@ def _smoothed(region: np.ndarray, image_sides) -> np.ndarray:
     opened = cv2.morphologyEx(region.view(np.uint8), cv2.MORPH_OPEN, _disk(1)).view(bool)
     region = opened if opened.any() else region
     pieces, enclosed, open_to_image = _holes(region, image_sides)
-    small = np.bincount(pieces.ravel(), minlength=len(enclosed)) <= 0.25 * region.sum()
+    small = np.bincount(pieces.ravel(), minlength=len(enclosed)) <= 0.25 * np.count_nonzero(region)
     return region | (enclosed | (open_to_image & small)).take(pieces)
 
 

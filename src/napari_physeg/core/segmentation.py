@@ -279,7 +279,7 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
     # the contour there, and only a rim keeps graded object-ness values (for
     # the sub-pixel balance of the region force). Outside, edges count within
     # a band around the region (neighbours' far sides do not).
-    size = np.sqrt(max(region.sum(), 1) / np.pi)
+    size = np.sqrt(max(np.count_nonzero(region), 1) / np.pi)
     rim = int(np.clip(round(0.1 * size), 1, 3))
     gate = int(np.ceil(EDGE_GATE * rim))
     # Every mask below lies within the gate of the region: they are made on
