@@ -1342,17 +1342,18 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     # meet there at a neck too).
     depth = _depth(like)
     blobs = _label(like)  # the blobs of ``like`` and their number, which most steps read
+    seed_blob = _flags(blobs[0][seed], blobs[1]).take(blobs[0])  # the blob the seed lies in, which two steps read
     if model.drawn_around:
         region = _split_at_cores(depth, like, blobs, seed, drawn, reach, stronger=stronger,
                                  centred=model.user_drawing)
-        region &= ~_crossed_neighbours(depth, like, blobs, seed, drawn)
+        region &= ~_crossed_neighbours(depth, like, seed_blob, seed, drawn)
     else:
         # No drawing line bounds it: neighbours touching at a neck narrow
         # for their own size are parted too (small crowded nuclei).
         region = (_split_at_cores(depth, like, blobs, seed, None, reach, _side_distance(shape, image_sides), stronger)
                   & _marked_basins(depth, like, seed))
     if stronger is not None:
-        region = _without_valley_neighbours(region, stronger, like, blobs, depth, seed,
+        region = _without_valley_neighbours(region, stronger, like, seed_blob, depth, seed,
                                             drawn if model.drawn_around else None)
         if not region.any():
             return None
@@ -1453,7 +1454,7 @@ def _hessian(image: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, n
     return filtered(d_rows, slope, smooth), filtered(d_rows, smooth, slope), filtered(d_cols, smooth, slope)
 
 
-def _beyond_valleys(excess: np.ndarray, like: np.ndarray, blobs, depth: np.ndarray, seed: np.ndarray,
+def _beyond_valleys(excess: np.ndarray, like: np.ndarray, blob: np.ndarray, depth: np.ndarray, seed: np.ndarray,
                     drawn=None) -> np.ndarray:
     """The pixels of ``like`` that belong to neighbours parted from the
     object by valleys of intensity (see VALLEY_SCALE).
@@ -1463,14 +1464,11 @@ def _beyond_valleys(excess: np.ndarray, like: np.ndarray, blobs, depth: np.ndarr
     other bodies of its blob that the seed does not touch may be neighbours:
     each side takes the pixels its flood reaches first, across the valley's
     ridge. A textured object's valleys make a network: its pieces are not
-    bodies, and nothing is parted. ``blobs``: the labels of ``like`` and
-    their number (see _label); ``depth``: its depth (see _depth); ``drawn``:
-    the pixels a drawing around the object encloses (None for a drawing
-    inside it).
+    bodies, and nothing is parted. ``blob``: the blob of ``like`` the seed
+    lies in; ``depth``: its depth (see _depth); ``drawn``: the pixels a
+    drawing around the object encloses (None for a drawing inside it).
     """
     beyond = np.zeros(like.shape, bool)
-    labels, n_blobs = blobs
-    blob = _flags(labels[seed], n_blobs).take(labels)
     inscribed = float(depth[seed].max())
     smallest = np.pi * (STRONGER_CORE * inscribed) ** 2
     # Room for the object's inscribed disk and a neighbour's smallest body;
@@ -1541,14 +1539,14 @@ def _convex(mask: np.ndarray) -> bool:
     return measure.regionprops(mask.view(np.uint8))[0].solidity >= APART_SOLIDITY
 
 
-def _without_valley_neighbours(region, excess, like, blobs, depth, seed, drawn=None) -> np.ndarray:
+def _without_valley_neighbours(region, excess, like, blob, depth, seed, drawn=None) -> np.ndarray:
     """``region`` without the neighbours that valleys of intensity part from
     the object (see _beyond_valleys), and without what that leaves apart
     from the seed. They only take away: parted at necks and cores again
     without those neighbours, the depths shift, and a crowded nucleus that
     kept apart from one neighbour ran into another (identical frames of the
     Data Science Bowl crowd lost two nuclei)."""
-    beyond = _beyond_valleys(excess, like, blobs, depth, seed, drawn)
+    beyond = _beyond_valleys(excess, like, blob, depth, seed, drawn)
     if not beyond.any():
         return region
     pieces, n = _label(region & ~beyond)
@@ -1595,16 +1593,15 @@ CROSSED_NECK = 0.9
 CROSSED_DEPTH = 0.7
 
 
-def _crossed_neighbours(depth, like, blobs, seed, drawn) -> np.ndarray:
+def _crossed_neighbours(depth, like, blob, seed, drawn) -> np.ndarray:
     """The depth basins of ``like`` that the drawing around the object
     crosses (see CROSSED_OUTSIDE): neighbours in broad contact with the
     object, which share its core (see _cores) but not its basin. A shallow
     lobe of the object that pokes out of a tight drawing, or that the
     image's side cuts off, is not one. Only those that can meet the object
-    are looked for: none when the seed's blob lies within the drawing
-    (``blobs``: the labels of ``like`` and their number, see _label)."""
-    labels, n_blobs = blobs
-    if not _flags(labels[seed], n_blobs)[labels[~drawn]].any():
+    are looked for: none when the seed's blob (``blob``) lies within the
+    drawing."""
+    if not (blob & ~drawn).any():
         return np.zeros(like.shape, bool)
     groups = _basin_groups(depth, like, CROSSED_NECK)
     n = groups.max() + 1
