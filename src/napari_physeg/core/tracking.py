@@ -531,9 +531,10 @@ def _inside(contour: np.ndarray, box) -> np.ndarray | None:
     return polygon_mask(contour - [box[0].start, box[1].start], shape)
 
 
-def _paint(owner: np.ndarray, contour: np.ndarray | None, value: int, only_free: bool = False) -> None:
+def _paint(run: _Run, owner: np.ndarray, contour: np.ndarray | None, value: int, only_free: bool = False) -> None:
     """Set the pixels of ``owner`` inside ``contour`` (if any) to ``value``
-    (``only_free``: those no object owns, -1)."""
+    (``only_free``: those no object owns, -1), and grow the box of object
+    ``value``'s pixels on the current frame (``run.painted``) to hold them."""
     if contour is None:
         return
     box = bounding_window(contour, owner.shape, 0.0)
@@ -543,6 +544,29 @@ def _paint(owner: np.ndarray, contour: np.ndarray | None, value: int, only_free:
     if only_free:
         inside &= owner[box] < 0
     owner[box][inside] = value
+    if value in run.painted:
+        held = run.painted[value]
+        box = (slice(min(box[0].start, held[0].start), max(box[0].stop, held[0].stop)),
+               slice(min(box[1].start, held[1].start), max(box[1].stop, held[1].stop)))
+    run.painted[value] = box
+
+
+def _unpainted(run: _Run, owner: np.ndarray, k: int) -> None:
+    """Give the pixels of ``owner`` that object ``k`` owns back to no object
+    (-1). Only ``_paint`` gives an object pixels: they lie in its box (a
+    frame holds many small objects, and this ran over the whole frame)."""
+    if k in run.painted:
+        held = owner[run.painted[k]]
+        held[held == k] = -1
+
+
+def _others(run: _Run, owner: np.ndarray, k: int) -> np.ndarray:
+    """The pixels of ``owner`` that objects other than ``k`` own."""
+    others = owner >= 0
+    if k in run.painted:
+        box = run.painted[k]
+        others[box] &= owner[box] != k
+    return others
 
 
 #: The pixels next to a node (and its own), where _touches_side looks for missing data.
@@ -829,10 +853,11 @@ def _segment_frame(run: _Run, image, shared, t: int, step: int):
     # Which object each pixel belongs to, as far as known: the others'
     # contours on this frame once done, else on the frame before.
     owner = np.full(image.shape, -1, dtype=np.int32)
+    run.painted = {}
     order = _segmenting_order(run, t, step)
     run.drift = _field_drift(run, t, step)
     for j in reversed(order):  # where claims overlap, the object done first has them
-        _paint(owner, _claim_before(run, j, t, step), j)
+        _paint(run, owner, _claim_before(run, j, t, step), j)
     run.moved = []
     boxes = np.array([np.r_[c.min(0), c.max(0)] for c in run.inits]) if t == run.start else None
     for n, k in enumerate(order):
@@ -892,6 +917,7 @@ class _Run:
     drift: np.ndarray = field(default_factory=lambda: np.zeros(2))  # see _field_drift: of the current frame
     looks: np.ndarray | None = None  # the current frame, its illumination taken out (see background.plane_removed)
     before: np.ndarray | None = None  # the same of the frame before, in the direction of travel
+    painted: dict = field(default_factory=dict)  # see _paint: per object, the box of its pixels on the current frame
 
 
 def _claim_before(run: _Run, k: int, t: int, step: int) -> np.ndarray | None:
@@ -955,8 +981,8 @@ def _field_drift(run: _Run, t: int, step: int) -> np.ndarray:
 def _settle(run: _Run, image, shared, owner, t: int, k: int, step: int, handed=None) -> None:
     """Segment object ``k`` on frame ``t`` (see _one_object) and make its pixels its own in ``owner``."""
     run.contours[k][t], run.status[k][t] = _one_object(run, image, shared, owner, t, k, step, handed)
-    owner[owner == k] = -1
-    _paint(owner, run.contours[k][t], k)
+    _unpainted(run, owner, k)
+    _paint(run, owner, run.contours[k][t], k)
 
 
 def _settle_first(run: _Run, image, shared, owner, k: int, undone, boxes: np.ndarray) -> None:
@@ -973,8 +999,8 @@ def _settle_first(run: _Run, image, shared, owner, k: int, undone, boxes: np.nda
         return _settle(run, image, shared, owner, run.start, k, 1)
     view = np.where(np.isin(owner, holders), -1, owner)
     _settle(run, image, shared, view, run.start, k, 1)
-    owner[owner == k] = -1
-    _paint(owner, run.contours[k][run.start], k)
+    _unpainted(run, owner, k)
+    _paint(run, owner, run.contours[k][run.start], k)
 
 
 def _holds(a: np.ndarray, b: np.ndarray, shape) -> bool:
@@ -1001,8 +1027,8 @@ def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, hand
     None) and status."""
     seen, options = run.seen[k], run.options
     if t == run.start:
-        return _found(image, shared, owner, t, k, _Drawing.on(run.inits[k], shared.intensity), None, None, seen,
-                      options)
+        return _found(image, shared, _others(run, owner, k), t, _Drawing.on(run.inits[k], shared.intensity), None,
+                      None, seen, options)
     last, history = _history(run, k, t, step)
     if last is None:  # lost or out of view for more than MAX_GAP frames: stays so
         return None, run.status[k][t - step]
@@ -1030,14 +1056,15 @@ def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, hand
     # a new part of it, not the same outline moved).
     in_view = last == t - step and not _touches_side(history[-1], image.shape, shared.missing)
     drawing = seen.drawing if in_view else None
+    avoid = _others(run, owner, k)
     tried = []
     for start in starts:
         if any(np.allclose(start, other, atol=0.5) for other in tried):
             continue
         tried.append(start)
         by_looks = look is not None and start is starts[0]
-        contour, verdict = _found(image, shared, owner, t, k, _carried(drawing, history[-1], start, shared.intensity,
-                                                                       by_looks), start, history[-1], seen, options,
+        contour, verdict = _found(image, shared, avoid, t, _carried(drawing, history[-1], start, shared.intensity,
+                                                                    by_looks), start, history[-1], seen, options,
                                   by_looks)
         if verdict != LOST:
             break
@@ -1244,9 +1271,9 @@ def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int, other
         misfit = _misfit(run, i, t, step) + _misfit(run, j, t, step)
         for handed in (None, kept[0][0]):
             trial = owner.copy()
-            trial[trial == i] = -1
+            _unpainted(run, trial, i)
             if handed is None:  # as if i came after j: its pixels those of the frame before
-                _paint(trial, _claim_before(run, i, t, step), i, only_free=True)
+                _paint(run, trial, _claim_before(run, i, t, step), i, only_free=True)
             _settle(run, image, shared, trial, t, j, step, handed)
             _settle(run, image, shared, trial, t, i, step)
             run.moved = list(moved)
@@ -1283,12 +1310,12 @@ def _misfit(run: _Run, k: int, t: int, step: int) -> float:
     return float(distance + abs(np.log(abs(signed_area(contour)) / abs(signed_area(last)))))
 
 
-def _found(image, shared, owner, t, k, drawing: _Drawing, predicted, previous, seen: _Seen, options,
+def _found(image, shared, avoid, t, drawing: _Drawing, predicted, previous, seen: _Seen, options,
            by_looks: bool = False):
-    """Object ``k`` segmented on frame ``t`` in ``drawing`` (``previous``: its last contour,
-    None on the start frame, where ``seen`` is filled in; ``by_looks``: see
-    _redrawn); its contour (or None) and status."""
-    avoid = (owner >= 0) & (owner != k)
+    """An object segmented on frame ``t`` in ``drawing``, out of the other
+    objects' pixels ``avoid`` (``previous``: its last contour, None on the
+    start frame, where ``seen`` is filled in; ``by_looks``: see _redrawn);
+    its contour (or None) and status."""
     segment_here = partial(_segment_from, image, features=shared, avoid=avoid if avoid.any() else None,
                            polarity=seen.polarity, **options)
     try:
