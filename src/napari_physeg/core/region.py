@@ -1984,7 +1984,8 @@ def _smoothed(region: np.ndarray, image_sides) -> np.ndarray:
     region = opened if opened.any() else region
     pieces, enclosed, open_to_image = _holes(region, image_sides)
     small = np.bincount(pieces.ravel(), minlength=len(enclosed)) <= 0.25 * np.count_nonzero(region)
-    return region | (enclosed | (open_to_image & small)).take(pieces)
+    filled = enclosed | (open_to_image & small)
+    return region | filled.take(pieces) if filled.any() else region
 
 
 def _depth(mask: np.ndarray) -> np.ndarray:
@@ -2083,13 +2084,15 @@ def _without_small_holes(mask: np.ndarray, max_area: float, image_sides, seed=No
     the image's side too), but for a wall around the pieces the drawing lies
     on (see :func:`_walled_rim`)."""
     pieces, enclosed, open_to_image = _holes(mask, image_sides)
-    small = np.bincount(pieces.ravel(), minlength=len(enclosed)) <= max_area
+    filled = (enclosed | open_to_image) & (np.bincount(pieces.ravel(), minlength=len(enclosed)) <= max_area)
+    if not filled.any():  # (half the tracked frames' windows: no wall to look for, see below)
+        return mask.copy()
     rim = None if seed is None else _walled_rim(mask, seed, drawn)
     if rim is not None:
         walls = np.unique(pieces[rim])
         if walls.size == 1:
-            small[walls] = False
-    return mask | ((enclosed | open_to_image) & small).take(pieces)
+            filled[walls] = False
+    return mask | filled.take(pieces)
 
 
 def _walled_rim(mask: np.ndarray, seed: np.ndarray, drawn: np.ndarray) -> np.ndarray | None:
