@@ -1674,8 +1674,9 @@ def _split_at_cores(depth, like, blobs, seed, drawn, reach, side_distance=None, 
         lobes = np.flatnonzero(inside_share >= 0.8)
         lobes = lobes[lobes > 0]
         if ours.size:
-            core_blob = np.zeros(n + 1, blobs.dtype)
-            core_blob[cores.ravel()] = blobs.ravel()
+            core_blob = np.zeros(n + 1, blobs.dtype)  # the blob each core lies in (read off its pixels)
+            in_core = cores > 0
+            core_blob[cores[in_core]] = blobs[in_core]
             lobes = lobes[_flags(core_blob[ours], n_blobs)[core_blob[lobes]]]
             lobes = lobes[~_flags(ours, n)[lobes]]
             joined = _across_no_neck(lobes, cores, ours, depth, like)
