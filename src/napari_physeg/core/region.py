@@ -195,8 +195,8 @@ def _fill(contour: np.ndarray, shape, corner=(0, 0)) -> np.ndarray:
     ``contour``'s frame: the same pixels as the mask of the whole frame
     there (the vertices are rounded first, then moved by whole pixels)."""
     mask = np.zeros(shape, dtype=np.uint8)
-    pts = np.round(contour[:, ::-1] * 16).astype(np.int32) - 16 * np.array(corner[::-1], dtype=np.int32)
-    cv2.fillPoly(mask, [pts], 1, lineType=cv2.LINE_8, shift=4)
+    pts = np.round(contour[:, ::-1] * 16).astype(np.int32)
+    cv2.fillPoly(mask, [pts], 1, lineType=cv2.LINE_8, shift=4, offset=(-16 * int(corner[1]), -16 * int(corner[0])))
     return mask.view(bool)
 
 
