@@ -1090,7 +1090,8 @@ def _reaches_beyond(intensity, drawing, border_level, polarity) -> bool:
     pieces, n = _label(like)
     marked = _flags(pieces[_middle(drawing, intensity.shape) & like], n)
     reach = _within_hasty_margin(drawn)
-    return bool(marked[pieces[~reach]].any())
+    # Only the labelled pixels (``like``) can be marked: the others are not read.
+    return bool(marked[pieces[like & ~reach]].any())
 
 
 def _either_side(intensity, drawn, line, size) -> tuple[float, float]:
