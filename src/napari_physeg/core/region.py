@@ -508,7 +508,7 @@ def _on_even_ground(intensity, drawing, along, on_line, centre, outside, floor) 
     """
     if _scatter(along) > floor or abs(on_line - centre) < 2 * floor or (on_line - centre) * (outside - on_line) <= 0:
         return False
-    ring = _ring(intensity, drawing, *_OUTER_RINGS[0])
+    ring = intensity[_ring_mask(drawing, intensity.shape, *_OUTER_RINGS[0])]
     return ring.size > 0 and abs(_median(ring) - on_line) <= floor
 
 
@@ -525,18 +525,6 @@ def _even(rings: list, floor: float) -> bool:
 def _ring_mask(drawing, shape, lo: float, hi: float) -> np.ndarray:
     """The pixels between ``drawing`` scaled by ``lo`` and by ``hi`` about its centroid."""
     return _fill(_scaled(drawing, hi), shape) & ~_fill(_scaled(drawing, lo), shape)
-
-
-def _ring(intensity, drawing, lo: float, hi: float) -> np.ndarray:
-    """``intensity[_ring_mask(drawing, intensity.shape, lo, hi)]``, read on
-    the bounding box of the ring's outer polygon: the near rings are a small
-    part of the window the drawing is read on (a tenth for the first)."""
-    outer = _scaled(drawing, hi)
-    box = bounding_window(outer, intensity.shape, 1.0)
-    shape, corner = (box[0].stop - box[0].start, box[1].stop - box[1].start), (box[0].start, box[1].start)
-    if min(shape) <= 0:
-        return intensity[:0, 0]
-    return intensity[box][_fill(outer, shape, corner) & ~_fill(_scaled(drawing, lo), shape, corner)]
 
 
 def _outside_level(intensity, drawing, centre, on_line, along, within, floor) -> float:
@@ -570,7 +558,7 @@ def _outside_level(intensity, drawing, centre, on_line, along, within, floor) ->
                        and near_best <= _TEXTURE_SPREADS * max(_scatter(best_ring), _scatter(within)))
         if far and best > (near_best if through else floor):
             break
-        ring = _ring(intensity, drawing, lo, hi)
+        ring = intensity[_ring_mask(drawing, intensity.shape, lo, hi)]
         # Far out the background may be a small part of a ring that still
         # lies mostly on the object: the ring's class furthest from the centre.
         level = _surrounding_class(intensity, drawing, ring, centre, floor) if far else _median(ring)
