@@ -189,6 +189,17 @@ class RegionModel:
         return self.contrast > self.least_contrast
 
 
+def _box_of(mask: np.ndarray, margin: int) -> tuple[slice, slice] | None:
+    """The bounding box of ``mask``'s pixels grown by ``margin`` px (cut at
+    the array's start; slicing cuts it at its end), or None when ``mask`` is
+    empty. A mask's pixels are often a small part of the window it covers:
+    work on them is done on this box."""
+    left, top, width, height = cv2.boundingRect(mask.view(np.uint8))
+    if width == 0:
+        return None
+    return (slice(max(top - margin, 0), top + height + margin), slice(max(left - margin, 0), left + width + margin))
+
+
 def _fill(contour: np.ndarray, shape, corner=(0, 0)) -> np.ndarray:
     """Polygon mask (OpenCV, 1/16 px vertex precision) of an array of
     ``shape`` whose first pixel is pixel ``corner`` (row, col) of
@@ -958,9 +969,9 @@ def _beside_the_ground(intensity: np.ndarray, middle: np.ndarray, ground: float,
     # Read on the middle's box and RAMP_WIDTH px about it only (every drawing
     # around an object asks; the whole context took 2 ms at 512 px, and
     # np.nonzero's box of the middle a tenth of that).
-    left, top, width, height = cv2.boundingRect(middle.view(np.uint8))
-    box = (slice(max(top - RAMP_WIDTH, 0), top + height + RAMP_WIDTH),
-           slice(max(left - RAMP_WIDTH, 0), left + width + RAMP_WIDTH))
+    box = _box_of(middle, RAMP_WIDTH)
+    if box is None:
+        return None
     middle, intensity = middle[box], intensity[box]
     if np.count_nonzero(middle) < 2 or (np.abs(intensity[middle] - ground) > floor).mean() > 1 - GROUND_SHARE:
         return None
@@ -1089,10 +1100,9 @@ def _either_side(intensity, drawn, line, size) -> tuple[float, float]:
     side = _side_width(size)
     # On the line's bounding box (and the sides' width): the window it is
     # read on may be the whole image.
-    left, top, width, height = cv2.boundingRect(line.view(np.uint8))
-    if width == 0:
+    box = _box_of(line, side)
+    if box is None:
         return np.nan, np.nan
-    box = (slice(max(top - side, 0), top + height + side), slice(max(left - side, 0), left + width + side))
     line, drawn, intensity = line[box], drawn[box], intensity[box]
     near = cv2.dilate(line.view(np.uint8), _disk(side)).view(bool) & ~line
     return _median(intensity[near & drawn]), _median(intensity[near & ~drawn])
@@ -1297,10 +1307,9 @@ def _within_hasty_margin(drawn: np.ndarray) -> np.ndarray:
     margin = hasty_margin(np.count_nonzero(drawn))
     # Dilated on the drawn pixels' box and the margin only: a wide disk costs
     # some 20 instructions a pixel, and the window is many times the drawing.
-    left, top, width, height = cv2.boundingRect(drawn.view(np.uint8))
-    box = (slice(max(top - margin, 0), top + height + margin), slice(max(left - margin, 0), left + width + margin))
     within = np.zeros(drawn.shape, bool)
-    within[box] = cv2.dilate(drawn[box].view(np.uint8), _disk(margin)).view(bool)
+    if (box := _box_of(drawn, margin)) is not None:
+        within[box] = cv2.dilate(drawn[box].view(np.uint8), _disk(margin)).view(bool)
     return within
 
 
@@ -1472,10 +1481,7 @@ def _beyond_valleys(excess: np.ndarray, like: np.ndarray, blob: np.ndarray, dept
     # curves the intensity as a valley would).
     if np.count_nonzero(blob) < np.pi * inscribed ** 2 + smallest or inscribed < 2 * VALLEY_SCALE:
         return beyond
-    left, top, width, height = cv2.boundingRect(blob.view(np.uint8))
-    margin = int(np.ceil(3 * VALLEY_SCALE))  # the Hessian's reach
-    box = (slice(max(top - margin, 0), top + height + margin),
-           slice(max(left - margin, 0), left + width + margin))
+    box = _box_of(blob, int(np.ceil(3 * VALLEY_SCALE)))  # the blob and the Hessian's reach about it
     strength, valley = _valleys(excess[box])
     blob, seed = blob[box], seed[box]
     pieces, n = _label(blob & ~valley)
@@ -1872,12 +1878,8 @@ def _basin_groups(depth: np.ndarray, like: np.ndarray, neck: float = NECK) -> np
     # (the same labels). Its object-like pixels are often a tenth of the
     # window, and the watershed's set-up costs by the pixel.
     groups = np.zeros(like.shape, np.int64)
-    inside = like | (depth > 0)
-    if not inside.any():
-        return groups
-    left, top, width, height = cv2.boundingRect(inside.view(np.uint8))
-    box = (slice(max(top - 1, 0), top + height + 1), slice(max(left - 1, 0), left + width + 1))
-    groups[box] = _basin_groups_within(depth[box], like[box], neck)
+    if (box := _box_of(like | (depth > 0), 1)) is not None:
+        groups[box] = _basin_groups_within(depth[box], like[box], neck)
     return groups
 
 

@@ -33,7 +33,7 @@ from .features import (_as_image, _check_2d, _intensity_range, _noise_sigma, _no
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .magnify import MagnifiedView, magnification
 from .materials import Material, get_material, suggested_stiffness
-from .region import (_INSIDE_LIMIT, RegionModel, _disk, _fill, _least_contrast, _scaled, drawing_levels,
+from .region import (_INSIDE_LIMIT, RegionModel, _box_of, _disk, _fill, _least_contrast, _scaled, drawing_levels,
                      level_beyond_object, object_region, objectness)
 from .subpixel import level_along, polish
 
@@ -284,9 +284,7 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
     gate = int(np.ceil(EDGE_GATE * rim))
     # Every mask below lies within the gate of the region: they are made on
     # its bounding box and that margin (and a pixel), not on the whole window.
-    left, top, width, height = cv2.boundingRect(region.view(np.uint8))
-    box = (slice(max(top - gate - 1, 0), top + height + gate + 1),
-           slice(max(left - gate - 1, 0), left + width + gate + 1))
+    box = _box_of(region, gate + 1) or (slice(0, region.shape[0]), slice(0, region.shape[1]))  # (others took it all)
     r8 = region[box].view(np.uint8)
     interior = cv2.erode(r8, _disk(rim + 1)).view(bool)
     band = cv2.dilate(r8, _disk(gate)).view(bool) & ~interior
