@@ -153,6 +153,9 @@ GOOD_INIT = data.ellipse((64, 64)).init_near
         (np.stack([GOOD_IMAGE] * 5), GOOD_INIT, "2D"),
         (np.full((64, 64), 7.0), GOOD_INIT, "constant"),
         (GOOD_IMAGE.astype(complex), GOOD_INIT, "real"),
+        # An empty or one-row image is the problem, not the drawing's place on it.
+        (np.zeros((0, 0)), GOOD_INIT, r"shape \(0, 0\).*no area"),
+        (GOOD_IMAGE[:1], [[0, 0], [0, 10], [0.5, 5]], r"shape \(1, 64\).*at least 2 px"),
     ],
 )
 def test_bad_input_gets_a_clear_error(image, init, message):

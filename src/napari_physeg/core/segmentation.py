@@ -131,9 +131,15 @@ class SegmentationResult:
 
 
 def _validate_image(image) -> np.ndarray:
-    """``image`` as an array, refused unless 2D (its values are checked where the features read them)."""
+    """``image`` as an array, refused unless 2D and at least 2 px on each
+    side (its values are checked where the features read them). Checked
+    before the drawing is placed on it: an empty image is not a drawing
+    that "lies outside the image"."""
     arr = np.asarray(image)
     _check_2d(arr, "image")
+    if min(arr.shape) < 2:
+        raise ValueError(f"image has shape {arr.shape}: it holds no area for a contour; pass a 2D image at "
+                         "least 2 px high and wide")
     return arr
 
 
