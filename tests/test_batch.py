@@ -440,3 +440,35 @@ def test_cli_batch_track_names_the_file_of_a_worker_warning_and_starts_no_idle_w
     table = pd.read_csv(out / "summary.csv", keep_default_na=False)
     assert list(table["status"]) == ["not found", "ok"]
     assert table["warnings"].iloc[0] and not table["warnings"].iloc[1]
+
+
+def test_a_batch_ends_without_the_messages_dask_logs_while_its_cluster_closes(movies, monkeypatch, capfd):
+    """On a busy machine a worker's heartbeat can meet the closed scheduler
+    and print a traceback at the end of a batch that went well (dask/distributed
+    #7105). Stand-in: every worker logs an error as it closes; none reaches
+    the terminal, and this process's dask loggers are as they were."""
+    import logging
+
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    class ErrorOnClose(WorkerPlugin):  # defined here: sent to the workers by value
+        def teardown(self, worker):
+            logging.getLogger("distributed.worker").error("an error logged while the cluster closes")
+
+    real_run = distributed.Client.run
+
+    def run_and_plug(self, function, *args, **kwargs):
+        if function is batch._ignore_interrupt:  # the batch's own cluster, just started
+            self.register_plugin(ErrorOnClose())
+        return real_run(self, function, *args, **kwargs)
+
+    monkeypatch.setattr(distributed.Client, "run", run_and_plug)
+    before = {name: logging.getLogger(name).level for name in ("distributed", "tornado")}
+    paths, init, tmp = movies
+    assert main(["batch", "track", *map(str, paths[:2]), "--init", str(init), "--out", str(tmp / "out"),
+                 "--workers", "2", "--quiet"]) == 0
+    time.sleep(0.5)  # the worker processes' last words
+    captured = capfd.readouterr()
+    assert "2 of 2 rows ok" in captured.out
+    assert "an error logged while the cluster closes" not in captured.err
+    assert {name: logging.getLogger(name).level for name in before} == before

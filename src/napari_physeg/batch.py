@@ -701,6 +701,14 @@ def _client(workers, scheduler, client):
             Client(cluster, set_as_default=False) as local:
         local.run(_ignore_interrupt)
         yield local
+        # The results are in: what dask logs while the cluster closes is no
+        # news, and on a busy machine it is alarming (a worker's heartbeat
+        # that meets the closed scheduler prints a traceback, dask/distributed
+        # #7105; a nanny kills a worker slow to exit, with a warning). Not
+        # after Ctrl-C or an error: the workers may be gone, and _gather
+        # quiets this process's part then.
+        local.run(_quiet_dask_logs)
+        _quiet_dask_logs()  # this process's (the nannies'); _run restores it
 
 
 def _check_address(scheduler) -> None:
@@ -720,6 +728,16 @@ def _check_address(scheduler) -> None:
                          "tcp://10.0.0.5:8786 or myhost:8786") from None
 
 
+#: The loggers dask's cluster writes to (tornado's: its event loop's errors).
+_DASK_LOGGERS = ("distributed", "tornado")
+
+
+def _quiet_dask_logs() -> None:
+    """Only dask's critical messages from now on, in this process."""
+    for name in _DASK_LOGGERS:
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+
+
 def _ignore_interrupt() -> None:
     """On a local cluster's workers: Ctrl-C reaches the terminal's whole process group, and the client
     alone is to handle it (it closes the cluster); a worker would print a traceback."""
@@ -734,7 +752,7 @@ def _run(tasks, workers, scheduler, client, progress) -> list[dict]:
     from tqdm.auto import tqdm
 
     n = default_workers() if workers is None else int(workers)
-    level = logging.getLogger("distributed").level
+    levels = {name: logging.getLogger(name).level for name in _DASK_LOGGERS}
     try:
         with _client(min(n, len(todo)), scheduler, client) as c:  # a worker without a task only costs memory
             futures = {c.submit(_execute, task, key=f"napari-physeg-{task.name}-{uuid.uuid4().hex[:8]}",
@@ -743,7 +761,8 @@ def _run(tasks, workers, scheduler, client, progress) -> list[dict]:
                        file=sys.stderr, desc=todo[0].kind)
             new_rows = _gather(c, futures, bar)
     finally:
-        logging.getLogger("distributed").setLevel(level)
+        for name, level in levels.items():
+            logging.getLogger(name).setLevel(level)
     _warn(new_rows)
     return out_rows + new_rows
 
