@@ -255,8 +255,10 @@ def test_nd_stack_segments_the_current_slice(viewer_widget, wait_done, errors):
 def slow_down_the_core(monkeypatch, hold=None) -> list:
     """Make each step of the core's ``iter_segment`` take 10 ms more; the steps taken are listed.
 
-    ``hold``: (n, event): the n-th run (from 0) takes no step further until
-    ``event`` is set (at most 30 s), so that a cancel lands on it however slow the GUI thread is."""
+    ``hold``: (n, event): the n-th run (from 0) takes its steps at 0.1 s each (the preview shows
+    at most one every 0.05 s) until ``event`` is set, so that a cancel lands on it however slow the
+    GUI thread is. (Held still after its first step, as it was, it had yielded nothing the preview
+    showed: the worker waited its 30 s in every run of the test.)"""
     steps, calls = [], []
     real_iter_segment = seg.iter_segment
 
@@ -272,7 +274,7 @@ def slow_down_the_core(monkeypatch, hold=None) -> list:
                 time.sleep(0.01)
                 stop = yield state
                 if held and not stop:
-                    hold[1].wait(30)
+                    hold[1].wait(0.1)
         except StopIteration as done:
             return done.value
 
