@@ -18,8 +18,10 @@ figures: demo
 	cp demo_output/segmentation.png demo_output/matching_simulation.png demo_output/simulation.gif \
 	   demo_output/tracking_nuclei.png docs/images/
 
+# One pytest worker per core (pytest-xdist), each test file on one worker, so that a file's
+# module fixtures (a dask cluster, the real images) are made once.
 test: setup
-	$(PY) -m pytest -p no:cacheprovider tests
+	$(PY) -m pytest -p no:cacheprovider -n auto --dist loadfile tests
 
 bench: setup
 	$(PY) benchmarks/segmentation.py
