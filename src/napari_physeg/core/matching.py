@@ -57,6 +57,7 @@ from __future__ import annotations
 import inspect
 import warnings
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -1077,6 +1078,24 @@ def iter_match(a, b, **options):
     return _run(_prepare(**arguments))
 
 
+def _match_pairs(a, b, **options) -> np.ndarray:
+    """:attr:`Matching.pairs` of :func:`match` with these options, and
+    nothing else: for callers that read only the pairs (tracking matches
+    every contour with the one before), the result's full ``(Na, Nb)``
+    affinity and cost matrices, and its unmatched nodes, are not built."""
+    bound = _match_signature().bind(a, b, **options)
+    bound.apply_defaults()
+    arguments = dict(bound.arguments)
+    if arguments.pop("callback") is not None:
+        raise TypeError("_match_pairs takes no callback")
+    return drain(_run(_prepare(**arguments), pairs_only=True))
+
+
+@lru_cache(maxsize=1)
+def _match_signature() -> inspect.Signature:
+    return inspect.signature(match)
+
+
 @dataclass(frozen=True, eq=False)
 class _Job:
     """Validated input of one matching: both contours positively oriented."""
@@ -1376,8 +1395,10 @@ def _nearest_at(t: np.ndarray, wanted: np.ndarray) -> np.ndarray:
     return np.where(d_after < d_before, after, before)
 
 
-def _run(job: _Job):
-    """The stages of :func:`match`, as a generator (see :func:`iter_match`)."""
+def _run(job: _Job, pairs_only: bool = False):
+    """The stages of :func:`match`, as a generator (see :func:`iter_match`);
+    it returns the :class:`Matching`, or with ``pairs_only`` its pairs alone
+    (see _match_pairs)."""
     A, B, method = job.A, job.B, job.method
     na, nb = len(A), len(B)
     t_a, _ = _arc_positions(A)
@@ -1394,6 +1415,8 @@ def _run(job: _Job):
     work /= work[-1]
 
     def result(part, total, final, stop_reason):
+        if pairs_only:
+            return _pairs(job, part)[0]
         return _result(job, part, total, final, Z, k, signs, theta, basis_a, basis_b, bool(detail), stop_reason)
 
     empty = np.full(na, -1, dtype=np.intp)
@@ -1424,15 +1447,22 @@ def _run(job: _Job):
     return result(part, total, final, "completed")
 
 
+def _pairs(job, part):
+    """The pairs ``part`` gives (partners of the nodes of ``A``, -1: none),
+    as ``(a's node, b's node)`` in the caller's numbering, sorted by ``a``'s
+    node; and the node of ``A`` of each pair."""
+    ia = np.flatnonzero(part >= 0)
+    pairs = np.column_stack([job.pa[ia], job.pb[part[ia]]]).astype(np.intp).reshape(-1, 2)
+    order = np.argsort(pairs[:, 0], kind="stable")
+    return pairs[order], ia[order]
+
+
 def _result(job, part, total, final, Z, k, signs, theta, basis_a, basis_b, detail, stop_reason) -> Matching:
     """The :class:`Matching` in the caller's node numbering."""
     pa, pb = job.pa, job.pb
     na, nb = len(pa), len(pb)
-    ia = np.flatnonzero(part >= 0)
-    pairs = np.column_stack([pa[ia], pb[part[ia]]]).astype(np.intp).reshape(-1, 2)
+    pairs, ia = _pairs(job, part)
     cost = final[ia, part[ia]]
-    order = np.argsort(pairs[:, 0], kind="stable")
-    pairs, cost = pairs[order], cost[order]
     affinity = np.empty((na, nb))
     affinity[np.ix_(pa, pb)] = Z
     cost_matrix = np.empty((na, nb))

@@ -48,7 +48,7 @@ from .contour import (area_centroid, as_contour, bounding_window, closest_on_pol
 from .background import plane_removed
 from .dynamics import DivergenceError
 from .features import _without_missing
-from .matching import match
+from .matching import _match_pairs
 from .region import hasty_margin
 from .segmentation import FrameFeatures, _segment_from, check_segment_options, segment
 
@@ -1447,7 +1447,7 @@ def node_origins(contour: np.ndarray, previous: np.ndarray, **match_options) -> 
     options = {"displacement_weight": DISPLACEMENT_WEIGHT, "n_starts": 1, "model_nodes": 32, "context_weight": 0.0,
                "sign_correction": False, "refine": False, "curvature_weight": 0.0,
                **match_options}
-    pairs = match(back, previous, method="order", **options).pairs
+    pairs = _match_pairs(back, previous, method="order", **options)
     partner = np.full(len(contour), -1)
     partner[pairs[:, 0]] = pairs[:, 1]
     missing = partner < 0
