@@ -601,57 +601,59 @@ def _order_dp(C: np.ndarray, nb: int, window: int, repeat: float, skip: float, g
     inf = np.inf
     ks = np.arange(width)
     ramp = skip * ks
-    from_adv = np.zeros((na, width), dtype=np.int32)  # predecessor column when advancing
-    choice = np.zeros((na, width), dtype=np.int8)  # 0 advance, 1 repeat, 2 gap
+    # The choices, written as they are made: the best column before each
+    # column j + 1 when advancing to it, and whether each column repeated
+    # (else advanced, or with a finite ``gap`` was left unmatched).
+    from_adv = np.zeros((na, width), dtype=ks.dtype)
+    repeated = np.zeros((na, width), dtype=bool)
+    may_gap = np.isfinite(gap)  # the default never leaves a node unmatched: three operations fewer a row
+    gapped = np.zeros((na, width), dtype=bool) if may_gap else None
     F = np.full(width, inf)
     F[: 2 * window + 1] = C[0, : 2 * window + 1]
     start = ks.copy()
     adv = np.full(width, inf)
     adv_start = np.empty(width, dtype=start.dtype)
-    may_gap = np.isfinite(gap)  # the default never leaves a node unmatched: three operations fewer a row
     vals, pm, rep = (np.empty(width) for _ in range(3))
-    arg = np.empty(width, dtype=ks.dtype)
-    use_rep = np.empty(width, dtype=bool)
+    at_min = np.empty(width, dtype=bool)
     # Each row is a dozen operations on a few dozen columns: their buffers
-    # are reused, and the choices written as they are made (numpy's call
-    # overhead, not the arithmetic, is most of the time).
+    # (and views of them) are made once, and every result written in place
+    # (numpy's call overhead, not the arithmetic, is most of the time).
+    pm_before, ramp_after, adv_after = pm[:-1], ramp[1:], adv[1:]
     for i in range(1, na):
         np.subtract(F, ramp, out=vals)
         np.minimum.accumulate(vals, out=pm)
-        np.multiply(vals <= pm, ks, out=arg)
+        arg = from_adv[i]  # the column of the running minimum: its last occurrence
+        np.less_equal(vals, pm, out=at_min)
+        np.multiply(at_min, ks, out=arg)
         np.maximum.accumulate(arg, out=arg)
-        np.add(pm[:-1], ramp[1:], out=adv[1:])
-        adv[1:] -= skip
+        np.add(pm_before, ramp_after, out=adv_after)
+        adv_after -= skip
         np.add(F, repeat, out=rep)
-        np.less(rep, adv, out=use_rep)
+        use_rep = np.less(rep, adv, out=repeated[i])
         D = np.where(use_rep, rep, adv)
         D += C[i]
-        from_adv[i, 1:] = arg[:-1]
-        ch = choice[i]
-        ch[:] = use_rep  # 1 repeat, else 0 advance
         kept = use_rep  # where the path did not advance
         if may_gap:
             G = F + gap
-            use_gap = G < D
+            use_gap = np.less(G, D, out=gapped[i])
             D[use_gap] = G[use_gap]
-            ch[use_gap] = 2
-            kept = ch != 0
+            kept = use_rep | use_gap
         F = D
         adv_start[0] = start[0]
         np.take(start, arg[:-1], out=adv_start[1:])
-        start = np.where(kept, start, adv_start)
+        np.copyto(adv_start, start, where=kept)
+        start, adv_start = adv_start, start
     span = ks - start
     end = np.where(span <= nb - 1, F + skip * (nb - 1 - span), inf)
     j = int(np.argmin(end))
     total = float(end[j])
     part = np.full(na, -1, dtype=np.intp)
     for i in range(na - 1, 0, -1):
-        ch = choice[i, j]
-        if ch == 2:
+        if may_gap and gapped[i, j]:
             continue
         part[i] = j
-        if ch == 0:
-            j = int(from_adv[i, j])
+        if not repeated[i, j]:  # advanced (never into column 0, whose advance costs inf)
+            j = int(from_adv[i, j - 1]) if j > 0 else 0
     part[0] = j
     return part, total
 
