@@ -1072,12 +1072,7 @@ def iter_match(a, b, **options):
     >>> next(run).phase
     'features'
     """
-    bound = inspect.signature(match).bind(a, b, **options)  # a misspelt option fails here
-    bound.apply_defaults()
-    arguments = dict(bound.arguments)
-    if arguments.pop("callback") is not None:
-        raise TypeError("iter_match takes no callback: it yields its progress")
-    return _run(_prepare(**arguments))
+    return _run(_prepare(**_match_arguments(a, b, options, "iter_match takes no callback: it yields its progress")))
 
 
 def _match_pairs(a, b, **options) -> np.ndarray:
@@ -1085,12 +1080,19 @@ def _match_pairs(a, b, **options) -> np.ndarray:
     nothing else: for callers that read only the pairs (tracking matches
     every contour with the one before), the result's full ``(Na, Nb)``
     affinity and cost matrices, and its unmatched nodes, are not built."""
+    return drain(_run(_prepare(**_match_arguments(a, b, options, "_match_pairs takes no callback")), pairs_only=True))
+
+
+def _match_arguments(a, b, options: dict, no_callback: str) -> dict:
+    """The arguments of :func:`match` for ``a``, ``b`` and ``options``,
+    with its defaults (a misspelt option fails here), for the callers that
+    take no ``callback`` (TypeError ``no_callback`` if one is given)."""
     bound = _match_signature().bind(a, b, **options)
     bound.apply_defaults()
     arguments = dict(bound.arguments)
     if arguments.pop("callback") is not None:
-        raise TypeError("_match_pairs takes no callback")
-    return drain(_run(_prepare(**arguments), pairs_only=True))
+        raise TypeError(no_callback)
+    return arguments
 
 
 @lru_cache(maxsize=1)
