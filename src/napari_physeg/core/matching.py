@@ -54,10 +54,8 @@ stage is in ``docs/benchmarks.md`` (section "Matching"). Coordinates are
 
 from __future__ import annotations
 
-import inspect
 import warnings
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -67,7 +65,7 @@ from ._drain import drain
 from .contour import resample, rotation_between, rotation_matrix, segment_lengths, signed_area
 from .inner_distance import inner_distance_context
 from .materials import Material
-from ._validation import check_contour, check_count, check_number
+from ._validation import check_contour, check_count, check_number, with_defaults
 from .modes import DEGENERACY_TOLERANCE, MAX_AUTO_MODES, ModalBasis, _modal_raw, select_modes, truncate
 
 __all__ = [
@@ -1087,17 +1085,10 @@ def _match_arguments(a, b, options: dict, no_callback: str) -> dict:
     """The arguments of :func:`match` for ``a``, ``b`` and ``options``,
     with its defaults (a misspelt option fails here), for the callers that
     take no ``callback`` (TypeError ``no_callback`` if one is given)."""
-    bound = _match_signature().bind(a, b, **options)
-    bound.apply_defaults()
-    arguments = dict(bound.arguments)
+    arguments = with_defaults(match, (a, b), options)
     if arguments.pop("callback") is not None:
         raise TypeError(no_callback)
     return arguments
-
-
-@lru_cache(maxsize=1)
-def _match_signature() -> inspect.Signature:
-    return inspect.signature(match)
 
 
 @dataclass(frozen=True, eq=False)

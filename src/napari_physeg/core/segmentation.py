@@ -8,7 +8,6 @@ the object it surrounds or lies inside.
 
 from __future__ import annotations
 
-import inspect
 import time
 import warnings
 from collections import deque
@@ -36,6 +35,7 @@ from .materials import Material, get_material, suggested_stiffness
 from .region import (_INSIDE_LIMIT, RegionModel, _box_of, _disk, _fill, _least_contrast, _scaled, drawing_levels,
                      level_beyond_object, object_region, objectness)
 from .subpixel import level_along, polish
+from ._validation import signature_of, with_defaults
 
 __all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "FrameFeatures", "region_features"]
 
@@ -1079,20 +1079,12 @@ def _checked_options(material, forces, weights, stiffness, reference, integrator
     return material, weights, r
 
 
-@lru_cache(maxsize=None)
-def _signature(function) -> inspect.Signature:
-    """``inspect.signature(function)``, read once: it took 0.3 ms, and a
-    tracked object asks for :func:`segment`'s on every frame."""
-    return inspect.signature(function)
-
-
 def check_segment_options(**options) -> None:
     """Raise the error :func:`segment` would raise for these options, before
     any image is read: for callers that segment many times (:func:`~.tracking.track`)."""
-    bound = _signature(segment).bind(None, None, **options)  # a misspelt option: TypeError
-    bound.apply_defaults()
-    names = _signature(_checked_options).parameters
-    _checked_options(**{name: bound.arguments[name] for name in names})
+    arguments = with_defaults(segment, (None, None), options)  # a misspelt option: TypeError
+    names = signature_of(_checked_options).parameters
+    _checked_options(**{name: arguments[name] for name in names})
 
 
 #: integrator="modal" solves a dense generalized eigenproblem of 2M x 2M at
@@ -1155,9 +1147,7 @@ def iter_segment(image, init, **options):
 def _segment_arguments(image, init, options: dict) -> dict:
     """:func:`segment`'s arguments with every default filled in, but its
     ``callback`` (a misspelt option: TypeError)."""
-    bound = _signature(segment).bind(image, init, **options)
-    bound.apply_defaults()
-    arguments = dict(bound.arguments)
+    arguments = with_defaults(segment, (image, init), options)
     arguments.pop("callback")
     return arguments
 

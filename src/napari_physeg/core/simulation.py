@@ -33,7 +33,6 @@ turned copy of itself then ends on it, its frames turned and moved copies.
 
 from __future__ import annotations
 
-import inspect
 import time
 from dataclasses import dataclass, field
 
@@ -42,7 +41,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
 from ._drain import drain
-from ._validation import check_contour, check_count, check_number
+from ._validation import check_contour, check_count, check_number, with_defaults
 from .contour import rotation_between, rotation_matrix, segment_lengths
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import (
@@ -288,9 +287,7 @@ def iter_simulate(a, b, matching=None, **options):
     >>> next(run).step
     1
     """
-    bound = inspect.signature(simulate).bind(a, b, matching, **options)  # a misspelt option fails here
-    bound.apply_defaults()
-    arguments = dict(bound.arguments)
+    arguments = with_defaults(simulate, (a, b, matching), options)  # a misspelt option fails here
     if arguments.pop("callback") is not None:
         raise TypeError("iter_simulate takes no callback: it yields its progress")
     return _run(*_prepare(**arguments))
