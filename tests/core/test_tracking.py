@@ -306,6 +306,16 @@ def test_an_object_not_found_on_the_start_frame_gets_a_warning():
     assert tr.status[0] == [LOST] * 2
 
 
+def test_a_start_frame_of_one_value_is_named_as_the_cause():
+    """A movie converted to a type that rounds it to one value (uint8 read as
+    int8 // 256, a wrong channel): the warning says so, not "check the drawing"."""
+    frames = np.zeros((2, 96, 96), dtype=np.int8)
+    with pytest.warns(UserWarning, match="not found on the start frame 0 and is reported lost: every pixel of the "
+                                         "frame is 0, so it has no border to follow; check that this is the channel"):
+        tr = track(frames, _circle((48, 48), 16))
+    assert tr.status[0] == [LOST] * 2
+
+
 def _dividing_cell_movie(n_frames=11, shape=(80, 110)):
     """A disk that pinches into two daughters moving apart, 3 px a frame."""
     from scipy import ndimage as ndi

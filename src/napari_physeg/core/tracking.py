@@ -704,7 +704,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                     break
             if stop_reason == "cancelled":
                 break
-            said += _warn_not_found(run, frame_shape) if t == start else _warn_divided(run, t, step)
+            said += _warn_not_found(run, image) if t == start else _warn_divided(run, t, step)
         if stop_reason == "cancelled":
             break
     if with_missing:
@@ -755,23 +755,40 @@ def _frame(frames, t: int) -> np.ndarray:
 SAME_DRAWING_SHARE = 0.5
 
 
-def _warn_not_found(run: _Run, shape) -> list[str]:
+def _warn_not_found(run: _Run, image: np.ndarray) -> list[str]:
     """Warn, naming the likely cause, of each object not found on the start
-    frame: it is reported lost on every frame, which is seldom what was meant.
-    Returns the messages."""
-    said = []
+    frame ``image``: it is reported lost on every frame, which is seldom what
+    was meant. Returns the messages."""
+    said, shape, blank = [], image.shape, _blank(image)
     for k, init in enumerate(run.inits):
         if run.status[k][run.start] == TRACKED:
             continue
         within = [j for j in range(len(run.inits))
                   if j != k and (_holds(run.inits[j], init, shape) or _holds(init, run.inits[j], shape))]
-        why = (f"its drawing and that of object {within[0]} lie one mostly within the other: both mark the same "
-               f"object, which contours that never overlap cannot share; draw each object once" if within else
-               "no object came to rest under its drawing; check that it is drawn around (or inside) one object, "
-               "or the segment_options (e.g. max_steps, material and stiffness)")
+        if blank:
+            why = blank
+        elif within:
+            why = (f"its drawing and that of object {within[0]} lie one mostly within the other: both mark the "
+                   f"same object, which contours that never overlap cannot share; draw each object once")
+        else:
+            why = ("no object came to rest under its drawing; check that it is drawn around (or inside) one "
+                   "object, or the segment_options (e.g. max_steps, material and stiffness)")
         said.append(f"object {k} was not found on the start frame {run.start} and is reported lost: {why}")
         warnings.warn(said[-1], UserWarning, stacklevel=5)
     return said
+
+
+def _blank(image: np.ndarray) -> str | None:
+    """Why nothing can be found on ``image`` whatever was drawn (all its
+    pixels with data of one value), or None. (A frame without data is refused
+    before: see iter_track.)"""
+    missing = np.isnan(image)
+    known = image[~missing]
+    if known.min() == known.max():
+        pixels = "every pixel of the frame with data" if missing.any() else "every pixel of the frame"
+        return (f"{pixels} is {known.min():g}, so it has no border to follow; check that this is "
+                f"the channel meant, and that no conversion of the data type rounded it to one value")
+    return None
 
 
 #: A contour pinched into two bodies, each at least DIVISION_SHARE of its
