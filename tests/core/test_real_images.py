@@ -1039,3 +1039,18 @@ def test_a_contour_spread_to_the_reach_of_a_drawing_inside_is_reported_leaked(he
     res, iou = segmented(image, nucleus, circle_about(nucleus, 1.25))
     assert iou < 0.1 and res.polarity == -1  # the situation, as it was
     assert res.stop_reason == "leaked" and not res.converged
+
+
+def test_a_nucleus_of_the_time_lapse_drawn_twice_is_tracked_once():
+    """The same generous circle drawn twice about a nucleus of the Cell Tracking
+    Challenge time-lapse, which sits in a dim halo. The second drawing, with
+    the first object's pixels counted as background, came to rest on a crumb
+    of the halo (12 px beside the 821-px nucleus) and was reported tracked on
+    the start frame. It is lost, with the warning that says why."""
+    from napari_physeg.core import LOST, TRACKED, track
+
+    frames = tifffile.imread(SAMPLES / "2D_timelapse.tif")[:2]
+    drawing = circle((390, 223.5), 26)  # 1.6 times the nucleus
+    with pytest.warns(UserWarning, match="object 1 was not found on the start frame 0.*mark the same object"):
+        tr = track(frames, [drawing, drawing])
+    assert tr.status == [[TRACKED] * 2, [LOST] * 2]

@@ -280,6 +280,35 @@ def test_two_drawings_of_one_object_are_one_contour_and_a_warning(second):
     assert len(tr.warnings) == 1 and "mark the same object" in tr.warnings[0]  # for the widget to show
 
 
+def _haloed_disk_movie(n_frames=3, shape=(96, 96)):
+    """A nucleus (radius 12) in a dim halo of cytoplasm (out to 17 px), blurred."""
+    import cv2
+
+    rr, cc = np.mgrid[: shape[0], : shape[1]]
+    distance = np.hypot(rr - 48, cc - 48)
+    image = cv2.GaussianBlur(np.where(distance <= 12, 0.8, np.where(distance <= 17, 0.35, 0.2)), (0, 0), 1.5)
+    rng = np.random.default_rng(0)
+    return np.stack([image + 0.03 * rng.standard_normal(shape) for _ in range(n_frames)])
+
+
+@pytest.mark.parametrize("listed", ["around first", "click first"])
+def test_a_click_inside_a_haloed_nucleus_drawn_around_too_is_one_contour(listed):
+    """A click inside a nucleus that a drawing around also marks. The click
+    (the smaller drawing, done first) finds the nucleus; the drawing around,
+    with the nucleus' pixels counted as background, kept the halo's rim, and
+    a closed contour about that rim took the nucleus with it: two contours
+    over the same 427 px. One contour, and the warning."""
+    frames = _haloed_disk_movie()
+    drawings = [_circle((48, 48), 20), _circle((48, 48), 3)]
+    if listed == "click first":
+        drawings.reverse()
+    with pytest.warns(UserWarning, match="not found on the start frame 0.*mark the same object"):
+        tr = track(frames, drawings)
+    found = [k for k in range(2) if tr.status[k] == [TRACKED] * 3]
+    assert len(found) == 1 and tr.status[1 - found[0]] == [LOST] * 3
+    assert all(iou(tr.contours[found[0]][t], frames[t] > 0.55) > 0.9 for t in range(3))
+
+
 @pytest.mark.parametrize("listed", ["generous first", "tight first"])
 def test_a_generous_drawing_over_a_neighbour_takes_nothing_from_it_whatever_the_order(listed):
     """A circle around one cell that passes over the next cell's tight one

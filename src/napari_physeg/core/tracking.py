@@ -880,6 +880,7 @@ def _segment_frame(run: _Run, image, shared, t: int, step: int):
     for n, k in enumerate(order):
         if t == run.start:
             _settle_first(run, image, shared, owner, k, order[n + 1:], boxes)
+            _drop_second_find(run, owner, k, order[:n], image.shape)
         else:
             _settle(run, image, shared, owner, t, k, step)
         if run.status[k][t] != TRACKED and t != run.start:
@@ -1018,6 +1019,30 @@ def _settle_first(run: _Run, image, shared, owner, k: int, undone, boxes: np.nda
     _settle(run, image, shared, view, run.start, k, 1)
     _unpainted(run, owner, k)
     _paint(run, owner, run.contours[k][run.start], k)
+
+
+def _drop_second_find(run: _Run, owner, k: int, done, shape) -> None:
+    """Object ``k`` on the start frame: if its drawing and that of an object
+    found before it are one drawing made twice (each holds most of the
+    other), and what ``k`` found lies further from the drawing's centre than
+    that object does, it is what the first left over: ``k`` is lost (and
+    _warn_not_found says why). A drawing means what lies at its centre.
+    (Drawn twice about a nucleus with a dim halo, the second found a 12-px
+    crumb of the halo beside the 821-px nucleus, and was reported tracked on
+    the start frame.) Drawings that differ, a generous one that passes over a
+    neighbour's tight one, are left to the image: see _mostly_others."""
+    contour = run.contours[k][run.start]
+    if contour is None:
+        return
+    centre = area_centroid(run.inits[k])
+    off = np.hypot(*(area_centroid(contour) - centre))
+    for j in done:
+        first = run.contours[j][run.start]
+        if (first is not None and _holds(run.inits[j], run.inits[k], shape) and _holds(run.inits[k], run.inits[j], shape)
+                and np.hypot(*(area_centroid(first) - centre)) < off):
+            _unpainted(run, owner, k)
+            run.contours[k][run.start], run.status[k][run.start] = None, LOST
+            return
 
 
 def _holds(a: np.ndarray, b: np.ndarray, shape) -> bool:
@@ -1353,6 +1378,8 @@ def _found(image, shared, avoid, t, drawing: _Drawing, predicted, previous, seen
     if not res.converged:
         return None, LOST
     contour = positively_oriented(res.contour)
+    if _mostly_others(contour, avoid):
+        return None, LOST
     if previous is None:
         seen.polarity = "bright" if res.polarity > 0 else "dark"
         seen.whole_area = abs(signed_area(contour))
@@ -1381,6 +1408,20 @@ def _found(image, shared, avoid, t, drawing: _Drawing, predicted, previous, seen
     if verdict == TRACKED and not _touches_side(contour, image.shape, shared.missing):
         seen.whole_area, seen.seen_whole = area, True
     return (contour if verdict == TRACKED else None), verdict
+
+
+def _mostly_others(contour: np.ndarray, others: np.ndarray) -> bool:
+    """Whether most of ``contour``'s pixels are other objects' (``others``).
+
+    Counted as background, others' pixels repel a contour; but where they
+    fill the object drawn (a click inside a nucleus found first, and a
+    drawing around it), only a rim of it is left, and a closed contour
+    around that rim, held by the nucleus' edge, takes the inside with it:
+    the two contours covered the same 782 px. Objects never overlap: such
+    a contour is the other's object, not this one's."""
+    box = bounding_window(contour, others.shape, 0.0)
+    inside = _inside(contour, box)
+    return inside is not None and 2 * np.count_nonzero(others[box][inside]) > np.count_nonzero(inside)
 
 
 def _last_seen(status: list, t: int, step: int) -> int | None:
