@@ -1038,8 +1038,8 @@ def _drop_second_find(run: _Run, owner, k: int, done, shape) -> None:
     off = np.hypot(*(area_centroid(contour) - centre))
     for j in done:
         first = run.contours[j][run.start]
-        if (first is not None and _holds(run.inits[j], run.inits[k], shape) and _holds(run.inits[k], run.inits[j], shape)
-                and np.hypot(*(area_centroid(first) - centre)) < off):
+        twice = _holds(run.inits[j], run.inits[k], shape) and _holds(run.inits[k], run.inits[j], shape)
+        if first is not None and twice and np.hypot(*(area_centroid(first) - centre)) < off:
             _unpainted(run, owner, k)
             run.contours[k][run.start], run.status[k][run.start] = None, LOST
             return
