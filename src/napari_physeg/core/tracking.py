@@ -1030,7 +1030,8 @@ def _drop_second_find(run: _Run, owner, k: int, done, shape) -> None:
     (Drawn twice about a nucleus with a dim halo, the second found a 12-px
     crumb of the halo beside the 821-px nucleus, and was reported tracked on
     the start frame.) Drawings that differ, a generous one that passes over a
-    neighbour's tight one, are left to the image: see _mostly_others."""
+    neighbour's tight one, are left to the image (and to segment's "leaked": a
+    contour around pixels of other objects)."""
     contour = run.contours[k][run.start]
     if contour is None:
         return
@@ -1378,8 +1379,6 @@ def _found(image, shared, avoid, t, drawing: _Drawing, predicted, previous, seen
     if not res.converged:
         return None, LOST
     contour = positively_oriented(res.contour)
-    if _mostly_others(contour, avoid):
-        return None, LOST
     if previous is None:
         seen.polarity = "bright" if res.polarity > 0 else "dark"
         seen.whole_area = abs(signed_area(contour))
@@ -1408,20 +1407,6 @@ def _found(image, shared, avoid, t, drawing: _Drawing, predicted, previous, seen
     if verdict == TRACKED and not _touches_side(contour, image.shape, shared.missing):
         seen.whole_area, seen.seen_whole = area, True
     return (contour if verdict == TRACKED else None), verdict
-
-
-def _mostly_others(contour: np.ndarray, others: np.ndarray) -> bool:
-    """Whether most of ``contour``'s pixels are other objects' (``others``).
-
-    Counted as background, others' pixels repel a contour; but where they
-    fill the object drawn (a click inside a nucleus found first, and a
-    drawing around it), only a rim of it is left, and a closed contour
-    around that rim, held by the nucleus' edge, takes the inside with it:
-    the two contours covered the same 782 px. Objects never overlap: such
-    a contour is the other's object, not this one's."""
-    box = bounding_window(contour, others.shape, 0.0)
-    inside = _inside(contour, box)
-    return inside is not None and 2 * np.count_nonzero(others[box][inside]) > np.count_nonzero(inside)
 
 
 def _last_seen(status: list, t: int, step: int) -> int | None:
