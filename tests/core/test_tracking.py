@@ -309,6 +309,29 @@ def test_a_click_inside_a_haloed_nucleus_drawn_around_too_is_one_contour(listed)
     assert all(iou(tr.contours[found[0]][t], frames[t] > 0.55) > 0.9 for t in range(3))
 
 
+@pytest.mark.parametrize("gap", [14, 16])
+@pytest.mark.parametrize("listed", [(0, 1), (1, 0)])
+def test_clicks_inside_two_touching_nuclei_are_two_contours(gap, listed):
+    """Two nuclei (domes of radius 11) that touch along most of their width,
+    each clicked inside, as one marks the nuclei of a crowd. The first click
+    done took both nuclei (600 px) and the second was reported lost: nothing
+    parted them for a drawing alone. The body it took holds the other's
+    click, so it is parted between the two at the valley of intensity."""
+    rr, cc = np.mgrid[:80, :96]
+    centres = [np.array([40.0, 48 - gap / 2]), np.array([40.0, 48 + gap / 2])]
+    domes = [np.clip(1 - ((rr - c[0]) ** 2 + (cc - c[1]) ** 2) / 121, 0, None) ** 0.3 for c in centres]
+    image = 0.2 + 0.6 * np.maximum(*domes)
+    rng = np.random.default_rng(0)
+    frames = np.stack([image + 0.03 * rng.standard_normal(image.shape) for _ in range(3)])
+    tr = track(frames, [_circle(centres[k], 3) for k in listed])
+    assert tr.status == [[TRACKED] * 3] * 2
+    for t in range(3):
+        masks = [polygon_mask(tr.contours[listed.index(k)][t], image.shape) for k in (0, 1)]
+        assert (masks[0] & masks[1]).sum() <= 2
+        assert 0.8 < masks[0].sum() / masks[1].sum() < 1.25 and min(m.sum() for m in masks) > 250  # 2 x 300
+        assert tr.centroids(listed.index(0))[t][1] < 48 < tr.centroids(listed.index(1))[t][1]
+
+
 @pytest.mark.parametrize("listed", ["generous first", "tight first"])
 def test_a_generous_drawing_over_a_neighbour_takes_nothing_from_it_whatever_the_order(listed):
     """A circle around one cell that passes over the next cell's tight one

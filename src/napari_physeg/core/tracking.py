@@ -39,6 +39,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 from skimage import registration
+from skimage.segmentation import watershed
 
 from ._drain import drain
 from ._validation import check_contour
@@ -1013,12 +1014,52 @@ def _settle_first(run: _Run, image, shared, owner, k: int, undone, boxes: np.nda
     undone = np.asarray(undone, dtype=int)
     meet = np.all(boxes[undone, :2] <= boxes[k, 2:], axis=1) & np.all(boxes[k, :2] <= boxes[undone, 2:], axis=1)
     holders = [j for j in undone[meet] if _holds(run.inits[j], run.inits[k], image.shape)]
-    if not holders:
-        return _settle(run, image, shared, owner, run.start, k, 1)
-    view = np.where(np.isin(owner, holders), -1, owner)
+    view = np.where(np.isin(owner, holders), -1, owner) if holders else owner
     _settle(run, image, shared, view, run.start, k, 1)
-    _unpainted(run, owner, k)
-    _paint(run, owner, run.contours[k][run.start], k)
+    swallowed = _swallowed(run, k, [j for j in undone if j not in holders], boxes, image.shape)
+    if swallowed:
+        view = _parted(run, shared.intensity, view, k, swallowed)
+        _settle(run, image, shared, view, run.start, k, 1)
+    if view is not owner:
+        _unpainted(run, owner, k)
+        _paint(run, owner, run.contours[k][run.start], k)
+
+
+def _swallowed(run: _Run, k: int, candidates, boxes: np.ndarray, shape) -> list[int]:
+    """The objects of ``candidates`` (not done yet) whose drawings lie wholly
+    inside object ``k``'s contour on the start frame, when ``k`` was drawn
+    inside its object (most of its drawing within its contour): ``k``'s
+    contour took in the objects they mark. Clicks inside touching nuclei of
+    a crowd: the first one done took its neighbour too (nothing parts two
+    nuclei that touch along most of their width), and the neighbour, its
+    pixels another's, was not found (4 of 49 Data Science Bowl nuclei).
+    ``boxes``: as for _settle_first."""
+    contour = run.contours[k][run.start]
+    if contour is None or not candidates or not _holds(contour, run.inits[k], shape):
+        return []
+    candidates = np.asarray(candidates, dtype=int)
+    low, high = contour.min(0), contour.max(0)
+    within = np.all(boxes[candidates, :2] >= low, axis=1) & np.all(boxes[candidates, 2:] <= high, axis=1)
+    return [j for j in candidates[within] if np.all(depth_inside(contour, run.inits[j]) > 0)]
+
+
+def _parted(run: _Run, intensity: np.ndarray, owner: np.ndarray, k: int, swallowed) -> np.ndarray:
+    """``owner`` with the pixels of ``k``'s contour on the start frame parted
+    between ``k`` and the ``swallowed`` objects whose drawings it holds: a
+    watershed of the intensity (the object's polarity up) from each drawing,
+    so that each gets the body about its own drawing, parted at the valley
+    between them. A copy."""
+    box = bounding_window(run.contours[k][run.start], owner.shape, 1.0)
+    region = _inside(run.contours[k][run.start], box)
+    markers = np.zeros(region.shape, dtype=np.int32)
+    for label, j in enumerate([k, *swallowed], start=1):
+        markers[_inside(run.inits[j], box) & region] = label
+    up = 1.0 if run.seen[k].polarity == "bright" else -1.0
+    basins = watershed(-up * intensity[box], markers, mask=region)
+    parted = owner.copy()
+    for label, j in enumerate(swallowed, start=2):
+        parted[box][basins == label] = j
+    return parted
 
 
 def _drop_second_find(run: _Run, owner, k: int, done, shape) -> None:
