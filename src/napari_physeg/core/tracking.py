@@ -1023,6 +1023,8 @@ def _settle_first(run: _Run, image, shared, owner, k: int, undone, boxes: np.nda
     if view is not owner:
         _unpainted(run, owner, k)
         _paint(run, owner, run.contours[k][run.start], k)
+        for j in swallowed:  # their claims, which k's first contour had painted over
+            _paint(run, owner, run.inits[j], j, only_free=True)
 
 
 def _swallowed(run: _Run, k: int, candidates, boxes: np.ndarray, shape) -> list[int]:
