@@ -881,7 +881,7 @@ def _segment_frame(run: _Run, image, shared, t: int, step: int):
     for n, k in enumerate(order):
         if t == run.start:
             _settle_first(run, image, shared, owner, k, order[n + 1:], boxes)
-            _drop_second_find(run, owner, k, order[:n], image.shape)
+            _drop_second_find(run, owner, k, order[:n], boxes, image.shape)
         else:
             _settle(run, image, shared, owner, t, k, step)
         if run.status[k][t] != TRACKED and t != run.start:
@@ -1064,7 +1064,7 @@ def _parted(run: _Run, intensity: np.ndarray, owner: np.ndarray, k: int, swallow
     return parted
 
 
-def _drop_second_find(run: _Run, owner, k: int, done, shape) -> None:
+def _drop_second_find(run: _Run, owner, k: int, done, boxes: np.ndarray, shape) -> None:
     """Object ``k`` on the start frame: if its drawing and that of an object
     found before it are one drawing made twice (each holds most of the
     other), and what ``k`` found lies further from the drawing's centre than
@@ -1074,16 +1074,19 @@ def _drop_second_find(run: _Run, owner, k: int, done, shape) -> None:
     crumb of the halo beside the 821-px nucleus, and was reported tracked on
     the start frame.) Drawings that differ, a generous one that passes over a
     neighbour's tight one, are left to the image (and to segment's "leaked": a
-    contour around pixels of other objects)."""
+    contour around pixels of other objects). ``boxes``: as for _settle_first."""
     contour = run.contours[k][run.start]
-    if contour is None:
+    if contour is None or not len(done):
         return
     centre = area_centroid(run.inits[k])
     off = np.hypot(*(area_centroid(contour) - centre))
-    for j in done:
+    done = np.asarray(done, dtype=int)
+    meet = np.all(boxes[done, :2] <= boxes[k, 2:], axis=1) & np.all(boxes[k, :2] <= boxes[done, 2:], axis=1)
+    for j in done[meet]:
         first = run.contours[j][run.start]
-        twice = _holds(run.inits[j], run.inits[k], shape) and _holds(run.inits[k], run.inits[j], shape)
-        if first is not None and twice and np.hypot(*(area_centroid(first) - centre)) < off:
+        if first is None or np.hypot(*(area_centroid(first) - centre)) >= off:
+            continue
+        if _holds(run.inits[j], run.inits[k], shape) and _holds(run.inits[k], run.inits[j], shape):
             _unpainted(run, owner, k)
             run.contours[k][run.start], run.status[k][run.start] = None, LOST
             return
