@@ -30,6 +30,7 @@ __all__ = [
     "outward_normals",
     "mean_nearest_neighbour_distance",
     "polygon_mask",
+    "window_mask",
     "remove_loops",
 ]
 
@@ -182,6 +183,16 @@ def bounding_window(contour: np.ndarray, shape, margin: float, keep=None) -> tup
         lo = np.minimum(lo, [keep[0].start, keep[1].start])
         hi = np.maximum(hi, [keep[0].stop, keep[1].stop])
     return slice(int(lo[0]), int(hi[0])), slice(int(lo[1]), int(hi[1]))
+
+
+def window_mask(contour: np.ndarray, window) -> np.ndarray | None:
+    """The mask of ``contour``'s pixels within ``window`` (rows and columns,
+    see :func:`bounding_window`), or None for an empty window: objects are
+    rasterised around themselves only, as a frame holds many small ones."""
+    if window[0].stop <= window[0].start or window[1].stop <= window[1].start:
+        return None
+    shape = (window[0].stop - window[0].start, window[1].stop - window[1].start)
+    return polygon_mask(contour - [window[0].start, window[1].start], shape)
 
 
 def polygon_mask(contour: np.ndarray, shape) -> np.ndarray:

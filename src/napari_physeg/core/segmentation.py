@@ -23,7 +23,7 @@ from .background import background_plane, plane_removed
 from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, crosses_itself,
                       cut_pinches, densify, depth_inside, nearest_node, nodes_for_spacing, outward_normals,
                       pair_indices, pairs_within, perimeter, polygon_mask, remove_loops, resample, segment_lengths,
-                      signed_area)
+                      signed_area, window_mask)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
@@ -507,11 +507,8 @@ def _around_others(contour: np.ndarray, avoid: np.ndarray | None) -> bool:
     if avoid is None:
         return False
     box = bounding_window(contour, avoid.shape, 0.0)
-    if box[0].stop <= box[0].start or box[1].stop <= box[1].start:
-        return False
-    inside = polygon_mask(contour - [box[0].start, box[1].start], (box[0].stop - box[0].start,
-                                                                   box[1].stop - box[1].start))
-    return 2 * np.count_nonzero(avoid[box][inside]) > np.count_nonzero(inside)
+    inside = window_mask(contour, box)
+    return inside is not None and 2 * np.count_nonzero(avoid[box][inside]) > np.count_nonzero(inside)
 
 
 #: A contour from a drawing read as lying inside its object that rests

@@ -44,8 +44,8 @@ from skimage.segmentation import watershed
 from ._drain import drain
 from ._validation import check_contour
 from .contour import (area_centroid, as_contour, bounding_window, closest_on_polyline, depth_inside, nearest_node,
-                      outward_normals, perimeter, polygon_mask, positively_oriented, remove_loops, resample,
-                      rotation_matrix, signed_area)
+                      outward_normals, perimeter, positively_oriented, remove_loops, resample, rotation_matrix,
+                      signed_area, window_mask)
 from .background import plane_removed
 from .dynamics import DivergenceError
 from .features import _without_missing
@@ -457,7 +457,7 @@ def _grew_beyond(contour: np.ndarray, drawing: _Drawing, intensity: np.ndarray) 
         return False
     beyond = contour[at_limit] + 2.0 * outward_normals(contour)[at_limit]
     box = bounding_window(contour, intensity.shape, 1.0)
-    inside = np.argwhere(_inside(contour, box)) + np.array([box[0].start, box[1].start])
+    inside = np.argwhere(window_mask(contour, box)) + np.array([box[0].start, box[1].start])
     on_line = resample(drawing.line, spacing=1.0)
     now = _height(*(_sampled(intensity, points) for points in (beyond, inside, on_line)))
     then = _height(*(drawing.looked(points) for points in (beyond, inside, on_line)))
@@ -522,16 +522,6 @@ def _carried(drawing: _Drawing | None, last: np.ndarray, start: np.ndarray, inte
     return _Drawing.on(_drawing_around(start), intensity)
 
 
-def _inside(contour: np.ndarray, box) -> np.ndarray | None:
-    """The mask of ``contour``'s pixels within the window ``box`` (see
-    contour.bounding_window), or None for an empty window: objects are
-    rasterised around themselves only, as a frame holds many small ones."""
-    if box[0].stop <= box[0].start or box[1].stop <= box[1].start:
-        return None
-    shape = (box[0].stop - box[0].start, box[1].stop - box[1].start)
-    return polygon_mask(contour - [box[0].start, box[1].start], shape)
-
-
 def _paint(run: _Run, owner: np.ndarray, contour: np.ndarray | None, value: int, only_free: bool = False) -> None:
     """Set the pixels of ``owner`` inside ``contour`` (if any) to ``value``
     (``only_free``: those no object owns, -1), and grow the box of object
@@ -539,7 +529,7 @@ def _paint(run: _Run, owner: np.ndarray, contour: np.ndarray | None, value: int,
     if contour is None:
         return
     box = bounding_window(contour, owner.shape, 0.0)
-    inside = _inside(contour, box)
+    inside = window_mask(contour, box)
     if inside is None:
         return
     if only_free:
@@ -629,7 +619,7 @@ def _shared_area(a: np.ndarray, b: np.ndarray, shape) -> int:
     both of two far objects made 400 objects take ten times as long."""
     box = tuple(slice(max(p.start, q.start), min(p.stop, q.stop))
                 for p, q in zip(bounding_window(a, shape, 0.0), bounding_window(b, shape, 0.0)))
-    in_a, in_b = _inside(a, box), _inside(b, box)
+    in_a, in_b = window_mask(a, box), window_mask(b, box)
     return 0 if in_a is None else int((in_a & in_b).sum())
 
 
@@ -1052,10 +1042,10 @@ def _parted(run: _Run, intensity: np.ndarray, owner: np.ndarray, k: int, swallow
     so that each gets the body about its own drawing, parted at the valley
     between them. A copy."""
     box = bounding_window(run.contours[k][run.start], owner.shape, 1.0)
-    region = _inside(run.contours[k][run.start], box)
+    region = window_mask(run.contours[k][run.start], box)
     markers = np.zeros(region.shape, dtype=np.int32)
     for label, j in enumerate([k, *swallowed], start=1):
-        markers[_inside(run.inits[j], box) & region] = label
+        markers[window_mask(run.inits[j], box) & region] = label
     up = 1.0 if run.seen[k].polarity == "bright" else -1.0
     basins = watershed(-up * intensity[box], markers, mask=region)
     parted = owner.copy()
@@ -1473,7 +1463,7 @@ def _contrast(image: np.ndarray, contour: np.ndarray, polarity: int, avoid: np.n
     of a ring 2-4 px outside it (others' pixels, ``avoid``, left out), signed
     by ``polarity``; NaN when either is empty."""
     box = bounding_window(contour, image.shape, 6.0)
-    inside = _inside(contour, box)
+    inside = window_mask(contour, box)
     if inside is None or not inside.any():
         return np.nan
     inside = inside.astype(np.uint8)
