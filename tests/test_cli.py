@@ -727,3 +727,75 @@ def test_outputs_get_the_mode_open_gives_them(tmp_path):
         os.umask(old)
     assert {oct(p.stat().st_mode & 0o777) for p in written} == {oct(0o640)}
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no temporary file left
+
+
+def test_a_tiff_cut_within_its_first_pages_gets_one_line(movie_files):
+    # tifffile logged "invalid page offset" to stderr, a line before the program's own (in a process of
+    # its own: pytest's log capture would take the line).
+    movie, stack, init, tmp = movie_files
+    cut = tmp / "cut.tif"
+    cut.write_bytes(stack.read_bytes()[:3000])
+    run = subprocess.run([sys.executable, "-m", "napari_physeg.cli", "track", str(cut), "--init", str(init),
+                          "--out", str(tmp / "tracked")], capture_output=True, text=True)
+    assert run.returncode == 2 and "is cut short" in run.stderr and run.stderr.count("\n") == 1
+
+
+def test_out_onto_a_pipe_writes_into_it_and_leaves_it_a_pipe(scene, tmp_path):
+    # Renamed over, --out /dev/null (a device) became a plain file, as root.
+    import stat
+    import threading
+
+    obj, image, init, tmp = scene
+    pipe = tmp / "pipe"
+    os.mkfifo(pipe)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(pipe.read_text()))
+    reader.start()
+    assert main(["segment", str(image), "--init", str(init), "--out", str(pipe)]) == 0  # no --overwrite needed
+    reader.join(timeout=30)
+    assert stat.S_ISFIFO(os.stat(pipe).st_mode)
+    assert got and got[0].startswith("index,shape-type,vertex-index,axis-0,axis-1")
+
+
+def test_a_row_col_table_of_several_objects_and_closed_contours(tmp_path):
+    # An id column named the objects: they were read as one self-crossing contour. A closed contour's
+    # repeated first point (find_contours, Fiji) was refused as a repeated node.
+    a = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    ring = np.c_[np.sin(a), np.cos(a)]
+    first, second = 30 + 8 * ring, 60 + 10 * ring
+    rows = [f"{k},{float(r)!r},{float(c)!r}" for k, shape in ((3, first), (1, second)) for r, c in np.vstack([shape, shape[:1]])]
+    table = tmp_path / "objects.csv"
+    table.write_text("id,row,col\n" + "\n".join(rows) + "\n")
+    shapes = read_shapes_csv(table)
+    assert len(shapes) == 2 and np.array_equal(shapes[0], first) and np.array_equal(shapes[1], second)
+    # Fiji's Results: a row number before X, Y names no object.
+    table.write_text(" ,X,Y\n" + "\n".join(f"{i + 1},{float(c)!r},{float(r)!r}" for i, (r, c) in enumerate(first)) + "\n")
+    (only,) = read_shapes_csv(table)
+    assert np.array_equal(only, first)
+
+
+def test_a_contour_that_did_not_converge_is_named_on_stderr(scene, capsys, monkeypatch):
+    import napari_physeg.core as core
+
+    obj, image, init, tmp = scene
+    real = core.segment
+    monkeypatch.setattr(core, "segment", functools.wraps(real)(lambda *a, **k: real(*a, **{**k, "max_steps": 1})))
+    assert main(["segment", str(image), "--init", str(init), "--out", str(tmp / "o.csv")]) == 1
+    err = capsys.readouterr().err
+    assert "shape 0 did not converge (max_steps)" in err and (tmp / "o.csv").exists()
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--sigma-factor", "50"], "--sigma-factor"),
+    (["--mask", "labels.jpg"], "name it .tif or .png"),
+])
+def test_segment_refuses_options_it_cannot_honour_before_any_work(scene, capsys, no_work, monkeypatch, extra,
+                                                                  message):
+    # Refused only after the work: each shape failed with segment()'s message; the JPEG after o.csv was written.
+    obj, image, init, tmp = scene
+    monkeypatch.chdir(tmp)
+    before = sorted(p.name for p in tmp.iterdir())
+    assert main(["segment", str(image), "--init", str(init), "--out", "o.csv", *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+    assert sorted(p.name for p in tmp.iterdir()) == before

@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import inspect
+import logging
 import sys
 import warnings
 from pathlib import Path
@@ -37,7 +38,8 @@ EPILOG = """examples:
 
 Contours are napari's shapes CSV (File > Save Selected Layer: columns index,
 shape-type, vertex-index, axis-0, axis-1, ...; polygons, rectangles, paths and
-ellipses) or a plain 'row,col' table. Exit status: 0 on success, 2 for bad
+ellipses) or a plain 'row,col' table (one contour, or one per object with an
+'id' column before the coordinates). Exit status: 0 on success, 2 for bad
 input (one line saying what to fix; nothing is written), 1 when a run did not
 converge or diverged (segment: a contour failed, named on stderr, the others
 written; track, batch track: an object was lost; batch: a task failed).
@@ -96,7 +98,7 @@ def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> 
     from .core import MATERIALS, segment
     from .core.forces import DEFAULT_WEIGHTS
     from .core.materials import suggested_stiffness
-    from .core.segmentation import MAX_NODES, MIN_NODE_SPACING
+    from .core.segmentation import MAX_NODES, MAX_SIGMA_FACTOR, MIN_NODE_SPACING
 
     d = _defaults(segment)
     g = p.add_argument_group("contour model (the Segmentation widget's options; defaults are segment()'s)")
@@ -128,8 +130,9 @@ def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> 
     nodes.add_argument("--n-nodes", type=_number(int, 3, high=MAX_NODES, why=" (each step costs ~n^2.6)"),
                        metavar="N", help=f"number of nodes of each initial contour instead, typically 50-500, at "
                        f"most {MAX_NODES}")
-    g.add_argument("--sigma-factor", type=_number(float, 0, True), metavar="F",
-                   help=f"width of the interaction between nodes relative to the node spacing, 0.75-1.5 (max 2); "
+    g.add_argument("--sigma-factor", type=_number(float, 0, True, high=MAX_SIGMA_FACTOR), metavar="F",
+                   help=f"width of the interaction between nodes relative to the node spacing, 0.75-1.5 (max "
+                   f"{MAX_SIGMA_FACTOR:g}); "
                    f"larger: smoother, stiffer contour; default {d['sigma_factor']:g}")
     g.add_argument("--weights", type=_weights, metavar="NAME=W,...",
                    help="image forces and their weights, e.g. "
@@ -191,7 +194,8 @@ def _add_io(p, *, out_help: str, init: bool = True) -> None:
     if init:
         p.add_argument("--init", type=Path, required=True, metavar="CONTOURS.csv",
                        help="initial contour(s): napari shapes CSV (polygon, rectangle, path or ellipse; nD "
-                       "shapes use their last two axes) or a 'row,col' table")
+                       "shapes use their last two axes) or a 'row,col' table (an 'id,row,col' table: one "
+                       "contour per id)")
     p.add_argument("--out", type=Path, required=True, help=out_help)
     p.add_argument("--overwrite", action="store_true", help="replace existing output (never an input file)")
 
@@ -207,7 +211,7 @@ def _check_input(path: Path, what: str, *, image: bool = False) -> None:
                          + (f" (e.g. {path / '*.tif'})" if image else ""))
 
 
-def _check_output(path: Path, args, inputs, *, folder: bool = False, writes=()) -> None:
+def _check_output(path: Path, args, inputs, *, folder: bool = False, writes=(), what: str = "--out") -> None:
     """Refuse an output that is an input, that exists (without --overwrite) or
     that cannot be written: before any work, not after it. ``writes``: the files
     written in the folder ``path``, none of which may be an input either (even
@@ -218,16 +222,17 @@ def _check_output(path: Path, args, inputs, *, folder: bool = False, writes=()) 
         if not source.exists():
             continue
         if same_file(path, source):
-            raise ValueError(f"--out {path} is also an input: write the result elsewhere")
+            raise ValueError(f"{what} {path} is also an input: write the result elsewhere")
         clash = next((path / name for name in writes if same_file(path / name, source)), None)
         if clash is not None:
-            raise ValueError(f"--out {path} would replace the input {source} (the result's {clash.name} is "
-                             "written there): choose another --out folder, or move the input")
+            raise ValueError(f"{what} {path} would replace the input {source} (the result's {clash.name} is "
+                             f"written there): choose another {what} folder, or move the input")
     # A file where a folder goes (or the reverse) first: --overwrite would not help.
     check_writable(path, folder=folder)
-    exists = path.exists() and (not folder or any(path.iterdir()))
+    # A device or a pipe (--out /dev/null) is written into, not replaced: no --overwrite needed.
+    exists = path.is_dir() and any(path.iterdir()) if folder else path.is_file()
     if exists and not args.overwrite:
-        raise ValueError(f"{path} exists: pass --overwrite to replace it, or choose another --out")
+        raise ValueError(f"{path} exists: pass --overwrite to replace it, or choose another {what}")
 
 
 def _read_contours(path: Path, what: str = "--init", leading: bool = False):
@@ -251,7 +256,10 @@ def _segment(args) -> int:
         if same_file(args.mask, args.out):
             raise ValueError(f"--mask {args.mask} is the same file as --out: give the label image another name "
                              "(e.g. labels.tif)")
-        _check_output(args.mask, args, [args.image, args.init])
+        _check_output(args.mask, args, [args.image, args.init], what="--mask")
+        if args.mask.suffix.lower() not in (*TIFF_SUFFIXES, ".png"):
+            raise ValueError(f"--mask {args.mask}: labels are 16-bit integers, which a TIFF or a PNG holds: name it "
+                             ".tif or .png")
     options = _segment_options(args)
     with open_stack(args.image, channel=args.channel) as stack:
         jobs, is_stack = _segment_jobs(args, len(stack), leading, len(shapes))
@@ -304,7 +312,10 @@ def _run_segment_jobs(stack, jobs, shapes, options, node_spacing, is_stack):
                 continue
             state = "converged" if res.converged else f"stopped ({res.stop_reason})"
             print(f"{where}shape {k}: {len(res.contour)} nodes, {res.steps} steps, {state}, "
-                  f"{res.timings['total'] * 1e3:.0f} ms")
+                  f"{res.timings['total'] * 1e3:.0f} ms", flush=True)
+            if not res.converged:  # written, but the exit status says a run failed: say which on stderr
+                print(f"{PROG}: {where}shape {k} did not converge ({res.stop_reason}); its contour is written "
+                      "as it stopped", file=sys.stderr, flush=True)
             done.append((t, k, res))
     return done, failed
 
@@ -696,6 +707,9 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as stop:  # --help (0), or a malformed argument (2, one line already printed)
         return stop.code
+    # tifffile logs what it finds wrong in a file (a truncated one: "invalid page offset") to stderr
+    # through logging's last resort, a line before the one this command prints about the same file.
+    logging.getLogger("tifffile").addHandler(logging.NullHandler())
     try:
         # The core's dense problems are small: more BLAS threads only fight each
         # other (a 128 x 128 eigenproblem took 0.5 s instead of 2 ms on a busy machine).

@@ -43,7 +43,10 @@ def read_shapes_csv(path, *, leading: bool = False):
         polygon, rectangle, path (closed by joining its ends) or ellipse (read
         as the ellipse's polygon, not the 4 corners napari stores); for nD
         shapes the last two axes are the contour. Or a table whose last two
-        columns are ``row, col`` (one shape, an optional header line).
+        columns are ``row, col`` (or ``x, y``, so named in a header line):
+        one shape, or one per object when the column before them is named
+        ``id``, ``object``, ``label``... (see OBJECT_COLUMNS). A closed
+        contour's repeated first point is dropped.
     leading : bool, optional
         Also return, per shape, the coordinates of its first vertex on the
         axes before the last two (e.g. ``(frame,)`` for a shape drawn on one
@@ -87,12 +90,15 @@ def read_shapes_csv(path, *, leading: bool = False):
         else:
             try:
                 [float(c) for c in rows[0][-2:]]
-                body, swap = rows, False
+                body, swap, objects = rows, False, None
             except ValueError:  # a header line
                 body, swap = rows[1:], _xy_header(header[-2:])
+                objects = _object_column(header, body)
             points = np.asarray([[float(r[-2]), float(r[-1])] for r in body], dtype=np.float64)
-            out = [points[:, ::-1] if swap else points]
-            before = [()]
+            points = points[:, ::-1] if swap else points
+            out = [_unclosed(points[objects == o]) for o in dict.fromkeys(objects)] if objects is not None \
+                else [_unclosed(points)]
+            before = [()] * len(out)
     except IndexError:
         raise ValueError(f"could not read contours from {path}: a line has fewer columns than expected (is it "
                          f"comma-separated, as napari writes it?)") from None
@@ -104,6 +110,27 @@ def read_shapes_csv(path, *, leading: bool = False):
     if bad:
         raise ValueError(f"could not read contours from {path}: shape {bad[0]} has a NaN or infinite coordinate")
     return (out, before) if leading else out
+
+
+#: The names of a plain table's column, just before its two coordinates, that
+#: says which object each point outlines (e.g. ``id,row,col``).
+OBJECT_COLUMNS = ("id", "object", "label", "shape", "cell", "contour", "roi", "track", "track_id", "index")
+
+
+def _object_column(header, body) -> np.ndarray | None:
+    """The object of each row of a plain table, when the column before its two
+    coordinates is named as one of OBJECT_COLUMNS and its values repeat (a
+    row number, as in Fiji's Results, names no object); else None."""
+    if len(header) < 3 or header[-3].lower() not in OBJECT_COLUMNS:
+        return None
+    objects = np.asarray([r[-3].strip() for r in body])
+    return objects if len(set(objects)) < len(objects) else None
+
+
+def _unclosed(points: np.ndarray) -> np.ndarray:
+    """A contour without its first point repeated at its end, as
+    ``skimage.measure.find_contours``, Fiji and shapely write a closed one."""
+    return points[:-1] if len(points) > 3 and np.array_equal(points[0], points[-1]) else points
 
 
 def _xy_header(names) -> bool:
@@ -165,6 +192,11 @@ def atomic_path(path):
     ends without error (and removed when it fails): a reader, or a batch run
     that resumes, never sees half a file."""
     path = Path(path)
+    if path.exists() and not path.is_file():
+        # A device or a pipe (--out /dev/null, /dev/stdout): written in place. Renamed over, it would
+        # be replaced by a plain file (as root), or refused after all the work.
+        yield path
+        return
     # The suffix kept last: writers that choose the format by it still do. Created with mode 0o666
     # (not mkstemp's 0o600): the umask applies, so the file gets the mode a plain open() gives it.
     tmp = path.parent / f".{path.stem}.{uuid.uuid4().hex[:12]}.part{path.suffix}"

@@ -657,6 +657,13 @@ def test_a_misspelt_segment_option_fails_before_any_frame():
         track(np.zeros((3, 32, 32)), _circle((16, 16), 5), segment_options={"stifness": 1.0})
 
 
+@pytest.mark.parametrize("sigma_factor", [0, 2.5, np.nan])
+def test_a_sigma_factor_out_of_range_fails_before_any_frame(sigma_factor):
+    # It failed per object and frame: every object was lost, each with segment()'s message.
+    with pytest.raises(ValueError, match="sigma_factor must be above 0 and at most 2"):
+        track(np.zeros((3, 32, 32)), _circle((16, 16), 5), segment_options={"sigma_factor": sigma_factor})
+
+
 def test_polarity_can_be_given_for_all_objects():
     frames = _disk_movie([[(48, 48)]] * 3)
     tr = track(frames, _circle((48, 48), 16), segment_options={"polarity": "bright"})

@@ -1066,8 +1066,14 @@ class _RestDetector:
         return all(contour_gap(nodes, newest) <= 0.5 * reach for remeshes, nodes in self.track if remeshes != last)
 
 
+#: The element's Gaussian width is at most this many node spacings: wider,
+#: each node is tied to nodes beyond its neighbours and the element stiffens
+#: past any use (0.75-1.5 is typical).
+MAX_SIGMA_FACTOR = 2.0
+
+
 def _checked_options(material, forces, weights, stiffness, reference, integrator, polarity, max_step_length, tol,
-                     max_steps, n_nodes):
+                     max_steps, n_nodes, sigma, sigma_factor):
     """The material, the force weights and the stiffness (None: the one that
     suits the material), once every option is checked (ValueError naming the bad one)."""
     material = get_material(material)
@@ -1091,6 +1097,10 @@ def _checked_options(material, forces, weights, stiffness, reference, integrator
     if n_nodes is not None and not 3 <= int(n_nodes) <= MAX_NODES:
         raise ValueError(f"n_nodes must be between 3 and {MAX_NODES}, got {n_nodes!r}: one node every 2-5 px "
                          "is typical (contour.nodes_for_spacing)")
+    if sigma is None and not (isinstance(sigma_factor, (int, float, np.number)) and not isinstance(sigma_factor, bool)
+                              and 0 < sigma_factor <= MAX_SIGMA_FACTOR):
+        raise ValueError(f"sigma_factor must be above 0 and at most {MAX_SIGMA_FACTOR:g}, got {sigma_factor!r}; "
+                         "typical values are 0.75-1.5")
     return material, weights, r
 
 
@@ -1114,9 +1124,10 @@ def _initial_nodes(init, n_nodes, sigma, sigma_factor):
         n_nodes = int(np.clip(nodes_for_spacing(init, DEFAULT_NODE_SPACING), MIN_NODES, MAX_DEFAULT_NODES))
     spacing = length / int(n_nodes)
     sigma_used = float(sigma) if sigma is not None else sigma_factor * spacing
-    if not (np.isfinite(sigma_used) and 0 < sigma_used <= 2.0 * spacing):
+    if not (np.isfinite(sigma_used) and 0 < sigma_used <= MAX_SIGMA_FACTOR * spacing):
         raise ValueError(
-            f"sigma = {sigma_used!r} must be positive and at most 2 x the node spacing ({spacing:.3g} px); "
+            f"sigma = {sigma_used!r} must be positive and at most {MAX_SIGMA_FACTOR:g} x the node spacing "
+            f"({spacing:.3g} px); "
             "typical values are 0.75-1.5 x the spacing"
         )
     # A jittery freehand line, resampled, can twist over itself: an element
@@ -1221,7 +1232,8 @@ def _evolve(
 
     init = check_contour(init, "init")
     material, weights, stiffness = _checked_options(material, forces, weights, stiffness, reference, integrator,
-                                                    polarity, max_step_length, tol, max_steps, n_nodes)
+                                                    polarity, max_step_length, tol, max_steps, n_nodes, sigma,
+                                                    sigma_factor)
     # The drawing as the user made it (partly beyond the image, maybe) tells
     # the object from its background; the clipped one starts the contour.
     drawing = init
