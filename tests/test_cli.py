@@ -316,7 +316,7 @@ def test_no_traceback_from_the_installed_command(scene):
 
 
 @pytest.mark.parametrize("command, swap, message", [
-    ("segment", {"--init": "{stack}"}, "cannot read {stack} as a CSV: it is not text (is it the image?)"),
+    ("segment", {"--init": "{stack}"}, "cannot read {stack} as a CSV: it is not UTF-8 text (is it the image?"),
     ("track", {"--out": "{tmp}/a-file"}, "{tmp}/a-file exists and is a file: choose another output"),
     ("track", {"--init": "{tmp}/a-folder"}, "--init {tmp}/a-folder is a folder, not a CSV file"),
     ("segment", {"--out": "{tmp}/a-folder"}, "{tmp}/a-folder exists and is a folder: choose another output"),
@@ -562,7 +562,7 @@ def test_track_refuses_contours_drawn_beyond_the_last_frame(movie_files, capsys,
 
 
 @pytest.mark.parametrize("text, message", [
-    ("index;shape-type;vertex-index;axis-0;axis-1\n0;polygon;0;1;2\n", "comma-separated"),
+    ("index,shape-type,vertex-index,axis-0,axis-1\n0,polygon,0,1\n", "comma-separated"),
     ("index,shape-type,vertex-index,axis-0,axis-1\n0,polygon,0,1,2\n0,polygon,1,3\n", "fewer columns"),
     ("index,shape-type,vertex-index,axis-0,axis-1,axis-2\n" +
      "".join(f"0,polygon,{i},nan,{r},{c}\n" for i, (r, c) in enumerate([(1, 2), (9, 3), (5, 8)])), "NaN"),
@@ -788,6 +788,7 @@ def test_a_contour_that_did_not_converge_is_named_on_stderr(scene, capsys, monke
 @pytest.mark.parametrize("extra, message", [
     (["--sigma-factor", "50"], "--sigma-factor"),
     (["--mask", "labels.jpg"], "name it .tif or .png"),
+    (["--out", "contours.tif"], "name it .csv"),
 ])
 def test_segment_refuses_options_it_cannot_honour_before_any_work(scene, capsys, no_work, monkeypatch, extra,
                                                                   message):
@@ -799,3 +800,15 @@ def test_segment_refuses_options_it_cannot_honour_before_any_work(scene, capsys,
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
     assert sorted(p.name for p in tmp.iterdir()) == before
+
+
+@pytest.mark.parametrize("text", [
+    "# drawn in Fiji\nrow,col\n1,2\n3,4\n5,1\n",  # a comment line
+    "row,col,\n1,2,\n3,4,\n5,1,\n",  # a spreadsheet's empty last column
+    "row;col\n1,0;2\n3;4,0\n5;1\n",  # ';' between columns, decimal commas
+    "Y\tX\n1\t2\n3\t4\n5\t1\n",  # Fiji's tab-separated table
+])
+def test_tables_as_spreadsheets_and_fiji_write_them(tmp_path, text):
+    table = tmp_path / "t.csv"
+    table.write_text(text)
+    assert np.array_equal(read_shapes_csv(table)[0], [[1, 2], [3, 4], [5, 1]])

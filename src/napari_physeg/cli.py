@@ -251,6 +251,9 @@ def _segment(args) -> int:
     _check_input(args.image, "image", image=True)
     shapes, leading = _read_contours(args.init, leading=True)
     _check_output(args.out, args, [args.image, args.init])
+    if args.out.suffix.lower() in (*TIFF_SUFFIXES, ".png", ".jpg", ".jpeg"):
+        raise ValueError(f"--out {args.out}: the contours are written as napari's shapes CSV: name it .csv (--mask "
+                         "writes the label image)")
     if args.mask:
         # --out need not exist yet, so _check_output's test against inputs cannot see this clash.
         if same_file(args.mask, args.out):

@@ -65,16 +65,7 @@ def read_shapes_csv(path, *, leading: bool = False):
         columns that cannot be read.
     """
     path = Path(path)
-    # utf-8-sig: Excel's "CSV UTF-8" (and many Windows editors) start the file with a byte-order mark,
-    # which would otherwise be part of the first header cell ('\ufeffindex': read as a 'row,col' table).
-    try:
-        with path.open(newline="", encoding="utf-8-sig") as fh:
-            rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
-    except (UnicodeDecodeError, csv.Error):  # binary: an image given for the contours, most often
-        raise ValueError(f"cannot read {path} as a CSV: it is not text (is it the image?); contours are "
-                         "napari's shapes CSV or a 'row,col' table") from None
-    if not rows:
-        raise ValueError(f"{path} is empty: expected napari's shapes CSV or 'row,col' lines")
+    rows = _csv_rows(path)
     header = [c.strip() for c in rows[0]]
     try:
         if "index" in header and "axis-0" in header:
@@ -110,6 +101,32 @@ def read_shapes_csv(path, *, leading: bool = False):
     if bad:
         raise ValueError(f"could not read contours from {path}: shape {bad[0]} has a NaN or infinite coordinate")
     return (out, before) if leading else out
+
+
+def _csv_rows(path: Path) -> list[list[str]]:
+    """The rows of a CSV file that hold something, comments ('#') left out."""
+    # utf-8-sig: Excel's "CSV UTF-8" (and many Windows editors) start the file with a byte-order mark,
+    # which would otherwise be part of the first header cell ('\ufeffindex': read as a 'row,col' table).
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
+            lines = [line for line in fh if line.strip() and not line.lstrip().startswith("#")]
+        # Fiji and spreadsheets in locales with decimal commas write tabs or ';' between columns.
+        delimiter = next((d for d in "\t;" if lines and d in lines[0] and "," not in lines[0].replace(d, "")), ",")
+        rows = [_without_trailing_empty(r) for r in csv.reader(lines, delimiter=delimiter)]
+    except (UnicodeDecodeError, csv.Error):  # binary: an image given for the contours, most often
+        raise ValueError(f"cannot read {path} as a CSV: it is not UTF-8 text (is it the image? a table saved "
+                         "in another encoding: save it as CSV UTF-8); contours are napari's shapes CSV or a "
+                         "'row,col' table") from None
+    if not rows:
+        raise ValueError(f"{path} is empty: expected napari's shapes CSV or 'row,col' lines")
+    return rows if delimiter == "," else [[c.replace(",", ".") for c in r] for r in rows]
+
+
+def _without_trailing_empty(row: list) -> list:
+    """A CSV row without the empty cells a spreadsheet leaves at its end ("1,2,")."""
+    while len(row) > 1 and not row[-1].strip():
+        row = row[:-1]
+    return row
 
 
 #: The names of a plain table's column, just before its two coordinates, that
@@ -308,7 +325,8 @@ def open_stack(path, *, channel: int | None = None):
         except _Refused:
             raise
         except Exception as err:  # unreadable or corrupt: one plain sentence
-            raise ValueError(f"could not read {path}: {type(err).__name__}: {err}") from None
+            raise ValueError(f"could not read {path}: {type(err).__name__}: {err}{_zarr_group_hint(path)}") \
+                from None
         # Frames are read here, in this process: the store is not for sending
         # to a cluster (a distributed Client made default elsewhere would try).
         with dask.config.set(scheduler="synchronous"):
@@ -316,6 +334,15 @@ def open_stack(path, *, channel: int | None = None):
     finally:
         for close in closers:
             close()
+
+
+def _zarr_group_hint(path: Path) -> str:
+    """For a zarr group (an OME-Zarr image), which arrays in it to give instead."""
+    if not is_zarr(path):
+        return ""
+    arrays = sorted(p.name for p in path.iterdir() if p.is_dir() and is_zarr(p) and
+                    not any((p / n).exists() for n in (".zgroup",)))
+    return f" ({path} is a group of arrays: give one of them, e.g. {path / arrays[0]})" if arrays else ""
 
 
 class _NamedReads:
