@@ -86,7 +86,7 @@ def test_nd_shapes_keep_the_last_two_axes_and_plain_tables_work(tmp_path):
 
 
 @pytest.mark.parametrize("extra, message", [
-    (["--material", "unobtainium"], "material"),
+    (["--material", "unobtainium"], "or make one with --young, --poisson and --density"),  # not "a Material"
     (["--channel", "1"], "channel"),
 ])
 def test_bad_input_exits_2_with_a_message(scene, capsys, extra, message):

@@ -468,10 +468,25 @@ def _new_line() -> str:
     return "\n"
 
 
+#: The core's advice names its Python parameters; the command line's user has options instead.
+_CLI_TERMS = {
+    "the segment_options (e.g. max_steps, material and stiffness)": "--steps-per-frame, --material or --stiffness",
+    "or pass a Material": "or make one with --young, --poisson and --density",
+}
+
+
+def _in_cli_terms(message) -> str:
+    """``message`` on one line, with the core's parameter names given as this program's options."""
+    text = " ".join(str(message).split())
+    for api, cli in _CLI_TERMS.items():
+        text = text.replace(api, cli)
+    return text
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """A warning as one line of the program's (not Python's file, line and source), on a line
     of its own when a progress bar is being drawn."""
-    print(f"{_new_line()}{PROG}: warning: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+    print(f"{_new_line()}{PROG}: warning: {_in_cli_terms(message)}", file=sys.stderr, flush=True)
 
 
 def _start_frame(args, leading):
@@ -720,8 +735,7 @@ def main(argv=None) -> int:
             warnings.showwarning = _show_warning
             return args.run(args)
     except (ValueError, OSError) as err:  # bad input, or a file that cannot be read or written
-        text = " ".join(str(err).split())
-        print(f"{_new_line()}{PROG}: error: {text}", file=sys.stderr)
+        print(f"{_new_line()}{PROG}: error: {_in_cli_terms(err)}", file=sys.stderr)
         return 2
     except RuntimeError as err:  # DivergenceError
         print(f"{_new_line()}{PROG}: {' '.join(str(err).split())}", file=sys.stderr)
