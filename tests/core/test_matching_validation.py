@@ -122,3 +122,13 @@ def test_nearly_repeated_nodes_raise_a_clear_error_or_simulate(node, log_gap, of
         return
     sim = simulate(a, b, m, n_frames=3)
     assert sim.frames.shape == (3, 68, 2) and np.all(np.isfinite(sim.frames))
+
+
+def test_more_modes_than_the_models_have_are_said_to_be_cut():
+    # Accepted silently: all 127 modes were used, the finest following the nodes' noise.
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    a = np.c_[50 + 20 * np.sin(t), 50 + 20 * np.cos(t)]
+    b = np.c_[50 + 25 * np.sin(t), 50 + 15 * np.cos(t)]
+    with pytest.warns(UserWarning, match="n_modes=500 is more than the 127 modes"):
+        res = match(a, b, n_modes=500)
+    assert res.n_modes == 127

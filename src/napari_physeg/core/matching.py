@@ -888,6 +888,10 @@ def _joint_bases(A, B, n_modes, model_nodes, sigma_factor, material):
     rb = _modal_raw(B, n_compute=n_compute, sigma_factor=sigma_factor, material=material,
                     model_nodes=model_nodes, name="b")
     avail = min(ra.n_modes, rb.n_modes) - 1
+    if n_modes is not None and n_modes > avail:
+        warnings.warn(f"n_modes={n_modes} is more than the {avail} modes the contours' models have "
+                      f"(model_nodes={model_nodes}); {avail} are used. The finest modes follow the nodes' noise: "
+                      "6-12 is typical", UserWarning, stacklevel=4)
     k = select_modes(ra.spectrum, n_modes)
     for _ in range(4):
         k2 = select_modes(ra.spectrum, select_modes(rb.spectrum, k))
