@@ -8,6 +8,8 @@ import sys
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from skimage import io
 
 from napari_physeg import data
@@ -812,3 +814,24 @@ def test_tables_as_spreadsheets_and_fiji_write_them(tmp_path, text):
     table = tmp_path / "t.csv"
     table.write_text(text)
     assert np.array_equal(read_shapes_csv(table)[0], [[1, 2], [3, 4], [5, 1]])
+
+
+_CELLS = st.one_of(st.floats(allow_nan=True, allow_infinity=True).map(repr), st.integers(-5, 5).map(str),
+                   st.sampled_from(["", " ", "polygon", "ellipse", "line", "index", "axis-0", "shape-type", "row",
+                                    "x", "id", "#", "nan", "1e400", "1,5", "a;b"]),
+                   st.text(max_size=5))
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=list(HealthCheck))
+@given(rows=st.lists(st.lists(_CELLS, max_size=7), max_size=12), sep=st.sampled_from([",", ";", "\t"]),
+       header=st.sampled_from([None, "index,shape-type,vertex-index,axis-0,axis-1", "row,col", "id,row,col", "x,y"]))
+def test_any_table_is_read_or_refused_with_a_reason(tmp_path_factory, rows, sep, header):
+    # An index of 1e400 escaped as an OverflowError (a traceback from the command).
+    path = tmp_path_factory.mktemp("table") / "t.csv"
+    path.write_bytes("\n".join(([header] if header else []) + [sep.join(r) for r in rows]).encode("utf-8",
+                                                                                              "surrogatepass"))
+    try:
+        shapes = read_shapes_csv(path)
+    except ValueError:
+        return
+    assert shapes and all(s.ndim == 2 and s.shape[1] == 2 and np.isfinite(s).all() for s in shapes)

@@ -93,7 +93,7 @@ def read_shapes_csv(path, *, leading: bool = False):
     except IndexError:
         raise ValueError(f"could not read contours from {path}: a line has fewer columns than expected (is it "
                          f"comma-separated, as napari writes it?)") from None
-    except ValueError as err:
+    except (ValueError, OverflowError) as err:  # OverflowError: an index of 1e400
         raise ValueError(f"could not read contours from {path}: {err}") from None
     if not out or all(len(s) == 0 for s in out):
         raise ValueError(f"{path} holds no shape")
