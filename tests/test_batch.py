@@ -12,6 +12,8 @@ import time
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from napari_physeg import batch, data
 from napari_physeg.cli import main
@@ -472,3 +474,35 @@ def test_a_batch_ends_without_the_messages_dask_logs_while_its_cluster_closes(mo
     assert "2 of 2 rows ok" in captured.out
     assert "an error logged while the cluster closes" not in captured.err
     assert {name: logging.getLogger(name).level for name in before} == before
+
+
+@pytest.mark.parametrize("spec, start, chosen", [
+    ("0:100000000", None, [0, 1]),  # listed a hundred million frames (a MemoryError, or minutes)
+    ("0:100000000", 5, [0, 1, 2, 3, 4, 5, 6]),
+    ("0:100000000:2,7", None, None),  # 7 is no frame of the range: the order is wrong, said by track_frames
+])
+def test_frames_are_checked_before_the_movies_are_opened_without_listing_a_range(spec, start, chosen):
+    from napari_physeg.io import check_frames
+
+    if chosen is None:
+        with pytest.raises(ValueError, match="movie's order"):
+            batch.track_frames(spec, start)
+        return
+    assert check_frames(spec, include=start) == chosen
+    assert batch.track_frames(spec, start) == (chosen, start if start is not None else 0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(spec=st.text(alphabet="0123456789:,- ", max_size=14), n_frames=st.integers(0, 40))
+def test_any_frame_spec_is_read_or_refused_with_a_reason(spec, n_frames):
+    from napari_physeg.io import check_frames, parse_frames
+
+    try:
+        frames = parse_frames(spec, n_frames)
+        assert frames and all(0 <= t < n_frames for t in frames) and len(set(frames)) == len(frames)
+    except ValueError:
+        pass
+    try:
+        check_frames(spec)
+    except ValueError:
+        pass

@@ -522,9 +522,13 @@ def check_frames(spec: str, include: int | None = None) -> list[int] | None:
     if any(n < 0 for n in named) or any((p.step or 1) < 0 and p.start is None for p in parts
                                         if isinstance(p, slice)):
         return None  # counts from the end: its meaning depends on the stack's length
-    # Long enough that each open range reaches past every frame named: its order and repeats show.
+    # Long enough that each range reaches past every frame named by itself or as a range's start:
+    # its order and repeats show. (A range's stop only bounds it: counted, 0:100000000 listed a
+    # hundred million frames.)
     steps = [abs(p.step or 1) for p in parts if isinstance(p, slice)]
-    frames = _select(parts, max(named + [include or 0]) + max(steps, default=1) + 1)
+    firsts = [p for p in parts if isinstance(p, int)] + [p.start for p in parts
+                                                         if isinstance(p, slice) and p.start is not None]
+    frames = _select(parts, max(firsts + [include or 0]) + max(steps, default=1) + 1)
     if not frames:
         raise ValueError(f"frames {spec!r} selects no frame")
     _no_repeat(spec, frames)
