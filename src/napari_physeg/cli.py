@@ -580,7 +580,9 @@ def _subparser(sub, name, help, description):
 
 def _frames_option(p, what):
     p.add_argument("--frames", "--frame", dest="frames", metavar="FRAMES",
-                   help=f"{what}: one frame (3), a range (0:10, stop excluded; 0:30:2 every other) or a list (2,5,9)")
+                   help=f"{what}: one frame (3), a range (0:10, stop excluded, ending at the last frame if the "
+                   "stack is shorter, as in Python: 0:100 on movies of any length; 0:30:2 every other) or a list "
+                   "(2,5,9)")
 
 
 def _channel_option(p):
