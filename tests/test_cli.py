@@ -835,3 +835,13 @@ def test_any_table_is_read_or_refused_with_a_reason(tmp_path_factory, rows, sep,
     except ValueError:
         return
     assert shapes and all(s.ndim == 2 and s.shape[1] == 2 and np.isfinite(s).all() for s in shapes)
+
+
+def test_a_zarr_group_is_refused_naming_an_array_in_it(scene, capsys, no_work):
+    # An OME-Zarr image is a group: zarr's "Expected 'array'. Got 'group'" said nothing of what to give.
+    zarr = pytest.importorskip("zarr")
+    obj, image, init, tmp = scene
+    group = zarr.open_group(str(tmp / "image.zarr"), mode="w")
+    group.create_array("0", shape=(2, 32, 32), dtype="u1")
+    assert main(["segment", str(tmp / "image.zarr"), "--init", str(init), "--out", str(tmp / "o.csv")]) == 2
+    assert f"give one of them, e.g. {tmp / 'image.zarr' / '0'}" in capsys.readouterr().err
