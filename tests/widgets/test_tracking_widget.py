@@ -6,7 +6,7 @@ import pytest
 
 napari = pytest.importorskip("napari")
 
-from napari.layers import Image, Shapes, Tracks  # noqa: E402
+from napari.layers import Image, Points, Shapes, Tracks  # noqa: E402
 
 from napari_physeg import data  # noqa: E402
 from napari_physeg._sample_data import deforming_cell  # noqa: E402
@@ -54,8 +54,10 @@ def test_round_trip_adds_contours_tracks_and_maps(movie_in_viewer, wait_done):
     for t, polygon in enumerate(polygons):
         found = polygon_mask(np.asarray(polygon[:, 1:], float), movie.masks[t].shape)
         assert (found & movie.masks[t]).sum() / (found | movie.masks[t]).sum() > 0.97
-    assert maps[0].data.shape == (1, 8, 100) and not maps[0].visible  # object x frame x arc
+    assert maps[0].data.shape == (8 + 2, 100 + 2) and not maps[0].visible  # frame x arc, a montage's tile
     assert "object" not in viewer.dims.axis_labels  # the movie's time axis keeps its name
+    numbers = [layer for layer in widget.output_layers if isinstance(layer, Points)]
+    assert len(numbers) == 1 and list(numbers[0].features["object"]) == [0]
     # The centroid track, then the node trajectories, each over the 8 frames.
     assert len(np.unique(tracks[0].data[:, 0])) == 13 and tracks[0].data[:, 1].max() == 7
     assert "tracking preview" not in [layer.name for layer in viewer.layers]
@@ -291,7 +293,7 @@ def test_a_movie_with_a_time_scale_keeps_its_slider_and_extent(dock, wait_done, 
     before = (viewer.dims.nsteps[0], viewer.layers.extent.world.tolist())
     widget.run()
     wait_done(widget)
-    assert errors == [] and len(widget.output_layers) == 4
+    assert errors == [] and len(widget.output_layers) == 5
     assert (viewer.dims.nsteps[0], viewer.layers.extent.world.tolist()) == before
 
 
@@ -309,8 +311,31 @@ def test_a_movie_in_seconds_and_micrometres_keeps_its_units(dock, wait_done, err
     before = viewer.dims.units
     widget.run()
     wait_done(widget)
-    assert errors == [] and len(widget.output_layers) == 4
-    assert viewer.dims.units == before and all(layer.units == before for layer in widget.output_layers)
+    assert errors == [] and len(widget.output_layers) == 5
+    assert viewer.dims.units == before and all(layer.units == before[-layer.ndim:] for layer in widget.output_layers)
+
+
+def test_more_objects_than_frames_leave_the_time_slider_to_the_movie(dock, wait_done, errors):
+    """Found by probing (session 57): the maps, stacked on a leading object
+    axis, shared the movie's time slider: 12 nuclei on 3 frames made it run to
+    11, past the movie's end. The maps are now one montage, a tile per object."""
+    viewer, widget = dock(TrackingWidget)
+    rr, cc = np.mgrid[:96, :128]
+    centres = [(20 + 28 * (k // 4), 18 + 30 * (k % 4)) for k in range(12)]
+    frame = 0.2 + 0.6 * sum(((rr - r) ** 2 + (cc - c) ** 2 <= 8**2) for r, c in centres)
+    rng = np.random.default_rng(0)
+    viewer.add_image(np.stack([frame + rng.normal(0, 0.02, frame.shape) for _ in range(3)]), name="movie")
+    viewer.add_shapes([_circle_on_frame(c, 11) for c in centres], shape_type="polygon", name="drawn")
+    widget.reset_choices()
+    viewer.dims.set_point(0, 0)
+    widget.run()
+    wait_done(widget)
+    assert errors == [] and widget.last_result.n_objects == 12
+    assert viewer.dims.nsteps[0] == 3
+    maps = [layer for layer in widget.output_layers if isinstance(layer, Image)]
+    assert [m.data.shape for m in maps] == [(3 * (3 + 1) + 1, 4 * (100 + 1) + 1)] * 2  # 3 x 4 tiles
+    numbers = [layer for layer in widget.output_layers if isinstance(layer, Points)][0]
+    assert list(numbers.features["object"]) == list(range(12))
 
 
 @pytest.mark.parametrize("view", ["3D view", "transposed axes", "drawn off the movie"])

@@ -15,7 +15,7 @@ expects: one Shapes layer with a polygon per object and frame (the frame as
 leading coordinate, one colour per object), a Tracks layer with the objects'
 centroids and sub-sampled node trajectories, and two Image layers, the
 normal-velocity (protrusion/retraction) and curvature maps (frame x arc
-position), one slice per object along a leading "object" axis.
+position), the objects' side by side, with a Points layer numbering them.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ import numpy as np
 from magicgui.widgets import ComboBox, Label, PushButton, SpinBox
 from napari.layers import Points, Shapes
 from napari.utils.notifications import show_info, show_warning
+from skimage.util import montage
 
 from ..core import LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, segment, track
 from ._inputs import (PHYSICS_TIPS, PREVIEW_COLOR, PREVIEW_KEY, PhysicsControls, check_plane_view,
@@ -109,19 +110,43 @@ def tracking_layer_data(result: TrackingResult, transform: dict, *, name: str, f
                 tracks.append(np.column_stack([np.full(len(path), len(tracks)), path]))
     if tracks:
         layers.append((np.vstack(tracks), dict(name=f"{name} tracks", tail_length=10, **common), "tracks"))
-    # One layer per quantity, the objects stacked on a leading axis (its
-    # slider picks one): 13 nuclei made 26 layers otherwise, 5 s to add. No
-    # axis labels: napari's are the viewer's, and the movie's time axis would
-    # be called "object".
+    # One 2D layer per quantity, the objects' maps side by side (a montage,
+    # numbered by a Points layer): 13 nuclei made 26 layers otherwise, 5 s to
+    # add; stacked on a leading axis, the maps shared the movie's time slider,
+    # which ran on past the movie's end when there were more objects than
+    # frames, and stepped through objects as it stepped through frames.
+    grid, maps_added = _map_grid(result.n_objects), []
     for quantity, colormap in (("normal_velocity", "bwr"), ("curvature", "PiYG")):
         maps = np.stack([result.membrane_map(k, quantity, n_arc=n_arc) for k in range(result.n_objects)])
         if not np.isfinite(maps).any():
             continue
         lim = float(np.nanpercentile(np.abs(maps), 98)) or 1.0
-        layers.append((maps, dict(name=f"{name} {quantity.replace('_', ' ')} (object x frame x arc)",
-                                  colormap=colormap, contrast_limits=(-lim, lim), visible=False,
-                                  **_map_placement(maps.shape, transform, frame_shape)), "image"))
+        tiled = montage(maps, fill=np.nan, grid_shape=grid, padding_width=1)
+        placement = _map_placement(tiled.shape, transform, frame_shape)
+        maps_added.append((tiled, dict(name=f"{name} {quantity.replace('_', ' ')} maps (frame x arc, per object)",
+                                       colormap=colormap, contrast_limits=(-lim, lim), visible=False, **placement),
+                           "image"))
+    if maps_added:
+        layers += maps_added + [_map_numbers(result.n_objects, maps.shape[1:], grid, placement, name)]
     return layers
+
+
+def _map_grid(n_maps: int) -> tuple[int, int]:
+    """Rows and columns of tiles for ``n_maps`` maps side by side."""
+    columns = int(np.ceil(np.sqrt(n_maps)))
+    return int(np.ceil(n_maps / columns)), columns
+
+
+def _map_numbers(n_maps: int, tile_shape, grid, placement: dict, name: str) -> tuple:
+    """A Points layer that numbers the objects' tiles of the maps' montage
+    (``grid`` rows and columns of tiles; object ``k`` is the ``k``-th tile, row
+    by row), at each tile's first pixel."""
+    step = np.asarray(tile_shape, float) + 1  # skimage's montage pads each tile by one pixel
+    corners = np.array([divmod(k, grid[1]) for k in range(n_maps)], float) * step + 1
+    return (corners, dict(name=f"{name} maps: object numbers", features={"object": np.arange(n_maps)},
+                          text={"string": "{object}", "color": "white", "anchor": "upper_left", "size": 10},
+                          size=0.1, face_color="transparent", border_width=0, visible=False, **placement),
+            "points")
 
 
 def _placement(transform: dict) -> dict:
@@ -133,19 +158,17 @@ def _placement(transform: dict) -> dict:
 
 
 def _map_placement(shape, transform: dict, frame_shape=None) -> dict:
-    """Scale and translate that lay the maps (object x frame x arc) over the
-    movie's first frame: the maps share the viewer's axes with the movie, so
-    their objects step as its frames do and their (frame, arc) plane spans its
-    field of view; in pixels at the origin they stretched the time slider of a
-    movie with a time scale and the view's extent."""
-    scale = np.asarray(transform.get("scale", np.ones(3)), float)[-3:]
-    translate = np.asarray(transform.get("translate", np.zeros(3)), float)[-3:]
-    frame_shape = np.asarray(shape[1:] if frame_shape is None else frame_shape, float)
+    """Scale and translate that lay a 2D image of ``shape`` (the maps'
+    montage) over the movie's field of view, on every frame: in pixels at
+    the origin it stretched the view's extent."""
+    scale = np.asarray(transform.get("scale", np.ones(2)), float)[-2:]
+    translate = np.asarray(transform.get("translate", np.zeros(2)), float)[-2:]
+    frame_shape = np.asarray(shape if frame_shape is None else frame_shape, float)
     # (napari's extent runs from the first pixel's centre to the last's)
-    stretch = scale[1:] * np.maximum(frame_shape - 1, 1) / np.maximum(np.asarray(shape[1:], float) - 1, 1)
-    placement = {"scale": (scale[0], *stretch), "translate": tuple(translate)}
+    stretch = scale * np.maximum(frame_shape - 1, 1) / np.maximum(np.asarray(shape, float) - 1, 1)
+    placement = {"scale": tuple(stretch), "translate": tuple(translate)}
     if "units" in transform:  # in the movie's units, as its frames: the viewer keeps them
-        placement["units"] = tuple(transform["units"])[-3:]
+        placement["units"] = tuple(transform["units"])[-2:]
     return placement
 
 
@@ -328,7 +351,8 @@ class TrackingWidget(WorkerWidget):
                                "so far were kept"}.get(result.stop_reason, "done")
         self._status.value = (f"{result.n_objects} object(s), {counts[TRACKED]} object-frames tracked, "
                               f"{counts[LOST]} lost ({done}, {result.timings['total']:.1f} s)")
-        show_info(f"Tracking: {self._status.value}. The maps (frame x arc) are hidden image layers")
+        show_info(f"Tracking: {self._status.value}. The membrane maps (frame x arc, one tile per object) are "
+                  "hidden image layers")
         lost = [k for k in range(result.n_objects) if LOST in result.status[k] and TRACKED in result.status[k]]
         if lost:
             show_warning(f"object(s) {lost} were lost on the way: their later frames have no contour")
