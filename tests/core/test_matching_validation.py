@@ -132,3 +132,19 @@ def test_more_modes_than_the_models_have_are_said_to_be_cut():
     with pytest.warns(UserWarning, match="n_modes=500 is more than the 127 modes"):
         res = match(a, b, n_modes=500)
     assert res.n_modes == 127
+
+
+def test_a_line_drawn_there_and_back_is_said_to_enclose_no_area():
+    # Its nodes spaced along it (as the widgets space a drawing's) repeat on the way back: the message
+    # was "a has 9 identical node(s) ... pass each node once".
+    there = np.linspace([10.0, 10.0], [30.0, 30.0], 10)
+    with pytest.raises(ValueError, match="a is degenerate: its nodes lie on one line and enclose no area"):
+        match(np.vstack([there, there[-2:0:-1]]), HAND)
+
+
+def test_a_figure_eight_whose_nodes_meet_where_it_crosses_is_told_to_be_redrawn():
+    # A bowtie drawn in napari, its nodes spaced along it: two of them fall on the crossing.
+    corners = np.array([[0.0, 0.0], [50.0, 50.0], [0.0, 50.0], [50.0, 0.0]])
+    nodes = np.vstack([np.linspace(p, q, 10, endpoint=False) for p, q in zip(corners, np.roll(corners, -1, 0))])
+    with pytest.raises(ValueError, match="draw a contour that does not cross or touch itself"):
+        match(nodes, HAND)

@@ -374,3 +374,18 @@ def test_the_tidy_table_is_saved_as_csv(movie_in_viewer, wait_done, tmp_path):
     assert list(saved.columns) == list(expected.columns) and len(saved) == len(expected)
     np.testing.assert_allclose(saved["normal_velocity"], expected["normal_velocity"])
     assert set(saved["status"]) == {"tracked"} and saved["frame"].max() == 7
+
+
+def test_shapes_drawn_on_other_frames_are_said_to_be_left_out(dock, wait_done, errors, warned):
+    """Found by probing (session 57): of drawings on frames 0 and 3, those on
+    frame 3 were left out without a word, standing on frame 0."""
+    viewer, widget = dock(TrackingWidget)
+    viewer.add_image(_disk_movie(4), name="movie")
+    viewer.add_shapes([_circle_on_frame((40, 40), 20), _circle_on_frame((40, 40), 20, frame=3)],
+                      shape_type="polygon", name="drawn")
+    widget.reset_choices()
+    viewer.dims.set_point(0, 0)
+    widget.run()
+    wait_done(widget)
+    assert errors == [] and widget.last_result.n_objects == 1
+    assert any("1 shape(s) of 'drawn' lie on other frames and are not tracked" in w for w in warned)

@@ -266,6 +266,9 @@ class TrackingWidget(WorkerWidget):
         if not sliced.contours:
             raise ValueError(f"no contour of {shapes.name!r} lies on the current frame: go to the frame the "
                              "contours were drawn on")
+        if sliced.off_slice:  # each drawing is an object: none is left out unsaid
+            show_warning(f"{sliced.off_slice} shape(s) of {shapes.name!r} lie on other frames and are not tracked: "
+                         "tracking starts from the frame you stand on, where every object must be drawn")
         contours = [c[:, -2:] for c in sliced.contours]
         for k, c in zip(sliced.indices, contours):  # it would be lost on every frame, for no visible reason
             outside = off_image(c, frames.shape, f"shape {k} of {shapes.name!r} lies outside the movie {image.name!r}")

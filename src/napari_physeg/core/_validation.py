@@ -83,6 +83,12 @@ def check_contour(points, name: str = "contour", *, min_nodes: int = 3) -> np.nd
     centred = arr - arr.mean(axis=0)
     if len(arr) < min_nodes:
         _check_distinct(arr, name, min_nodes)
+    # On one line first: a line drawn there and back, its nodes spaced along
+    # it, repeats nodes too, and was told to pass each node once.
+    singular = np.linalg.svd(centred, compute_uv=False)
+    if singular[1] <= _COLLINEAR * singular[0]:
+        _check_distinct(arr, name, min_nodes)  # (too few distinct nodes says more)
+        raise ValueError(f"{name} is degenerate: its nodes lie on one line and enclose no area")
     try:
         _check_repeats(centred, name)
     except ValueError:
@@ -90,9 +96,6 @@ def check_contour(points, name: str = "contour", *, min_nodes: int = 3) -> np.nd
         # only then: np.unique took a third of a valid contour's check).
         _check_distinct(arr, name, min_nodes)
         raise
-    singular = np.linalg.svd(centred, compute_uv=False)
-    if singular[1] <= _COLLINEAR * singular[0]:
-        raise ValueError(f"{name} is degenerate: its nodes lie on one line and enclose no area")
     return np.ascontiguousarray(arr)
 
 
@@ -120,9 +123,13 @@ def _check_repeats(centred: np.ndarray, name: str) -> None:
         shown = ", ".join(f"{i} and {j}" for i, j in pairs[:5]) + (" ..." if len(pairs) > 5 else "")
         consecutive = np.any((pairs[:, 1] - pairs[:, 0] == 1) | (pairs[:, 1] - pairs[:, 0] == n - 1))
         kind = "repeated consecutive nodes" if consecutive else f"{len(pairs)} identical node(s)"
+        # Nodes apart along the contour that meet: it passes twice through one
+        # point (a figure-8 drawn in napari, its nodes spaced along it, meets
+        # itself where it crosses).
+        fix = "pass each node once" if consecutive else \
+            "pass each node once, and draw a contour that does not cross or touch itself"
         raise ValueError(
-            f"{name} has {kind} (nodes {shown} coincide, within {NEAR_DUPLICATE:g} of the node spacing); "
-            "pass each node once"
+            f"{name} has {kind} (nodes {shown} coincide, within {NEAR_DUPLICATE:g} of the node spacing); {fix}"
         )
 
 
