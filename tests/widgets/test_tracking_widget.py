@@ -389,3 +389,13 @@ def test_shapes_drawn_on_other_frames_are_said_to_be_left_out(dock, wait_done, e
     wait_done(widget)
     assert errors == [] and widget.last_result.n_objects == 1
     assert any("1 shape(s) of 'drawn' lie on other frames and are not tracked" in w for w in warned)
+
+
+def test_many_warnings_of_a_run_are_grouped():
+    from napari_physeg._widgets.tracking import _grouped
+
+    messages = [f"object {k} was not found on the start frame 0 and is reported lost: ..." for k in range(23)]
+    shown = _grouped(messages)
+    assert shown[:3] == messages[:3] and len(shown) == 4
+    assert shown[3] == "... and 20 more warning(s) like these (object(s) " + ", ".join(map(str, range(3, 23))) + ")"
+    assert _grouped(messages[:3]) == messages[:3]

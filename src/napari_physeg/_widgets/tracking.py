@@ -172,6 +172,22 @@ def _map_placement(shape, transform: dict, frame_shape=None) -> dict:
     return placement
 
 
+#: At most this many of a run's warnings are shown one by one; the rest in one.
+MAX_WARNINGS_SHOWN = 3
+
+
+def _grouped(messages: list, most: int = MAX_WARNINGS_SHOWN) -> list:
+    """``messages``, the first ``most`` as they are and the rest in one that
+    names the objects they are about: fifty drawings, 36 of them on the
+    background, made 23 notifications one after the other."""
+    if len(messages) <= most:
+        return list(messages)
+    rest = messages[most:]
+    objects = [m.split()[1] for m in rest if m.startswith("object ") and m.split()[1].isdigit()]
+    about = f" (object(s) {', '.join(objects)})" if len(objects) == len(rest) else ""
+    return list(messages[:most]) + [f"... and {len(rest)} more warning(s) like these{about}"]
+
+
 @dataclass
 class _Failed:
     """The core's error, returned by :func:`track_movie` rather than raised:
@@ -333,7 +349,7 @@ class TrackingWidget(WorkerWidget):
         self.last_result = result
         if not self._gui_alive():
             return
-        for message in result.warnings:
+        for message in _grouped(result.warnings):
             show_warning(message)
         if not any(TRACKED in row for row in result.status):
             self._remove_preview()
