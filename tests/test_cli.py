@@ -790,7 +790,7 @@ def test_a_contour_that_did_not_converge_is_named_on_stderr(scene, capsys, monke
 @pytest.mark.parametrize("extra, message", [
     (["--sigma-factor", "50"], "--sigma-factor"),
     (["--mask", "labels.jpg"], "name it .tif or .png"),
-    (["--out", "contours.tif"], "name it .csv"),
+    (["--out", "contours.tif"], "written as CSV text: name it .csv (--mask writes the label image)"),
 ])
 def test_segment_refuses_options_it_cannot_honour_before_any_work(scene, capsys, no_work, monkeypatch, extra,
                                                                   message):
@@ -845,3 +845,12 @@ def test_a_zarr_group_is_refused_naming_an_array_in_it(scene, capsys, no_work):
     group.create_array("0", shape=(2, 32, 32), dtype="u1")
     assert main(["segment", str(tmp / "image.zarr"), "--init", str(init), "--out", str(tmp / "o.csv")]) == 2
     assert f"give one of them, e.g. {tmp / 'image.zarr' / '0'}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["match", "simulate"])
+def test_match_and_simulate_refuse_an_out_named_as_an_image(tmp_path, capsys, no_work, command):
+    t = np.linspace(0, 2 * np.pi, 30, endpoint=False)
+    pair = write_shapes_csv(tmp_path / "pair.csv", [np.c_[20 + 8 * np.sin(t), 20 + 8 * np.cos(t)],
+                                                    np.c_[20 + 10 * np.sin(t), 20 + 6 * np.cos(t)]])
+    assert main([command, str(pair), "--out", str(tmp_path / "out.png")]) == 2
+    assert "written as CSV text: name it .csv" in capsys.readouterr().err and not (tmp_path / "out.png").exists()

@@ -235,6 +235,12 @@ def _check_output(path: Path, args, inputs, *, folder: bool = False, writes=(), 
         raise ValueError(f"{path} exists: pass --overwrite to replace it, or choose another {what}")
 
 
+def _check_csv_out(path: Path, more: str = "") -> None:
+    """Refuse an --out named as an image: the result is CSV text, which such a name would hide."""
+    if path.suffix.lower() in (*TIFF_SUFFIXES, ".png", ".jpg", ".jpeg"):
+        raise ValueError(f"--out {path}: the result is written as CSV text: name it .csv{more}")
+
+
 def _read_contours(path: Path, what: str = "--init", leading: bool = False):
     _check_input(path, what)
     return read_shapes_csv(path, leading=leading)
@@ -251,9 +257,7 @@ def _segment(args) -> int:
     _check_input(args.image, "image", image=True)
     shapes, leading = _read_contours(args.init, leading=True)
     _check_output(args.out, args, [args.image, args.init])
-    if args.out.suffix.lower() in (*TIFF_SUFFIXES, ".png", ".jpg", ".jpeg"):
-        raise ValueError(f"--out {args.out}: the contours are written as napari's shapes CSV: name it .csv (--mask "
-                         "writes the label image)")
+    _check_csv_out(args.out, " (--mask writes the label image)")
     if args.mask:
         # --out need not exist yet, so _check_output's test against inputs cannot see this clash.
         if same_file(args.mask, args.out):
@@ -405,6 +409,7 @@ def _match(args) -> int:
 
     a, b = _pair(args)
     _check_output(args.out, args, [args.a, args.b])
+    _check_csv_out(args.out)
     m = match(a, b, **_match_options(args))
     cost = np.asarray(getattr(m, "cost", np.full(len(m.pairs), np.nan)))
     with atomic_path(args.out) as tmp, open(tmp, "w", newline="") as fh:
@@ -422,6 +427,7 @@ def _simulate(args) -> int:
 
     a, b = _pair(args)
     _check_output(args.out, args, [args.a, args.b])
+    _check_csv_out(args.out)
     options = {name: getattr(args, name) for name in ("q", "material", "n_frames", "max_steps")
                if getattr(args, name) is not None}
     if "material" in options:
