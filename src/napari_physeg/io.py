@@ -340,8 +340,7 @@ def _zarr_group_hint(path: Path) -> str:
     """For a zarr group (an OME-Zarr image), which arrays in it to give instead."""
     if not is_zarr(path):
         return ""
-    arrays = sorted(p.name for p in path.iterdir() if p.is_dir() and is_zarr(p) and
-                    not any((p / n).exists() for n in (".zgroup",)))
+    arrays = sorted(p.name for p in path.iterdir() if p.is_dir() and is_zarr(p) and not (p / ".zgroup").exists())
     return f" ({path} is a group of arrays: give one of them, e.g. {path / arrays[0]})" if arrays else ""
 
 

@@ -1001,9 +1001,7 @@ def _settle_first(run: _Run, image, shared, owner, k: int, undone, boxes: np.nda
     ``k`` marks from inside it), or ``k`` could not reach its object's border.
     ``boxes``: each drawing's (row, col) min and max, so that only drawings
     whose boxes meet ``k``'s are weighed (hundreds of objects make many pairs)."""
-    undone = np.asarray(undone, dtype=int)
-    meet = np.all(boxes[undone, :2] <= boxes[k, 2:], axis=1) & np.all(boxes[k, :2] <= boxes[undone, 2:], axis=1)
-    holders = [j for j in undone[meet] if _holds(run.inits[j], run.inits[k], image.shape)]
+    holders = [j for j in _meeting(boxes, k, undone) if _holds(run.inits[j], run.inits[k], image.shape)]
     view = np.where(np.isin(owner, holders), -1, owner) if holders else owner
     _settle(run, image, shared, view, run.start, k, 1)
     swallowed = _swallowed(run, k, [j for j in undone if j not in holders], boxes, image.shape)
@@ -1015,6 +1013,14 @@ def _settle_first(run: _Run, image, shared, owner, k: int, undone, boxes: np.nda
         _paint(run, owner, run.contours[k][run.start], k)
         for j in swallowed:  # their claims, which k's first contour had painted over
             _paint(run, owner, run.inits[j], j, only_free=True)
+
+
+def _meeting(boxes: np.ndarray, k: int, others) -> np.ndarray:
+    """The objects of ``others`` whose drawings' boxes (see _settle_first)
+    meet object ``k``'s."""
+    others = np.asarray(others, dtype=int)
+    meet = np.all(boxes[others, :2] <= boxes[k, 2:], axis=1) & np.all(boxes[k, :2] <= boxes[others, 2:], axis=1)
+    return others[meet]
 
 
 def _swallowed(run: _Run, k: int, candidates, boxes: np.ndarray, shape) -> list[int]:
@@ -1070,9 +1076,7 @@ def _drop_second_find(run: _Run, owner, k: int, done, boxes: np.ndarray, shape) 
         return
     centre = area_centroid(run.inits[k])
     off = np.hypot(*(area_centroid(contour) - centre))
-    done = np.asarray(done, dtype=int)
-    meet = np.all(boxes[done, :2] <= boxes[k, 2:], axis=1) & np.all(boxes[k, :2] <= boxes[done, 2:], axis=1)
-    for j in done[meet]:
+    for j in _meeting(boxes, k, done):
         first = run.contours[j][run.start]
         if first is None or np.hypot(*(area_centroid(first) - centre)) >= off:
             continue
