@@ -1104,3 +1104,28 @@ def test_a_click_inside_a_nucleus_brighter_in_its_middle_finds_the_whole_nucleus
     again = segment(frame, res.contour)
     first, second = (polygon2mask(truth.shape, c) for c in (res.contour, again.contour))
     assert (first & second).sum() / (first | second).sum() > 0.95
+
+
+
+IHC_BOX = np.array([[5.8, 465.7], [5.8, 474.9], [25.6, 474.9], [25.6, 465.7]])
+
+
+@pytest.mark.parametrize("drawing", [circle((14, 470), 6.2), circle((14, 470), 6.7), IHC_BOX],
+                         ids=["circle1.2", "circle1.3", "box1.3"])
+def test_a_nucleus_in_the_stroma_near_a_dark_gland_is_not_read_as_texture_of_the_stroma(drawing):
+    """A dark stromal nucleus of skimage.data.immunohistochemistry() in grey (as
+    the widget's 'grey' channel reads it), 10 px across, near a gland as dark,
+    drawn around 1.2-1.3 times its size. The drawing is read on a
+    window 2 guard bands about it, where the pale stroma, cut off by the
+    window's sides, looked enclosed by the gland: the drawing was taken for a
+    click on dark texture inside a bright object, and the contour spread over
+    10,000 px of stroma. The window's cut sides are now no enclosure."""
+    from skimage import color, data
+
+    image = color.rgb2gray(data.immunohistochemistry())
+    res = segment(image, drawing)
+    found = polygon2mask(image.shape, res.contour)
+    ring = ndi.binary_dilation(found, iterations=4) & ~ndi.binary_dilation(found, iterations=1)
+    assert res.converged and res.polarity == -1
+    assert 40 <= found.sum() <= polygon2mask(image.shape, drawing).sum()
+    assert image[found].mean() < image[ring].mean() - 0.1  # a dark nucleus in the pale stroma

@@ -269,7 +269,8 @@ def _median(values: np.ndarray) -> float:
 
 
 def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | None = None,
-                   noise: float | None = None, user_drawing: bool = True) -> RegionModel:
+                   noise: float | None = None, user_drawing: bool = True,
+                   image_sides=(True, True, True, True)) -> RegionModel:
     """Object and background levels, polarity, and whether the drawing is around the object.
 
     Parameters
@@ -289,6 +290,10 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         border, see :func:`traced_border_level`); False for a margin a
         program drew around a known contour (a tracked frame's), which lies
         around the object.
+    image_sides : 4 bools, optional
+        Which sides of ``intensity`` (top, bottom, left, right) are the
+        image's own; all by default (it is the whole image). Beyond the
+        others the image goes on, unseen.
 
     Returns
     -------
@@ -395,7 +400,13 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     # near it on the texture: the object's border is a stronger contrast
     # further out (a click on a nucleolus, a coin's relief).
     texture = centre if around else outside
-    enclosing = _enclosing_background(intensity, drawing, line, on_line, texture, floor, traced=beyond is not None)
+    # What the view cuts off is unseen for a person's drawing; a program's
+    # margin keeps the view's own reading (read as running on beyond the cuts,
+    # the margins of nuclei leaving a warped DSB movie through its side took
+    # their neighbours: 3 of 51 tracks, 11 frames under two contours).
+    seen_sides = image_sides if user_drawing else (True, True, True, True)
+    enclosing = _enclosing_background(intensity, drawing, line, on_line, texture, floor, seen_sides,
+                                      traced=beyond is not None)
     # (Told the object's polarity the other way, the spot drawn around is the object.)
     if enclosing is not None and polarity in (None, np.sign(on_line - enclosing)):
         around, obj, background = False, on_line, enclosing
@@ -704,24 +715,31 @@ def _on_view_edge(mask: np.ndarray) -> int:
     return int(mask[0].sum() + mask[-1].sum() + mask[1:-1, 0].sum() + mask[1:-1, -1].sum())
 
 
-def _enclosed(body: np.ndarray, extent: np.ndarray) -> bool | None:
-    """Whether ``body`` reaches neither the outer edge of ``extent`` (within
-    the image: cv2.erode keeps the image's sides) nor half its area; None
-    where ``extent`` has no such edge (it covers the whole image)."""
+def _enclosed(body: np.ndarray, extent: np.ndarray, image_sides) -> bool | None:
+    """Whether ``body`` reaches neither the outer edge of ``extent`` nor half
+    its area; None where that cannot be seen: ``extent`` has no such edge (it
+    covers the whole view), or ``body`` reaches none of it but runs out of
+    the view where the view is not the image (``image_sides``: which of its
+    top, bottom, left and right sides are the image's), and may run on."""
     edge = _rim(extent)
     if not edge.any():
         return None
-    return not (body & edge).any() and body.sum() <= 0.5 * extent.sum()
+    if (body & edge).any() or body.sum() > 0.5 * extent.sum():
+        return False
+    cut = [side for side, is_image in zip((body[0], body[-1], body[:, 0], body[:, -1]), image_sides) if not is_image]
+    return None if any(side.any() for side in cut) else True
 
 
-def _enclosing_background(intensity, drawing, line, on_line, texture, floor, traced=False) -> float | None:
+def _enclosing_background(intensity, drawing, line, on_line, texture, floor, image_sides,
+                          traced=False) -> float | None:
     """The background's level if a drawing lies inside an object at its
     line's level whose texture the drawing's reading took for the other
     level; else None.
 
     ``texture`` is that level: the centre's, for a drawing read as around a
     spot; the near rings', for one read as inside. ``line`` are the drawn
-    line's pixels, at level ``on_line``; ``floor`` is the least contrast.
+    line's pixels, at level ``on_line``; ``floor`` is the least contrast;
+    ``image_sides`` says which sides of the view are the image's.
     Within the far rings (out to 21 times the drawing), the class of pixels
     furthest from the line's level must differ from it at least
     :data:`_ENCLOSING_CONTRAST` times as much as ``texture`` does, and the
@@ -755,7 +773,7 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, tra
         return None
     if traced and not _runs_on_beyond(body, line, _fill(drawing, shape)):
         return None
-    enclosed = _enclosed(body, extent)
+    enclosed = _enclosed(body, extent, image_sides)
     if enclosed is None:
         return None
     if enclosed:
@@ -765,7 +783,7 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, tra
     # the drawing's object (a click on a dim nucleus in a gap among bright
     # ones: the gap's piece of ground, with the nucleus in it, meets the
     # bright ones all around).
-    piece = _piece_enclosed_apart(body, line, extent)
+    piece = _piece_enclosed_apart(body, line, extent, image_sides)
     if piece is None or np.count_nonzero(_on_side(intensity, texture, on_line)[piece]) >= 0.5 * piece.sum():
         return None
     return far
@@ -778,7 +796,7 @@ def _runs_on_beyond(body: np.ndarray, line: np.ndarray, drawn: np.ndarray) -> bo
     return not band.any() or np.count_nonzero(body & band) >= 0.5 * np.count_nonzero(band)
 
 
-def _piece_enclosed_apart(body: np.ndarray, line: np.ndarray, extent: np.ndarray) -> np.ndarray | None:
+def _piece_enclosed_apart(body: np.ndarray, line: np.ndarray, extent: np.ndarray, image_sides) -> np.ndarray | None:
     """The part of ``body`` the line marks, parted from the rest at its necks
     (see :func:`_marked_basins`), if it is enclosed in ``extent`` and meets
     the other level along most of its rim; else None.
@@ -791,7 +809,7 @@ def _piece_enclosed_apart(body: np.ndarray, line: np.ndarray, extent: np.ndarray
     other level, or, among crowded objects, they are concave.
     """
     piece = _marked_basins(_depth(body), body, line & body)
-    if not piece.any() or not _enclosed(piece, extent):
+    if not piece.any() or not _enclosed(piece, extent, image_sides):
         return None
     # The ground between crowded objects parts into pieces that meet them
     # all around too, but concave ones (a star between round nuclei).

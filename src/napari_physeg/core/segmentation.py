@@ -720,7 +720,7 @@ class _FeatureWindow:
             raise ValueError("image is constant: there is no object border to segment")
         origin = np.array([context[0].start, context[1].start], dtype=float)
         self.model = drawing_levels(intensity, self.drawing - origin, self.polarity, noise,
-                                    user_drawing=self.user_drawing)
+                                    user_drawing=self.user_drawing, image_sides=self._image_sides(context))
         if not self.model.is_visible and context != self._whole_image and self.raw_model is None:
             # The rings a drawing inside a large object is read on reach up to
             # 21 times its size, beyond the window: on the window alone, a
@@ -736,6 +736,11 @@ class _FeatureWindow:
             if seen.is_visible:
                 self.model = seen
         self.polarity = self.model.polarity
+
+    def _image_sides(self, window) -> tuple[bool, bool, bool, bool]:
+        """Which sides of ``window`` (top, bottom, left, right) are the image's."""
+        rows, cols = window
+        return rows.start == 0, rows.stop == self.image.shape[0], cols.start == 0, cols.stop == self.image.shape[1]
 
     def model_in_image_units(self) -> RegionModel:
         """The drawing's levels in the image's units (see _in_units)."""
@@ -754,9 +759,7 @@ class _FeatureWindow:
         if not edges.any() and np.ptp(intensity) <= 1e-12 and sub.shape != self.image.shape:
             return self._compute(self._whole_image)  # nothing here: look at the whole image
         avoid = None if self.avoid is None else self.avoid[window]
-        rows, cols = window
-        image_sides = (rows.start == 0, rows.stop == self.image.shape[0], cols.start == 0,
-                       cols.stop == self.image.shape[1])
+        image_sides = self._image_sides(window)
         signed, edges, _ = region_features(intensity, edges, self.drawing - origin, avoid=avoid,
                                            image_sides=image_sides, model=self.model)
         distance = _distance_with_image_border(edges, signed, window, self.image.shape)
