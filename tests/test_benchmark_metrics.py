@@ -119,6 +119,21 @@ def test_u2os_truth_outlines_each_nucleus_at_its_own_edge(real):
         assert (found & mask).sum() / (found | mask).sum() > 0.85
 
 
+def test_a_drawing_inside_an_object_cut_by_the_side_stays_in_the_image(real):
+    """``real_data.init_inside`` on a flat object cut by the image's top side (6 x 41
+    px): its deepest point was read on the top row, the image's side not counting as
+    its outline, and the circle there poked out of the image (polygon2mask clipped
+    it, and it passed as inside: the benchmark's ihc n1 started from a 5-px sliver);
+    now the circle lies inside the object, in the image."""
+    real_data = sys.modules["real_data"]
+    mask = np.zeros((40, 80), bool)
+    mask[:6, 20:61] = True
+    obj = real_data.Obj("test", "cut", mask.astype(float), mask)
+    init, _ = real_data.init_inside(obj, np.random.default_rng(0))
+    assert init.min() >= -0.5 and np.all(init.max(axis=0) <= np.array(mask.shape) - 0.5)
+    assert real_data.inside(init, mask)
+
+
 def test_the_noise_probe_adds_the_noise_it_names(real, monkeypatch_module):
     """``benchmarks/noise.py``: photon counts with the named brightest mean, and white noise of
     the object's contrast over the named SNR."""
