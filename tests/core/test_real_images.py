@@ -1106,7 +1106,6 @@ def test_a_click_inside_a_nucleus_brighter_in_its_middle_finds_the_whole_nucleus
     assert (first & second).sum() / (first | second).sum() > 0.95
 
 
-
 IHC_BOX = np.array([[5.8, 465.7], [5.8, 474.9], [25.6, 474.9], [25.6, 465.7]])
 
 
