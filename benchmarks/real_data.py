@@ -550,20 +550,29 @@ def u2os_image() -> np.ndarray:
     return cv2.resize(raw, (w // U2OS_SHRINK, h // U2OS_SHRINK), interpolation=cv2.INTER_AREA).astype(np.float64)
 
 
+def split_touching(fg: np.ndarray, min_distance: int, exclude_border: bool = True) -> np.ndarray:
+    """Labels of ``fg``, touching objects parted by a watershed of the negated distance transform
+    from its peaks at least ``min_distance`` px apart (skimage's ``peak_local_max``, with its
+    ``exclude_border``): where two objects meet, the foreground narrows."""
+    from skimage import feature
+
+    distance = ndi.distance_transform_edt(fg)
+    peaks = feature.peak_local_max(distance, min_distance=min_distance, labels=measure.label(fg),
+                                   exclude_border=exclude_border)
+    markers = np.zeros(fg.shape, np.int32)
+    markers[tuple(peaks.T)] = np.arange(1, len(peaks) + 1)
+    return segmentation.watershed(-distance, markers, mask=fg)
+
+
 def u2os_truth(image: np.ndarray) -> np.ndarray:
     """Labels of the nuclei of :func:`u2os_image` (0 = background): see the module's docstring."""
-    from skimage import feature, morphology
+    from skimage import morphology
 
     smooth = filters.gaussian(image, 1, preserve_range=True)
     level = np.median(smooth)
     fg = ndi.binary_fill_holes(smooth > level + 0.5 * (filters.threshold_li(smooth) - level))
     fg = ndi.binary_opening(fg, morphology.disk(2))
-    distance = ndi.distance_transform_edt(fg)
-    peaks = feature.peak_local_max(distance, min_distance=U2OS_MIN_PEAK_DISTANCE, labels=measure.label(fg),
-                                   exclude_border=False)
-    markers = np.zeros(image.shape, np.int32)
-    markers[tuple(peaks.T)] = np.arange(1, len(peaks) + 1)
-    split = segmentation.watershed(-distance, markers, mask=fg)
+    split = split_touching(fg, U2OS_MIN_PEAK_DISTANCE, exclude_border=False)
     out = np.zeros(image.shape, np.int32)
     for region in measure.regionprops(split):
         if region.area < MIN_AREA:
@@ -599,7 +608,7 @@ IHC_DARKER = 0.15  # ... and the nucleus darker than it by at least this much (g
 def ihc_truth() -> tuple[np.ndarray, np.ndarray]:
     """The grey image of ``skimage.data.immunohistochemistry()`` and the labels of its stromal
     nuclei (0 = background): see the module's docstring."""
-    from skimage import color, feature, morphology
+    from skimage import color, morphology
 
     rgb = skdata.immunohistochemistry()
     grey = color.rgb2gray(rgb)
@@ -608,12 +617,7 @@ def ihc_truth() -> tuple[np.ndarray, np.ndarray]:
     stroma = dab < filters.threshold_otsu(dab)
     fg = ndi.binary_opening((stain > filters.threshold_otsu(stain[stroma])) & stroma, morphology.disk(1))
     fg = ndi.binary_fill_holes(fg)
-    distance = ndi.distance_transform_edt(fg)
-    labels = measure.label(fg)
-    peaks = feature.peak_local_max(distance, min_distance=IHC_PEAK_DISTANCE, labels=labels)
-    markers = np.zeros(grey.shape, np.int32)
-    markers[tuple(peaks.T)] = np.arange(1, len(peaks) + 1)
-    split = segmentation.watershed(-distance, markers, mask=fg)
+    split = split_touching(fg, IHC_PEAK_DISTANCE)
     out = np.zeros(grey.shape, np.int32)
     for region in measure.regionprops(split):
         if not IHC_AREA[0] <= region.area <= IHC_AREA[1] or region.solidity <= IHC_SOLIDITY:

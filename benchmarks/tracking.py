@@ -59,7 +59,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 from scipy import ndimage as ndi  # noqa: E402
-from skimage import feature, filters, measure, segmentation  # noqa: E402
+from skimage import filters, measure  # noqa: E402
 
 import real_data  # noqa: E402
 from _common import machine, normal_velocity_errors, plot_membrane_maps, report, write_section  # noqa: E402
@@ -129,12 +129,7 @@ def threshold_regions(frame, min_distance=8):
     """What a user would do per frame: Gaussian sigma 1, Otsu, holes filled, a watershed of
     the distance transform from its peaks at least ``min_distance`` px apart; a label image."""
     smooth = filters.gaussian(frame, 1)
-    fg = ndi.binary_fill_holes(smooth > filters.threshold_otsu(smooth))
-    dist = ndi.distance_transform_edt(fg)
-    peaks = feature.peak_local_max(dist, min_distance=min_distance, labels=measure.label(fg))
-    markers = np.zeros(fg.shape, np.int32)
-    markers[tuple(peaks.T)] = np.arange(1, len(peaks) + 1)
-    return segmentation.watershed(-dist, markers, mask=fg)
+    return real_data.split_touching(ndi.binary_fill_holes(smooth > filters.threshold_otsu(smooth)), min_distance)
 
 
 def laptrack_linked(rows, cutoff):
