@@ -359,10 +359,12 @@ RAMP_REACH = 5.0
 def ramp_positions(rows, groups):
     """Lines: where on the edge's ramp ours' and the truth's outlines lie, per group: the median
     over the cases of the median over the outline's points of ``(I - foot) / (top - foot)``, with
-    ``I`` the image smoothed by a 1 px Gaussian at the point, and ``top`` and ``foot`` its highest
-    and lowest values along the point's normal within ``RAMP_REACH`` px inside and outside (0:
-    the foot of the ramp, 1: its top; for a bright object). Truths made by different
-    conventions lie at different heights; ours is at one height everywhere."""
+    ``I`` the image smoothed by a 1 px Gaussian at the point, and ``top`` and ``foot`` its values
+    farthest toward the object's level and the background's along the point's normal within
+    ``RAMP_REACH`` px inside and outside (0: the foot of the ramp, the background's side; 1: its
+    top, the object's side, whether the object is brighter or darker: the truth's outline tells
+    which). Truths made by different conventions lie at different heights; ours is at one height
+    everywhere."""
     from scipy import ndimage as ndi
 
     from napari_physeg.core.contour import positively_oriented
@@ -376,8 +378,9 @@ def ramp_positions(rows, groups):
         key = id(image)
         if key not in smoothed:
             smoothed[key] = ndi.gaussian_filter(image, 1.0)
-        outlines = (r["contour"], real_data.outline_of(r["obj"].mask))
-        pair = [_ramp_height(smoothed[key], positively_oriented(c)) for c in outlines]
+        truth = positively_oriented(real_data.outline_of(r["obj"].mask))
+        polarity = _object_side(smoothed[key], truth)
+        pair = [_ramp_height(polarity * smoothed[key], c) for c in (positively_oriented(r["contour"]), truth)]
         heights.setdefault(r["group"], []).append(pair)
     return ["- where on the edge's ramp the outlines lie (median height, 0 its foot, 1 its top, within "
             f"{RAMP_REACH:.0f} px either side), ours / truth: "
@@ -385,17 +388,30 @@ def ramp_positions(rows, groups):
                         for g in groups if g in heights)]
 
 
-def _ramp_height(smoothed, outline):
+def _normal_profiles(smoothed, outline):
+    """``smoothed`` along each point's normal, from ``RAMP_REACH`` px inside to as far outside."""
     from scipy import ndimage as ndi
 
     from napari_physeg.core.contour import outward_normals
 
+    offsets = np.linspace(-RAMP_REACH, RAMP_REACH, 21)  # 0.5 px apart, the point in the middle
+    points = outline[:, None, :] + offsets[None, :, None] * outward_normals(outline)[:, None, :]
+    return ndi.map_coordinates(smoothed, [points[..., 0], points[..., 1]], order=1, mode="nearest")
+
+
+def _object_side(smoothed, outline) -> int:
+    """+1 if the object within ``outline`` is brighter than just outside it, else -1."""
+    profile = _normal_profiles(smoothed, outline)
+    mid = profile.shape[1] // 2
+    return 1 if np.median(profile[:, :mid].mean(1) - profile[:, mid + 1:].mean(1)) >= 0 else -1
+
+
+def _ramp_height(smoothed, outline):
+    """The median height of ``outline``'s points on their edge's ramp, the object's side up."""
     if len(outline) < 5:
         return np.nan
-    offsets = np.linspace(-RAMP_REACH, RAMP_REACH, 21)  # 0.5 px apart, the point in the middle
-    mid = len(offsets) // 2
-    points = outline[:, None, :] + offsets[None, :, None] * outward_normals(outline)[:, None, :]
-    profile = ndi.map_coordinates(smoothed, [points[..., 0], points[..., 1]], order=1, mode="nearest")
+    profile = _normal_profiles(smoothed, outline)
+    mid = profile.shape[1] // 2
     at, top, foot = profile[:, mid], profile[:, :mid + 1].max(1), profile[:, mid:].min(1)
     ok = top - foot > 1e-6
     return float(np.median((at[ok] - foot[ok]) / (top[ok] - foot[ok]))) if ok.any() else np.nan

@@ -76,6 +76,19 @@ def test_an_outline_lies_at_its_height_on_a_linear_ramp(real, radius, height):
     assert real._ramp_height(ndi.gaussian_filter(_ramp_disc(), 1.0), _circle(radius)) == pytest.approx(height, abs=0.05)
 
 
+@pytest.mark.parametrize("dark", [False, True])
+def test_a_dark_object_s_outline_lies_at_its_height_up_from_its_background(real, dark):
+    from types import SimpleNamespace
+
+    # Truth half-way up the ramp, ours a quarter up (1.5 px out): for a bright disc and a dark one
+    # alike, as the ramp rises from the background's side to the object's.
+    image = _ramp_disc()
+    obj = SimpleNamespace(image=1.0 - image if dark else image, mask=image >= 0.5)
+    line = real.ramp_positions([dict(group="g", obj=obj, contour=_circle(21.5))], ["g"])[0]
+    ours, truth = (float(v) for v in line.rsplit("g ", 1)[1].split(" / "))
+    assert (ours, truth) == (pytest.approx(0.25, abs=0.05), pytest.approx(0.5, abs=0.05))
+
+
 def test_drawings_that_end_on_one_region_agree_and_one_that_strays_does_not(real):
     from types import SimpleNamespace
 
