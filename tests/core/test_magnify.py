@@ -147,7 +147,9 @@ def test_a_huge_drawing_around_a_small_object_is_not_magnified_into_a_huge_view(
     """A box over most of a 1500 x 1500 image around a disk of 4 px radius:
     a view magnified 3 times would hold 20 million pixels (160 MB). (So
     large a drawing says too little about so small an object for the
-    contour to find it, magnified or not: only the view's size is asked.)"""
+    contour to find it, magnified or not: only the view's size is asked.
+    The contour spreads to the image's sides: it stalled there, and since
+    session 59 it is seen to leak on its way.)"""
     made = []
     image_of = MagnifiedView.image
 
@@ -162,5 +164,5 @@ def test_a_huge_drawing_around_a_small_object_is_not_magnified_into_a_huge_view(
     image = ndi.gaussian_filter(disk.astype(float), 1.0) + np.random.default_rng(0).normal(0, 0.02, disk.shape)
     box = np.array([[20.0, 20.0], [20.0, 1480.0], [1480.0, 1480.0], [1480.0, 20.0]])
     res = segment(image, box)
-    assert res.stop_reason in ("converged", "stalled")
+    assert res.stop_reason in ("converged", "stalled", "leaked")
     assert all(size <= MAX_VIEW_PIXELS for size in made)

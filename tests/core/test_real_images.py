@@ -340,6 +340,18 @@ def test_a_click_on_the_background_outlines_the_dark_gap_not_a_nucleus(stack):
     assert found.sum() > 500 and not (found & (labels > 0)).any()
 
 
+def test_a_click_at_the_end_of_a_nucleus_its_reach_ends_at_is_converged(stack):
+    """A 3-px click at the left end of a nucleus 38 px long (slice 32,
+    label 2): the farthest reach such a click is given (25 times its size)
+    ends where the nucleus does, and a quarter of the contour's nodes rest
+    on both. The nucleus' edge holds them: not a leak."""
+    image, labels = stack[0][32], stack[1][32]
+    res = segment(image, circle(np.array([134.0, 14.0]), 1.5))
+    found = polygon2mask(labels.shape, res.contour)
+    assert res.converged
+    assert (labels[found] == 2).all() and found.sum() > 0.6 * (labels == 2).sum()
+
+
 @pytest.mark.parametrize("z, label", [(29, 16), (38, 5), (44, 5)])
 def test_a_click_inside_a_dim_nucleus_among_bright_ones(stack, z, label):
     """The nucleus dimmed to 60 % of its contrast over the background (as a
@@ -502,6 +514,21 @@ def test_a_click_on_a_dim_nucleus_near_a_saturated_one_is_read_bright(dsb, label
     # It may take in a touching neighbour (the saturated one beside n156: 5x
     # the nucleus' area; see docs/benchmarks.md), not the background (80x and more).
     assert found.sum() < 6 * truth.sum()
+
+
+@pytest.mark.parametrize("centre, radius", [((42, 194), 8), ((338, 115), 8), ((27, 172), 14)])
+def test_a_circle_on_the_ground_that_spreads_over_it_has_leaked(dsb, centre, radius):
+    """A circle on the dark ground between nuclei, nothing in it: read as
+    inside a dark object, the contour spreads over the ground, 200-300 times
+    the drawing, until the farthest reach of such a drawing holds 23-46 % of
+    its nodes and nuclei the rest. That was reported converged; no border of
+    the ground held it, and the evolution stops there with "leaked"."""
+    image, labels = dsb
+    drawing = circle(np.array(centre, float), radius)
+    assert not (polygon2mask(labels.shape, drawing) & (labels > 0)).any()
+    res = segment(image, drawing)
+    assert (res.stop_reason, res.converged) == ("leaked", False)
+    assert res.steps < 1000
 
 
 @pytest.mark.parametrize("label", [46, 120])

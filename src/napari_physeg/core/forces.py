@@ -271,8 +271,16 @@ class ForceField:
         values = self._sample_short_lines(nodes, normals)
         region = values[..., 2]
         crossing = (region.min(1) < 0) & (region.max(1) > 0)
-        near = np.abs(self._region_offsets) <= 1.5
-        return crossing | (values[:, near, 0].max(1) > 0.3)
+        return crossing | self._edge_near(values)
+
+    def on_edge(self, nodes: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
+        """Which nodes have an edge within a pixel and a half along their normal."""
+        if normals is None:
+            normals = outward_normals(nodes)
+        return self._edge_near(self._sample_short_lines(nodes, normals))
+
+    def _edge_near(self, values: np.ndarray) -> np.ndarray:
+        return values[:, np.abs(self._region_offsets) <= 1.5, 0].max(1) > 0.3
 
 
 #: cv2.remap's maps and images must have sides below 2**15 - 1 (SHRT_MAX):
