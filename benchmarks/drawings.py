@@ -22,6 +22,12 @@ each seeded by the case's name:
   pressing Segment twice). Under the table: how many of these results move (IoU below 0.9
   with the result they started from).
 
+And circles drawn on the ground, with no object in them (a click that missed): of 8, 14 and
+24 px radius, three of each on every image of the groups whose truths label every object, at
+random points at least 1.5 radii and 3 px from any labelled pixel. No answer is right there;
+the table counts the stop reasons, how far the contours spread (their area over the circle's)
+and how long they took.
+
 Run::
 
     python benchmarks/drawings.py [--write]
@@ -36,7 +42,9 @@ import argparse
 import csv
 import os
 import sys
+import time
 import warnings
+import zlib
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
@@ -126,6 +134,58 @@ def run(groups=GROUPS):
 
 
 
+#: The groups whose truths label every object of their images: the ground is all the rest.
+GROUND_GROUPS = ("nuclei", "heldout", "small", "coins", "dsb")
+GROUND_RADII = (8, 14, 24)
+
+
+def ground_circles(groups=GROUND_GROUPS):
+    """(image name, image, circle) for every circle on the ground (see the module's docstring)."""
+    for group in groups:
+        images = {}
+        for obj in real_data.GROUPS[group]():
+            name = "/".join(filter(None, (group, obj.name.rpartition("/")[0])))
+            images.setdefault(name, [obj.image, np.zeros(obj.image.shape, bool)])[1] |= obj.mask
+        for name, (image, labelled) in images.items():
+            rng = np.random.default_rng(zlib.crc32(name.encode()))
+            free = ndi.distance_transform_edt(~labelled)
+            for radius in GROUND_RADII:
+                ok = np.argwhere(free > 1.5 * radius + 3)
+                ok = ok[np.all((ok >= radius) & (ok < np.array(image.shape) - radius), axis=1)]
+                for point in ok[rng.choice(len(ok), size=min(3, len(ok)), replace=False)]:
+                    yield name, image, real_data.circle(point.astype(float), radius)
+
+
+def run_ground(groups=GROUND_GROUPS):
+    """One row per circle on the ground: image, stop reason, area over the circle's, seconds."""
+    from napari_physeg.core import segment
+
+    rows = []
+    for name, image, circle in ground_circles(groups):
+        t0 = time.perf_counter()
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                res = segment(image, circle)
+        except Exception as exc:  # noqa: BLE001 - every failure is a result here
+            rows.append((name, f"{type(exc).__name__}", np.nan, time.perf_counter() - t0))
+            continue
+        spread = polygon2mask(image.shape, res.contour).sum() / polygon2mask(image.shape, circle).sum()
+        rows.append((name, res.stop_reason, spread, time.perf_counter() - t0))
+    return rows
+
+
+def ground_table(rows) -> list[str]:
+    lines = ["| stop reason | circles | area over the circle's, median (max) | seconds, median (max) |",
+             "|---|---|---|---|"]
+    for stop in sorted({r[1] for r in rows}):
+        spread = np.array([r[2] for r in rows if r[1] == stop])
+        seconds = np.array([r[3] for r in rows if r[1] == stop])
+        lines.append(f"| {stop} | {len(spread)} | {np.median(spread):.0f} ({np.max(spread):.0f}) "
+                     f"| {np.median(seconds):.2f} ({np.max(seconds):.2f}) |")
+    return lines
+
+
 def table(rows) -> list[str]:
     kinds, groups = [*DRAWINGS, AGAIN], dict.fromkeys(r[0] for r in rows)
     lines = ["| group | " + " | ".join(kinds) + " |", "|---|" + "---|" * len(kinds)]
@@ -150,11 +210,15 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--write", action="store_true", help="write the table into docs/benchmarks.md")
     args = ap.parse_args(argv)
-    rows = run()
+    rows, ground = run(), run_ground()
     OUT.mkdir(exist_ok=True)
     with open(OUT / "drawings_cases.csv", "w", newline="") as f:
         csv.writer(f).writerows([("group", "object", "drawing", "iou", "stop", "iou_with_start"), *rows])
-    lines = [f"Machine: {machine()}", "Command: `python benchmarks/drawings.py`", "", *table(rows)]
+    with open(OUT / "drawings_ground.csv", "w", newline="") as f:
+        csv.writer(f).writerows([("image", "stop", "area_over_circle", "seconds"), *ground])
+    lines = [f"Machine: {machine()}", "Command: `python benchmarks/drawings.py`", "", *table(rows), "",
+             f"Circles on the ground, no object in them ({len(ground)}, on the images of "
+             + ", ".join(GROUND_GROUPS) + "; one row per stop reason):", "", *ground_table(ground)]
     print("\n".join(lines))
     if args.write:
         doc = write_section("drawings", lines, "Other drawings on the real images")

@@ -147,6 +147,27 @@ def test_a_drawing_inside_an_object_cut_by_the_side_stays_in_the_image(real):
     assert real_data.inside(init, mask)
 
 
+def test_the_circles_on_the_ground_keep_clear_of_every_object(real, monkeypatch_module):
+    """``benchmarks/drawings.py``'s circles on the ground: inside the image, at least 1.5 radii
+    and 3 px from every labelled pixel, three of each radius on each image."""
+    real_data = sys.modules["real_data"]
+    from drawings import GROUND_RADII, ground_circles
+
+    mask = np.zeros((160, 200), bool)
+    mask[disk((50, 60), 20)] = mask[disk((110, 140), 25)] = True
+    real_data.GROUPS["test"] = lambda: [real_data.Obj("test", "a/n1", mask.astype(float), mask)]
+    try:
+        circles = list(ground_circles(["test"]))
+    finally:
+        del real_data.GROUPS["test"]
+    assert len(circles) == 3 * len(GROUND_RADII) and {c[0] for c in circles} == {"test/a"}
+    labelled = np.argwhere(mask)
+    for _, image, circle in circles:
+        centre, radius = circle.mean(axis=0), np.ptp(circle[:, 0]) / 2
+        assert np.all((circle >= 0) & (circle <= np.array(image.shape) - 1))
+        assert np.hypot(*(labelled - centre).T).min() > 1.5 * radius + 3 - 1e-9
+
+
 def test_the_noise_probe_adds_the_noise_it_names(real, monkeypatch_module):
     """``benchmarks/noise.py``: photon counts with the named brightest mean, and white noise of
     the object's contrast over the named SNR."""
