@@ -336,6 +336,12 @@ def test_more_objects_than_frames_leave_the_time_slider_to_the_movie(dock, wait_
     assert [m.data.shape for m in maps] == [(3 * (3 + 1) + 1, 4 * (100 + 1) + 1)] * 2  # 3 x 4 tiles
     numbers = [layer for layer in widget.output_layers if isinstance(layer, Points)][0]
     assert list(numbers.features["object"]) == list(range(12))
+    # Each number on its tile's first pixel, in the maps' own placement.
+    corners = [(1 + (3 + 1) * (k // 4), 1 + (100 + 1) * (k % 4)) for k in range(12)]
+    np.testing.assert_array_equal(numbers.data, corners)
+    for m in maps:
+        np.testing.assert_allclose(numbers.scale, m.scale)
+        np.testing.assert_allclose(numbers.translate, m.translate)
 
 
 @pytest.mark.parametrize("view", ["3D view", "transposed axes", "drawn off the movie"])

@@ -115,20 +115,32 @@ def tracking_layer_data(result: TrackingResult, transform: dict, *, name: str, f
     # add; stacked on a leading axis, the maps shared the movie's time slider,
     # which ran on past the movie's end when there were more objects than
     # frames, and stepped through objects as it stepped through frames.
-    grid, maps_added = _map_grid(result.n_objects), []
+    # Every object's map of either quantity is (frames, n_arc): one montage
+    # shape, one placement, one numbering for both.
+    grid, tile = _map_grid(result.n_objects), (result.n_frames, int(n_arc))
+    placement = _map_placement(_montage_shape(grid, tile), transform, frame_shape)
+    maps_added = []
     for quantity, colormap in (("normal_velocity", "bwr"), ("curvature", "PiYG")):
         maps = np.stack([result.membrane_map(k, quantity, n_arc=n_arc) for k in range(result.n_objects)])
         if not np.isfinite(maps).any():
             continue
         lim = float(np.nanpercentile(np.abs(maps), 98)) or 1.0
-        tiled = montage(maps, fill=np.nan, grid_shape=grid, padding_width=1)
-        placement = _map_placement(tiled.shape, transform, frame_shape)
+        tiled = montage(maps, fill=np.nan, grid_shape=grid, padding_width=MAP_PADDING)
         maps_added.append((tiled, dict(name=f"{name} {quantity.replace('_', ' ')} maps (frame x arc, per object)",
                                        colormap=colormap, contrast_limits=(-lim, lim), visible=False, **placement),
                            "image"))
     if maps_added:
-        layers += maps_added + [_map_numbers(result.n_objects, maps.shape[1:], grid, placement, name)]
+        layers += maps_added + [_map_numbers(result.n_objects, tile, grid, placement, name)]
     return layers
+
+
+#: Pixels of NaN that skimage's montage puts between the maps' tiles and around them.
+MAP_PADDING = 1
+
+
+def _montage_shape(grid, tile_shape) -> tuple[int, int]:
+    """The shape of the montage of ``grid`` (rows, columns) tiles of ``tile_shape``."""
+    return tuple(int(n * (side + MAP_PADDING) + MAP_PADDING) for n, side in zip(grid, tile_shape))
 
 
 def _map_grid(n_maps: int) -> tuple[int, int]:
@@ -141,8 +153,8 @@ def _map_numbers(n_maps: int, tile_shape, grid, placement: dict, name: str) -> t
     """A Points layer that numbers the objects' tiles of the maps' montage
     (``grid`` rows and columns of tiles; object ``k`` is the ``k``-th tile, row
     by row), at each tile's first pixel."""
-    step = np.asarray(tile_shape, float) + 1  # skimage's montage pads each tile by one pixel
-    corners = np.array([divmod(k, grid[1]) for k in range(n_maps)], float) * step + 1
+    step = np.asarray(tile_shape, float) + MAP_PADDING
+    corners = np.array([divmod(k, grid[1]) for k in range(n_maps)], float) * step + MAP_PADDING
     return (corners, dict(name=f"{name} maps: object numbers", features={"object": np.arange(n_maps)},
                           text={"string": "{object}", "color": "white", "anchor": "upper_left", "size": 10},
                           size=0.1, face_color="transparent", border_width=0, visible=False, **placement),
