@@ -729,6 +729,7 @@ def test_advice_fits_why_a_contour_did_not_reach_a_border():
     assert "[5]" in messages[0] and "max steps" in messages[0] and "1000" in messages[0]
     assert "[7]" in messages[1] and "max steps" not in messages[1] and "closer" in messages[1]
     assert "[8]" in messages[2] and "beyond the drawing" in messages[2] and "object is" in messages[2]
+    assert "no object in the drawing" in messages[2]  # a circle on the background leaks too
     assert "[9]" in messages[3] and "max steps" not in messages[3] and "around the object" in messages[3]
 
 

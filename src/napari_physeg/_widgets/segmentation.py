@@ -448,8 +448,9 @@ _NOT_CONVERGED_ADVICE = {
     "max_steps": "were still moving after {steps} steps: raise 'max steps' (or draw closer to the object)",
     "stalled": "came to rest away from any border (nothing in reach pulled them further): draw them closer "
                "to the object's border, or raise the stiffness r",
-    "leaked": "spread far beyond the drawing, over the image (nothing told the object from its surroundings): "
-              "draw them around the object, closer to its border, or set 'object is' to bright or dark",
+    "leaked": "spread far beyond the drawing, over the image (nothing told the object from its surroundings, "
+              "or there was no object in the drawing): draw them around the object, closer to its border, or set "
+              "'object is' to bright or dark",
     "oscillating": "kept swinging without getting anywhere (no border holds them: noise or shading only): "
                    "draw them around the object, closer to its border",
 }
