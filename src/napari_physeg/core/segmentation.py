@@ -1335,7 +1335,7 @@ def _evolve(
                 body.nodes + features.origin, init, drawing, features.model, image.shape,
                 features.fields[phase].on_edge(body.nodes)):
             # Stopped at once: a leak crawls on for seconds (a circle on the
-            # ground between nuclei, 400-1000 steps) and ends no nearer an object.
+            # ground between nuclei, 200-1000 steps) and ends no nearer an object.
             stop_reason = "leaked"
             break
         at_rest = rest.at_rest(body.nodes, body.shifts, body.remeshes)
@@ -1362,7 +1362,7 @@ def _evolve(
         # read on smoothed images and each on its own noise: measure the border
         # on the raw image and fit the polygon to it (see subpixel.polish).
         nodes = _polished(features, nodes)
-    on_edge = features.fields[0].on_edge(nodes)
+    on_edge = features.fields[0].on_edge(nodes) if stop_reason == "converged" else None
     nodes = nodes + features.origin
     if stop_reason == "converged" and (_spread_beyond_the_object(nodes, init, drawing, features.model, image.shape,
                                                                  on_edge)
