@@ -528,24 +528,26 @@ AT_REACH_SHARE = 0.1
 LEAK_CHECK_EVERY = 10
 
 
-def _spread_beyond_the_object(contour, init, drawing, model: RegionModel, shape, on_edge: np.ndarray) -> bool:
+def _spread_beyond_the_object(contour, init, drawing, features: _FeatureWindow, field: ForceField, shape) -> bool:
     """Whether ``contour`` (image frame) spread beyond any object the drawing
     meant: over the whole image (see :func:`_took_the_whole_image`, ``init``
     the drawing clipped to the image) or to the farthest reach of a drawing
-    read as inside its object (see :func:`_held_by_the_reach`; ``on_edge``:
-    which nodes lie on an edge)."""
-    return _took_the_whole_image(contour, init, shape) or _held_by_the_reach(contour, drawing, model, shape, on_edge)
+    read as inside its object (see :func:`_held_by_the_reach`; ``field``
+    tells which nodes lie on an edge)."""
+    return _took_the_whole_image(contour, init, shape) or _held_by_the_reach(contour, drawing, features.model, shape,
+                                                                             field, features.origin)
 
 
-def _held_by_the_reach(contour: np.ndarray, drawing: np.ndarray, model: RegionModel, shape,
-                       on_edge: np.ndarray) -> bool:
+def _held_by_the_reach(contour: np.ndarray, drawing: np.ndarray, model: RegionModel, shape, field: ForceField,
+                       origin: np.ndarray) -> bool:
     """Whether ``contour``, grown from a ``drawing`` that ``model`` reads as
     inside its object, rests along the farthest reach such a drawing is
     given: the object's look-alike spread that far (the ground between
     nuclei, for a dim nucleus whose levels the drawing did not tell). The
     image's sides, which hold an object cut by them, are left out, and so
-    are the nodes ``on_edge``: a border may lie at the reach (a 3-px click
-    at one end of a nucleus 38 px long)."""
+    are the nodes on an edge of ``field`` (whose window starts at
+    ``origin``): a border may lie at the reach (a 3-px click at one end of
+    a nucleus 38 px long)."""
     if model.drawn_around:
         return False
     low, high = _near_sides(contour, shape)
@@ -553,7 +555,10 @@ def _held_by_the_reach(contour: np.ndarray, drawing: np.ndarray, model: RegionMo
     if not off_sides.any():
         return False
     at_reach = np.abs(depth_inside(_scaled(drawing, _INSIDE_LIMIT), contour[off_sides])) <= AT_REACH_PX
-    return bool(np.mean(at_reach & ~on_edge[off_sides]) >= AT_REACH_SHARE)
+    if np.mean(at_reach) < AT_REACH_SHARE:  # (most contours: the edges need not be read)
+        return False
+    on_edge = field.on_edge(contour - origin)[off_sides]
+    return bool(np.mean(at_reach & ~on_edge) >= AT_REACH_SHARE)
 
 
 def _near_sides(contour: np.ndarray, shape, within: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
@@ -1332,8 +1337,7 @@ def _evolve(
             stop_reason = "cancelled"
             break
         if steps % LEAK_CHECK_EVERY == 0 and _spread_beyond_the_object(
-                body.nodes + features.origin, init, drawing, features.model, image.shape,
-                features.fields[phase].on_edge(body.nodes)):
+                body.nodes + features.origin, init, drawing, features, features.fields[phase], image.shape):
             # Stopped at once: a leak crawls on for seconds (a circle on the
             # ground between nuclei, 200-1000 steps) and ends no nearer an object.
             stop_reason = "leaked"
@@ -1362,10 +1366,9 @@ def _evolve(
         # read on smoothed images and each on its own noise: measure the border
         # on the raw image and fit the polygon to it (see subpixel.polish).
         nodes = _polished(features, nodes)
-    on_edge = features.fields[0].on_edge(nodes) if stop_reason == "converged" else None
     nodes = nodes + features.origin
-    if stop_reason == "converged" and (_spread_beyond_the_object(nodes, init, drawing, features.model, image.shape,
-                                                                 on_edge)
+    if stop_reason == "converged" and (_spread_beyond_the_object(nodes, init, drawing, features, features.fields[0],
+                                                                 image.shape)
                                        or _around_others(nodes, features.avoid)):
         stop_reason = "leaked"
     if not np.array_equal(history[-1], nodes):
