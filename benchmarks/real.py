@@ -380,7 +380,7 @@ def ramp_positions(rows, groups):
             smoothed[key] = ndi.gaussian_filter(image, 1.0)
         truth = positively_oriented(real_data.outline_of(r["obj"].mask))
         polarity = _object_side(smoothed[key], truth)
-        pair = [_ramp_height(polarity * smoothed[key], c) for c in (positively_oriented(r["contour"]), truth)]
+        pair = [_ramp_height(smoothed[key], c, polarity) for c in (positively_oriented(r["contour"]), truth)]
         heights.setdefault(r["group"], []).append(pair)
     return ["- where on the edge's ramp the outlines lie (median height, 0 its foot, 1 its top, within "
             f"{RAMP_REACH:.0f} px either side), ours / truth: "
@@ -406,11 +406,12 @@ def _object_side(smoothed, outline) -> int:
     return 1 if np.median(profile[:, :mid].mean(1) - profile[:, mid + 1:].mean(1)) >= 0 else -1
 
 
-def _ramp_height(smoothed, outline):
-    """The median height of ``outline``'s points on their edge's ramp, the object's side up."""
+def _ramp_height(smoothed, outline, polarity: int = 1):
+    """The median height of ``outline``'s points on their edge's ramp, the object's side up
+    (``polarity``: -1 for an object darker than its background)."""
     if len(outline) < 5:
         return np.nan
-    profile = _normal_profiles(smoothed, outline)
+    profile = polarity * _normal_profiles(smoothed, outline)  # the profiles, not the whole image, turned
     mid = profile.shape[1] // 2
     at, top, foot = profile[:, mid], profile[:, :mid + 1].max(1), profile[:, mid:].min(1)
     ok = top - foot > 1e-6
