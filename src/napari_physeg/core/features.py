@@ -474,32 +474,56 @@ def _shen_castan(
     ``noise``, if given, the standard deviation of the image's noise.
     """
     shape = image.shape
-
-    def no_edges(strength=None):
-        if strength is None:
-            strength = np.zeros(shape, dtype=np.float64)
-        return np.zeros(shape, dtype=bool), strength
-
+    no_edges = np.zeros(shape, dtype=bool)
     scale = max(abs(float(image.max())), abs(float(image.min())))
     if float(smoothed.max() - smoothed.min()) <= _ROUNDOFF * scale:
-        return no_edges()  # constant image: the BLI would be round-off noise
-
+        return no_edges, np.zeros(shape, dtype=np.float64)  # constant image: the BLI would be round-off noise
     # Binary Laplacian image: smoothed - image approximates the Laplacian and
     # is positive on the dark side of a step.
     bli = smoothed > image
+    cand = _zero_crossings(bli, smoothed)
+    if not cand.any():
+        return no_edges, np.zeros(shape, dtype=np.float64)
+    noise_sigma = _noise_sigma(image) if noise is None else noise  # before image may be overwritten
+    strength = _adaptive_gradient(image, smoothed, bli, cand, window, overwrite, work)
+    # Hysteresis thresholds. The quantile of the candidates alone picks noise
+    # when most candidates are noise (a noisy image has zero crossings at
+    # ~40 % of its pixels), so seeds must also beat a noise floor: a multiple
+    # of the noise's standard deviation after ISEF smoothing (white noise's
+    # std is multiplied by sum(f**2) = (1-b)(1+b^2)/(1+b)^3 in 2D), and
+    # round-off relative to the image's magnitude.
+    gain = (1.0 - b) * (1.0 + b * b) / (1.0 + b) ** 3
+    floor = max(_NOISE_FLOOR_SIGMAS * gain * noise_sigma, _ROUNDOFF * scale)
+    high = max(_quantile_above(strength, cand, high_quantile, floor), floor)
+    if float(strength.max()) < high:
+        return no_edges, strength
+    # Chains extend over candidates >= low_ratio * high, or over any that is
+    # clearly significant (_CHAIN_FLOOR_FACTOR noise floors): on a clean
+    # image the weak parts of a border (thin protrusions, which the ISEF
+    # flattens) stay attached to its strong parts; on a noisy one the
+    # threshold rises with the noise.
+    low = min(low_ratio * high, _CHAIN_FLOOR_FACTOR * floor)
+    seeds = _dominant_seeds(strength, high, b)
+    return _chains(strength >= low, seeds, min_length), strength  # (off the candidates strength is 0 < low)
 
-    # Zero crossings of the BLI between 4-neighbours (pairs (p, right) and
-    # (p, below)). Shen–Castan's false-crossing test: going from the BLI=1
-    # (dark) pixel to the BLI=0 (bright) pixel the smoothed image must rise
-    # strictly; otherwise it is a ripple of the Laplacian, not an edge.
-    # (Requiring the rise to peak at the crossing, as a Laplacian zero
-    # crossing should, was tried and rejected: with the wide ISEF the peak of
-    # a curved edge's rise is displaced from the sharp step that sets the
-    # BLI, and most of a disc's border failed.) Of each valid pair the BLI=0
-    # pixel, the bright side (smoothed <= image), is marked, so the edges of
-    # a bright object lie on its outermost pixels and those of a dark object
-    # on the background's innermost ones.
-    cand = np.zeros(shape, dtype=bool)
+
+def _zero_crossings(bli: np.ndarray, smoothed: np.ndarray) -> np.ndarray:
+    """The edge candidates: the bright side of each zero crossing of the
+    binary Laplacian image ``bli`` between 4-neighbours (pairs (p, right)
+    and (p, below)) across which ``smoothed`` rises toward it.
+
+    Shen-Castan's false-crossing test: going from the BLI=1 (dark) pixel to
+    the BLI=0 (bright) pixel the smoothed image must rise strictly;
+    otherwise it is a ripple of the Laplacian, not an edge. (Requiring the
+    rise to peak at the crossing, as a Laplacian zero crossing should, was
+    tried and rejected: with the wide ISEF the peak of a curved edge's rise
+    is displaced from the sharp step that sets the BLI, and most of a disc's
+    border failed.) Of each valid pair the BLI=0 pixel, the bright side
+    (smoothed <= image), is marked, so the edges of a bright object lie on
+    its outermost pixels and those of a dark object on the background's
+    innermost ones.
+    """
+    cand = np.zeros(bli.shape, dtype=bool)
     pairs = (
         ((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
         ((slice(None, -1), slice(None)), (slice(1, None), slice(None))),
@@ -509,25 +533,28 @@ def _shen_castan(
         s_a, s_b = smoothed[first], smoothed[second]
         cand[second] |= bli_a & ~bli_b & (s_b > s_a)  # 1 -> 0, rising: mark second
         cand[first] |= bli_b & ~bli_a & (s_b < s_a)  # 0 -> 1, falling: mark first
-    if not cand.any():
-        return no_edges()
+    return cand
 
-    # Adaptive gradient: difference of the smoothed image's means over the
-    # BLI=1 and BLI=0 pixels of the window, from box filters: with k the
-    # count of BLI=1 pixels among the window's N, m the mean of smoothed and
-    # m1 the mean of smoothed*BLI (f = k/N),
-    # mean1 - mean0 = m1 / f - (m - m1) / (1 - f) = N (N m1 - k m) / (k (N - k)).
-    # Both classes are present in any candidate's 3x3 neighbourhood, so
-    # there k (N - k) >= N - 1; elsewhere the result is discarded.
-    # Computed on the whole image, in place, the count in uint8 (for windows
-    # up to 15): masked
-    # indexing and fresh whole-image temporaries cost more than arithmetic.
+
+def _adaptive_gradient(image, smoothed, bli, cand, window: int, overwrite: bool, work) -> np.ndarray:
+    """Each candidate's strength: the difference of the smoothed image's
+    means over the BLI=1 and BLI=0 pixels of its ``window`` x ``window``
+    neighbourhood (0 off the candidates ``cand``).
+
+    From box filters: with k the count of BLI=1 pixels among the window's
+    N, m the mean of smoothed and m1 the mean of smoothed*BLI (f = k/N),
+    mean1 - mean0 = m1 / f - (m - m1) / (1 - f) = N (N m1 - k m) / (k (N - k)).
+    Both classes are present in any candidate's 3x3 neighbourhood, so there
+    k (N - k) >= N - 1; elsewhere the result is discarded. Computed on the
+    whole image, in place (in ``image``'s buffer with ``overwrite``, and in
+    ``work`` if given), the count in uint8 (for windows up to 15): masked
+    indexing and fresh whole-image temporaries cost more than arithmetic.
+    """
     ksize = (window, window)
     n_win = float(window * window)
     bt = cv2.BORDER_REFLECT
     depth = cv2.CV_8U if n_win < 256 else cv2.CV_32F  # exact counts either way
     count = cv2.boxFilter(bli.view(np.uint8), depth, ksize, normalize=False, borderType=bt)
-    noise_sigma = _noise_sigma(image) if noise is None else noise  # before image may be overwritten
     strength = np.multiply(smoothed, bli, out=image if overwrite else None)
     cv2.boxFilter(strength, -1, ksize, dst=strength, borderType=bt)
     mean = cv2.boxFilter(smoothed, -1, ksize, dst=work, borderType=bt)
@@ -541,58 +568,47 @@ def _shen_castan(
     strength /= mean
     strength *= n_win
     strength *= cand
-    del count, mean
+    return strength
 
-    # Hysteresis thresholds. The quantile of the candidates alone picks noise
-    # when most candidates are noise (a noisy image has zero crossings at
-    # ~40 % of its pixels), so seeds must also beat a noise floor: a multiple
-    # of the noise's standard deviation after ISEF smoothing (white noise's
-    # std is multiplied by sum(f**2) = (1-b)(1+b^2)/(1+b)^3 in 2D), and
-    # round-off relative to the image's magnitude.
-    gain = (1.0 - b) * (1.0 + b * b) / (1.0 + b) ** 3
-    floor = max(_NOISE_FLOOR_SIGMAS * gain * noise_sigma, _ROUNDOFF * scale)
-    high = max(_quantile_above(strength, cand, high_quantile, floor), floor)
-    if float(strength.max()) < high:
-        return no_edges(strength)
-    # Chains extend over candidates >= low_ratio * high, or over any that is
-    # clearly significant (_CHAIN_FLOOR_FACTOR noise floors): on a clean
-    # image the weak parts of a border (thin protrusions, which the ISEF
-    # flattens) stay attached to its strong parts; on a noisy one the
-    # threshold rises with the noise.
-    low = min(low_ratio * high, _CHAIN_FLOOR_FACTOR * floor)
 
-    # A seed must also dominate its surroundings: at least half the
-    # strongest strength within the ISEF's reach, 2 / (1 - b) px. Noise
-    # flips the Laplacian's sign on the long flanks of a smoothed edge, and
-    # there the adaptive gradient is sizeable (the flank is steep) but well
-    # below the edge's own; on a small object in a large noisy frame such
-    # crossings outnumber its border and reach the quantile. (In units of
-    # `high` and float32: a maximum needs no precision, and cv2 dilates
-    # float32 8x faster than float64.)
-    relative = np.empty(shape, dtype=np.float32)
+def _dominant_seeds(strength: np.ndarray, high: float, b: float) -> np.ndarray:
+    """The chains' seeds: candidates at least ``high`` strong and at least
+    half (_SEED_DOMINANCE) the strongest strength within the ISEF's reach,
+    2 / (1 - b) px.
+
+    Noise flips the Laplacian's sign on the long flanks of a smoothed edge,
+    and there the adaptive gradient is sizeable (the flank is steep) but well
+    below the edge's own; on a small object in a large noisy frame such
+    crossings outnumber its border and reach the quantile. (In units of
+    ``high`` and float32: a maximum needs no precision, and cv2 dilates
+    float32 8x faster than float64.)
+    """
+    relative = np.empty(strength.shape, dtype=np.float32)
     np.multiply(strength, 1.0 / high, out=relative, casting="same_kind")
-    reach = min(int(np.ceil(2.0 / (1.0 - b))), max(shape))
+    reach = min(int(np.ceil(2.0 / (1.0 - b))), max(strength.shape))
     box = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * reach + 1, 2 * reach + 1))
     local_max = cv2.dilate(relative, box, borderType=cv2.BORDER_REFLECT)
     local_max *= _SEED_DOMINANCE
-    seeds = (strength >= high) & (relative >= local_max)
-    del relative, local_max
+    return (strength >= high) & (relative >= local_max)
 
-    # Keep 8-connected chains of weak candidates that hold a seed. (skimage's
-    # apply_hysteresis_threshold labels 4-connected components, which breaks
-    # the staircase of a diagonal edge into single pixels.) Non-candidates
-    # have strength 0 < low.
-    weak = strength >= low
+
+def _chains(weak: np.ndarray, seeds: np.ndarray, min_length: int) -> np.ndarray:
+    """The 8-connected chains of ``weak`` candidates that hold a seed and
+    at least ``min_length`` pixels, their spurs pruned.
+
+    (skimage's apply_hysteresis_threshold labels 4-connected components,
+    which breaks the staircase of a diagonal edge into single pixels.)
+    Short chains are dropped: Laplacian sign flips caused by noise on the
+    long flanks of a smoothed edge have a strong adaptive gradient (the
+    flank is steep) but come as isolated pixels or pairs. (Sizes from the
+    few weak pixels: cv2's WithStats variant costs 5x the labelling.)
+    """
     n_labels, labels = cv2.connectedComponents(weak.view(np.uint8), connectivity=8)
     keep = np.zeros(n_labels, dtype=bool)
     keep[labels[seeds]] = True
-    # Short chains are dropped: Laplacian sign flips caused by noise on the
-    # long flanks of a smoothed edge have a strong adaptive gradient (the
-    # flank is steep) but come as isolated pixels or pairs. (Sizes from the
-    # few weak pixels: cv2's WithStats variant costs 5x the labelling.)
     keep &= np.bincount(labels[weak], minlength=n_labels) >= min_length
     keep[0] = False
-    return _prune_spurs(keep[labels], _SPUR_LENGTH), strength
+    return _prune_spurs(keep[labels], _SPUR_LENGTH)
 
 
 #: Branches of up to this many pixels hanging off an edge chain are pruned.

@@ -299,6 +299,62 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     -------
     RegionModel
     """
+    s = _read_drawing(intensity, drawing, noise)
+    border = traced_border_level(intensity, drawing, s.size, s.centre, s.outside, s.floor) if user_drawing else None
+    if border is not None and polarity in (None, np.sign(s.centre - s.outside)):
+        # Traced on the object's border (an earlier result, a label's
+        # outline): it says where the border lies. Read as a rough drawing,
+        # its line on the edge's ramp gave the background another level and
+        # the border moved at each new start (on crowded nuclei, 107 of 226
+        # results started from again lost a tenth of their IoU and more).
+        return _traced_model(s.centre, s.outside, s.floor, border)
+    inner, outer = _either_side(intensity, s.drawn, s.line, s.size)
+    beyond = _beyond_the_border(inner, outer, s.centre, s.outside, s.on_line, s.floor)
+    around = _line_around(s)
+    if around and beyond is not None and _on_the_ramp(s.on_line, outer, s.centre, beyond):
+        # Traced on the outer part of the object's edge (a label's outline,
+        # an earlier result on a blurred edge): the line's level is not yet
+        # the background's, which lies beyond it. (Read as the background,
+        # it put the object's border three quarters up the ramp.)
+        obj, background = s.centre, beyond
+    elif around:
+        obj, background = _levels_drawn_around(s, user_drawing)
+    elif (levels := _around_after_all(s, beyond)) is not None:
+        around, (obj, background) = True, levels
+    elif user_drawing and polarity in (None, np.sign(s.centre - s.outside)) and \
+            (border := traced_border_level(intensity, drawing, s.size, s.centre, s.outside, s.floor,
+                                           TRACED_AMONG_NEIGHBOURS_SHARE, TRACED_AMONG_NEIGHBOURS_LENGTH)) is not None:
+        return _traced_model(s.centre, s.outside, s.floor, border)
+    else:  # inside its object
+        obj, background = s.on_line, s.outside
+    return _model_of(s, around, obj, background, polarity, user_drawing, image_sides, traced=beyond is not None)
+
+
+@dataclass(frozen=True, eq=False)
+class _DrawingReading:
+    """What :func:`drawing_levels` reads of a drawing on ``intensity``: the
+    pixels of its line (``line``, a band 1-3 px wide, and their levels
+    ``along``), of its middle and of all it encloses (``drawn``, sampled in
+    ``within``); the medians ``on_line`` and ``centre``, the level
+    ``outside`` it, the least contrast ``floor`` the noise lets through, and
+    ``span``, how far the levels within differ from the line's at most."""
+
+    intensity: np.ndarray
+    drawing: np.ndarray
+    size: float
+    line: np.ndarray
+    middle: np.ndarray
+    drawn: np.ndarray
+    along: np.ndarray
+    within: np.ndarray
+    on_line: float
+    centre: float
+    outside: float
+    floor: float
+    span: float
+
+
+def _read_drawing(intensity: np.ndarray, drawing: np.ndarray, noise: float | None) -> _DrawingReading:
     shape = intensity.shape
     size = _drawing_size(drawing)
     half_width = int(np.clip(round(0.05 * size), 1, 3))
@@ -320,96 +376,100 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     within = intensity[box][drawn[box]]
     within = within[:: max(1, within.size // _MAX_SAMPLES)]
     outside = _outside_level(intensity, drawing, centre, on_line, along, within, floor)
-    border = traced_border_level(intensity, drawing, size, centre, outside, floor) if user_drawing else None
-    if border is not None and polarity in (None, np.sign(centre - outside)):
-        # Traced on the object's border (an earlier result, a label's
-        # outline): it says where the border lies. Read as a rough drawing,
-        # its line on the edge's ramp gave the background another level and
-        # the border moved at each new start (on crowded nuclei, 107 of 226
-        # results started from again lost a tenth of their IoU and more).
-        return _traced_model(centre, outside, floor, border)
-    # Around the object, the line lies on the background: at least halfway
-    # from the centre's level toward the outside's. (Comparing the line with
-    # the outside instead fails when the rings hold look-alike neighbours.)
-    # Signed: a line brighter than a dim, textured centre of a bright object
-    # lies on the object, not halfway to its dark outside.
-    # Nor can a line that differs from the centre more than anything outside
-    # does, the other way, lie on the object: the centre's texture would
-    # differ from the object more than its background does (the rings hold
-    # neighbours unlike the object: a dim nucleus among bright ones).
-    around = (np.isnan(outside) or (on_line - centre) * np.sign(outside - centre) >= 0.5 * abs(centre - outside)
-              or abs(on_line - centre) > abs(centre - outside)
-              or _on_even_ground(intensity, drawing, along, on_line, centre, outside, floor))
     # What differs from the line within the drawing: the object, if the
     # drawing is around it; texture, if inside it. (A classes' split is only
     # made when the pixels' spread leaves room for a rule below to use it.)
     span = max(abs(float(within.max()) - on_line), abs(float(within.min()) - on_line)) if within.size else 0.0
-    inner, outer = _either_side(intensity, drawn, line, size)
-    beyond = _beyond_the_border(inner, outer, centre, outside, on_line, floor)
-    if around and beyond is not None and _on_the_ramp(on_line, outer, centre, beyond):
-        # Traced on the outer part of the object's edge (a label's outline,
-        # an earlier result on a blurred edge): the line's level is not yet
-        # the background's, which lies beyond it. (Read as the background,
-        # it put the object's border three quarters up the ramp.)
-        obj, background = centre, beyond
-    elif around:
-        obj, background = centre, on_line
-        # A lasso drawn close about a blurred object: its line lies on the
-        # tail of the edge's ramp, and the ground beyond it.
-        foot = _ramp_foot(intensity, drawing, size, centre, on_line, floor)
-        # A drawing about a thin object (a rod, a circle about its length):
-        # its middle shows the background too, and its median is a mix of
-        # the two levels (see GROUND_SHARE).
-        if (shown := _beside_the_ground(intensity, middle, on_line, floor)) is not None and \
-                _centred(intensity, middle, drawn & ~middle, on_line, shown):
-            obj = shown
-        # A drawing far larger than the object: its centre is mostly
-        # background too (within a fifth of the way to the other class),
-        # and the other class lies mostly at the centre (not a far brighter
-        # neighbour in a corner of a box around a dim object).
-        if abs(centre - on_line) < 0.2 * span:
-            other = _other_level(within, on_line, floor)
-            if abs(centre - on_line) < 0.2 * abs(other - on_line) and \
-                    _centred(intensity, middle, drawn & ~middle, on_line, other):
-                obj = other
-        if foot is not None:
-            background = _foot_that_holds(intensity, drawing, obj, on_line, foot, floor, user_drawing)
-    elif beyond is not None:
+    return _DrawingReading(intensity, drawing, size, line, middle, drawn, along, within, on_line, centre, outside,
+                           floor, span)
+
+
+def _line_around(s: _DrawingReading) -> bool:
+    """Whether the drawing's line lies around its object, on the background.
+
+    Around the object, the line lies on the background: at least halfway
+    from the centre's level toward the outside's. (Comparing the line with
+    the outside instead fails when the rings hold look-alike neighbours.)
+    Signed: a line brighter than a dim, textured centre of a bright object
+    lies on the object, not halfway to its dark outside. Nor can a line that
+    differs from the centre more than anything outside does, the other way,
+    lie on the object: the centre's texture would differ from the object
+    more than its background does (the rings hold neighbours unlike the
+    object: a dim nucleus among bright ones).
+    """
+    on_line, centre, outside = s.on_line, s.centre, s.outside
+    return bool(np.isnan(outside) or (on_line - centre) * np.sign(outside - centre) >= 0.5 * abs(centre - outside)
+                or abs(on_line - centre) > abs(centre - outside)
+                or _on_even_ground(s.intensity, s.drawing, s.along, on_line, centre, outside, s.floor))
+
+
+def _levels_drawn_around(s: _DrawingReading, user_drawing: bool) -> tuple[float, float]:
+    """The object's and the background's levels for a drawing around its object."""
+    obj, background = s.centre, s.on_line
+    # A lasso drawn close about a blurred object: its line lies on the
+    # tail of the edge's ramp, and the ground beyond it.
+    foot = _ramp_foot(s.intensity, s.drawing, s.size, s.centre, s.on_line, s.floor)
+    # A drawing about a thin object (a rod, a circle about its length):
+    # its middle shows the background too, and its median is a mix of
+    # the two levels (see GROUND_SHARE).
+    if (shown := _beside_the_ground(s.intensity, s.middle, s.on_line, s.floor)) is not None and \
+            _centred(s.intensity, s.middle, s.drawn & ~s.middle, s.on_line, shown):
+        obj = shown
+    # A drawing far larger than the object: its centre is mostly
+    # background too (within a fifth of the way to the other class),
+    # and the other class lies mostly at the centre (not a far brighter
+    # neighbour in a corner of a box around a dim object).
+    if abs(s.centre - s.on_line) < 0.2 * s.span:
+        other = _other_level(s.within, s.on_line, s.floor)
+        if abs(s.centre - s.on_line) < 0.2 * abs(other - s.on_line) and \
+                _centred(s.intensity, s.middle, s.drawn & ~s.middle, s.on_line, other):
+            obj = other
+    if foot is not None:
+        background = _foot_that_holds(s.intensity, s.drawing, obj, s.on_line, foot, s.floor, user_drawing)
+    return obj, background
+
+
+def _around_after_all(s: _DrawingReading, beyond) -> tuple[float, float] | None:
+    """The object's and the background's levels if, its line not on the
+    background (see :func:`_line_around`), a rule tells that the drawing is
+    around its object after all; None if none does."""
+    centre, on_line, outside, floor = s.centre, s.on_line, s.outside, s.floor
+    if beyond is not None:
         # Traced on the object's edge (a label's outline, an earlier result):
         # the line lies on the edge's ramp, at neither level. The object is
         # within the drawing, as for a drawing around it; its background is
         # beyond the line.
-        around, obj, background = True, centre, beyond
-    elif (crossed := _line_among_neighbours(along, centre, outside)) is not None:
-        around, obj, background = True, centre, crossed
-    elif _line_over_neighbours(intensity, drawing, middle, line, centre, outside):
-        around, obj, background = True, centre, outside
-    elif (off_centre := _off_centre_level(within, span, on_line, outside, floor)) is not None:
-        around, obj, background = True, off_centre, on_line
-    elif _held_within(intensity, middle, drawn, line, centre, on_line, outside, floor):
-        around, obj, background = True, centre, on_line
-    elif _line_on_open_ground(intensity, line, centre, on_line, outside, floor):
-        around, obj, background = True, centre, on_line
-    elif user_drawing and polarity in (None, np.sign(centre - outside)) and \
-            (border := traced_border_level(intensity, drawing, size, centre, outside, floor,
-                                           TRACED_AMONG_NEIGHBOURS_SHARE, TRACED_AMONG_NEIGHBOURS_LENGTH)) is not None:
-        return _traced_model(centre, outside, floor, border)
-    else:
-        obj, background = on_line, outside
+        return centre, beyond
+    if (crossed := _line_among_neighbours(s.along, centre, outside)) is not None:
+        return centre, crossed
+    if _line_over_neighbours(s.intensity, s.drawing, s.middle, s.line, centre, outside):
+        return centre, outside
+    if (off_centre := _off_centre_level(s.within, s.span, on_line, outside, floor)) is not None:
+        return off_centre, on_line
+    if _held_within(s.intensity, s.middle, s.drawn, s.line, centre, on_line, outside, floor) or \
+            _line_on_open_ground(s.intensity, s.line, centre, on_line, outside, floor):
+        return centre, on_line
+    return None
+
+
+def _model_of(s: _DrawingReading, around: bool, obj: float, background: float, polarity, user_drawing: bool,
+              image_sides, traced: bool) -> RegionModel:
+    """The :class:`RegionModel` of these levels, once a background that
+    encloses the drawing is looked for and the polarity told or inferred."""
     # A small drawing deep inside a textured object, its centre or the rings
     # near it on the texture: the object's border is a stronger contrast
     # further out (a click on a nucleolus, a coin's relief).
-    texture = centre if around else outside
+    texture = s.centre if around else s.outside
     # What the view cuts off is unseen for a person's drawing; a program's
     # margin keeps the view's own reading (read as running on beyond the cuts,
     # the margins of nuclei leaving a warped DSB movie through its side took
     # their neighbours: 3 of 51 tracks, 11 frames under two contours).
     seen_sides = image_sides if user_drawing else (True, True, True, True)
-    enclosing = _enclosing_background(intensity, drawing, line, on_line, texture, floor, seen_sides,
-                                      traced=beyond is not None)
+    enclosing = _enclosing_background(s.intensity, s.drawing, s.line, s.on_line, texture, s.floor, seen_sides,
+                                      traced=traced)
     # (Told the object's polarity the other way, the spot drawn around is the object.)
-    if enclosing is not None and polarity in (None, np.sign(on_line - enclosing)):
-        around, obj, background = False, on_line, enclosing
+    if enclosing is not None and polarity in (None, np.sign(s.on_line - enclosing)):
+        around, obj, background = False, s.on_line, enclosing
     if polarity is None:
         polarity = 1 if obj >= background else -1
     elif np.sign(obj - background) not in (0, polarity):
@@ -419,12 +479,12 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
             # where the object was, and nothing of the object is there (a
             # tracked disk that vanished took, at the known polarity, the
             # level of a neighbour that had moved beside where it was).
-            return RegionModel(int(polarity), float(background), float(background), True, floor,
+            return RegionModel(int(polarity), float(background), float(background), True, s.floor,
                                user_drawing=False)
         # The user knows better: take the levels in the order they say.
         obj, background = (max(obj, background), min(obj, background)) if polarity > 0 else \
             (min(obj, background), max(obj, background))
-    return RegionModel(int(polarity), float(obj), float(background), bool(around), floor,
+    return RegionModel(int(polarity), float(obj), float(background), bool(around), s.floor,
                        user_drawing=user_drawing)
 
 

@@ -165,7 +165,7 @@ def _warn_if_figure_eight(drawing: np.ndarray) -> None:
     if cut >= FIGURE_EIGHT_SHARE:
         warnings.warn(f"init crosses itself (a figure-8): the loops a contour cannot keep hold {cut:.0%} of what "
                       "it encloses, and the result may hold a part of the object only; draw one outline that does "
-                      "not cross itself, around (or inside) the object", UserWarning, stacklevel=5)
+                      "not cross itself, around (or inside) the object", UserWarning, stacklevel=6)
 
 
 def _clip_to_image(init: np.ndarray, shape, warn: bool = True) -> np.ndarray:
@@ -184,7 +184,7 @@ def _clip_to_image(init: np.ndarray, shape, warn: bool = True) -> np.ndarray:
             warnings.warn(
                 f"{outside.sum()} of {len(init)} nodes of init lie outside the image and were clipped to it",
                 UserWarning,
-                stacklevel=5,  # the caller of segment() (through _evolve, drain and segment)
+                stacklevel=6,  # the caller of segment() (through _set_up, _evolve, drain and segment)
             )
         init = as_contour(np.clip(init, 0.0, hi), name="init (clipped to the image)")
     return init
@@ -1256,38 +1256,8 @@ def _evolve(
     """
     options = dict(locals())
     t_start = time.perf_counter()
-    image, missing = _without_missing(_validate_image(image))
-    from ._validation import check_contour  # the one validation of segment, match and simulate
-
-    init = check_contour(init, "init")
-    material, weights, stiffness = _checked_options(material, forces, weights, stiffness, reference, integrator,
-                                                    polarity, max_step_length, tol, max_steps, n_nodes, sigma,
-                                                    sigma_factor)
-    # The drawing as the user made it (partly beyond the image, maybe) tells
-    # the object from its background; the clipped one starts the contour.
-    drawing = init
-    if warn:
-        _warn_if_figure_eight(drawing)
-    init = _clip_to_image(init, image.shape, warn)
-    first = init if start is None else _clip_to_image(check_contour(start, "start"), image.shape, warn)
-    nodes, spacing, sigma_used = _initial_nodes(first, n_nodes, sigma, sigma_factor)
-    if integrator == "modal" and len(nodes) > MODAL_MAX_NODES:
-        raise ValueError(
-            f"integrator='modal' with {len(nodes)} nodes would solve a dense {2 * len(nodes)} x {2 * len(nodes)} "
-            f"eigenproblem at every remesh (seconds to minutes each); use integrator='newmark' (the same "
-            f"equation, sparse) or at most n_nodes={MODAL_MAX_NODES}"
-        )
-    for name, given in (("features", features), ("avoid", avoid)):
-        if given is not None and np.shape(getattr(given, "edges", given)) != image.shape:
-            raise ValueError(f"{name} must be of the image's shape {image.shape}, got "
-                             f"{np.shape(getattr(given, 'edges', given))}")
-    avoid = _avoiding_missing(avoid, missing, features, warn)
-    features = _FeatureWindow(image, drawing, init, polarity={"bright": 1, "dark": -1}.get(polarity),
-                              weights=weights, max_line_length=max_line_length, isef_b=isef_b,
-                              refine=refine and reference == "incremental", shared=features,
-                              avoid=None if avoid is None else np.asarray(avoid, dtype=bool),
-                              user_drawing=start is None, image_noise=image_noise, pixel_noise=pixel_noise,
-                              raw_model=raw_model, evenly_lit=evenly_lit)
+    setup = _set_up(options)
+    features = setup.features
     t_features = time.perf_counter()
     # A user's drawing inside a small object is read as segment() alone reads
     # it, on the magnified view, even where the image's features are shared
@@ -1302,34 +1272,113 @@ def _evolve(
         return (yield from _magnified(view, features, options, t_start))
 
     body = _new_body(
-        nodes - features.origin, features.bounds, spacing=spacing, sigma=sigma_used, material=material,
-        rayleigh=rayleigh_coefficients(damping_ratio, *reference_frequency_range(spacing, sigma_used, material)),
-        integrator=integrator, dt=dt, divergence_limit=10.0 * float(np.hypot(*image.shape)),
+        setup.nodes - features.origin, features.bounds, spacing=setup.spacing, sigma=setup.sigma,
+        material=setup.material,
+        rayleigh=rayleigh_coefficients(damping_ratio, *reference_frequency_range(setup.spacing, setup.sigma,
+                                                                                 setup.material)),
+        integrator=integrator, dt=dt, divergence_limit=10.0 * float(np.hypot(*setup.shape)),
         reference=reference, max_step_length=max_step_length, tol=tol,
-        grown_spacing=DEFAULT_NODE_SPACING if _finer_for_its_size(first, n_nodes, sigma) else None)
+        grown_spacing=DEFAULT_NODE_SPACING if _finer_for_its_size(setup.first, n_nodes, sigma) else None)
     body.cap_by_reach(features.fields[0])
     history = [body.nodes + features.origin]
-    # The evolution need only bring the nodes within reach of the refinement
-    # (if any), and the refinement within reach of the polish, which measures
-    # the border on the raw image to the last tenths of a pixel.
+    stop_reason, steps, settled = yield from _time_loop(body, setup, options, history)
+    nodes, stop_reason = _final_nodes(body, setup, stop_reason, settled, steps, max_line_length)
+    if not np.array_equal(history[-1], nodes):
+        history.append(nodes.copy())
+    t_end = time.perf_counter()
+    return SegmentationResult(
+        contour=nodes, steps=steps, converged=stop_reason == "converged", stop_reason=stop_reason,
+        history=tuple(history), polarity=features.polarity,
+        timings={"features": t_features - t_start, "model": body.model_time,
+                 "evolution": t_end - t_features - body.model_time, "total": t_end - t_start},
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class _Setup:
+    """What an evolution starts from, every input checked (see :func:`_set_up`)."""
+
+    shape: tuple  # the image's
+    drawing: np.ndarray  # as the user made it (partly beyond the image, maybe)
+    init: np.ndarray  # the drawing clipped to the image
+    first: np.ndarray  # what the nodes start on: init, or the given start
+    nodes: np.ndarray
+    spacing: float  # the nodes'
+    sigma: float  # the element's
+    material: Material
+    stiffness: float
+    features: _FeatureWindow
+
+
+def _set_up(options: dict) -> _Setup:
+    """:func:`_evolve`'s ``options`` checked (ValueError naming the bad one),
+    the first nodes laid on the drawing, and the feature window read."""
+    o = options
+    image, missing = _without_missing(_validate_image(o["image"]))
+    from ._validation import check_contour  # the one validation of segment, match and simulate
+
+    init = check_contour(o["init"], "init")
+    material, weights, stiffness = _checked_options(
+        o["material"], o["forces"], o["weights"], o["stiffness"], o["reference"], o["integrator"], o["polarity"],
+        o["max_step_length"], o["tol"], o["max_steps"], o["n_nodes"], o["sigma"], o["sigma_factor"])
+    # The drawing as the user made it (partly beyond the image, maybe) tells
+    # the object from its background; the clipped one starts the contour.
+    drawing, start, warn = init, o["start"], o["warn"]
+    if warn:
+        _warn_if_figure_eight(drawing)
+    init = _clip_to_image(init, image.shape, warn)
+    first = init if start is None else _clip_to_image(check_contour(start, "start"), image.shape, warn)
+    nodes, spacing, sigma = _initial_nodes(first, o["n_nodes"], o["sigma"], o["sigma_factor"])
+    if o["integrator"] == "modal" and len(nodes) > MODAL_MAX_NODES:
+        raise ValueError(
+            f"integrator='modal' with {len(nodes)} nodes would solve a dense {2 * len(nodes)} x {2 * len(nodes)} "
+            f"eigenproblem at every remesh (seconds to minutes each); use integrator='newmark' (the same "
+            f"equation, sparse) or at most n_nodes={MODAL_MAX_NODES}"
+        )
+    for name in ("features", "avoid"):
+        given = o[name]
+        if given is not None and np.shape(getattr(given, "edges", given)) != image.shape:
+            raise ValueError(f"{name} must be of the image's shape {image.shape}, got "
+                             f"{np.shape(getattr(given, 'edges', given))}")
+    avoid = _avoiding_missing(o["avoid"], missing, o["features"], warn)
+    features = _FeatureWindow(image, drawing, init, polarity={"bright": 1, "dark": -1}.get(o["polarity"]),
+                              weights=weights, max_line_length=o["max_line_length"], isef_b=o["isef_b"],
+                              refine=o["refine"] and o["reference"] == "incremental", shared=o["features"],
+                              avoid=None if avoid is None else np.asarray(avoid, dtype=bool),
+                              user_drawing=start is None, image_noise=o["image_noise"],
+                              pixel_noise=o["pixel_noise"], raw_model=o["raw_model"], evenly_lit=o["evenly_lit"])
+    return _Setup(shape=image.shape, drawing=drawing, init=init, first=first, nodes=nodes, spacing=spacing,
+                  sigma=sigma, material=material, stiffness=stiffness, features=features)
+
+
+def _time_loop(body: _ElasticBody, setup: _Setup, options: dict, history: list):
+    """The paper's loop: image forces along the normals, one step of the
+    dynamic equilibrium, remesh when the nodes crowd or thin out. Yields a
+    :class:`SegmentationProgress` a step (``True`` sent back cancels),
+    appends to ``history`` every ``history_every`` steps, and returns the
+    stop reason, the steps taken and where the evolution came to rest
+    (image frame; None if it had not).
+
+    Phase 0 uses every force; once at rest, a short second phase lets the
+    region force alone (sub-pixel: it balances where the lightly smoothed
+    intensity crosses the object/background mid-level) settle the nodes that
+    edge pixels hold half a pixel off the true border; a geometric polish
+    (:func:`_final_nodes`) then ends them on the border of the raw image.
+    The evolution need only bring the nodes within reach of the refinement
+    (if any), and the refinement within reach of the polish.
+    """
+    features, o = setup.features, options
     stop_reason, steps = "max_steps", 0
-    # The paper's loop: image forces along the normals, one step of the
-    # dynamic equilibrium, remesh when the nodes crowd or thin out. Phase 0
-    # uses every force; once at rest, a short second phase lets the region
-    # force alone (sub-pixel: it balances where the lightly smoothed intensity
-    # crosses the object/background mid-level) settle the nodes that edge
-    # pixels hold half a pixel off the true border; a geometric polish
-    # (subpixel.polish) then ends them on the border of the raw image.
-    phase = _first_phase(features, body.nodes, carried=start is not None)
-    rest_tol = tol * (HANDOVER if len(features.fields) > 1 else 1.0)  # the same in either phase
-    rest = _RestDetector(rest_tol, _phase_patience(phase, patience))
-    settled = None  # where the evolution came to rest (image frame), once it has
-    for steps in range(1, int(max_steps) + 1):
+    phase = _first_phase(features, body.nodes, carried=o["start"] is not None)
+    rest_tol = o["tol"] * (HANDOVER if len(features.fields) > 1 else 1.0)  # the same in either phase
+    rest = _RestDetector(rest_tol, _phase_patience(phase, o["patience"]))
+    settled = None
+    for steps in range(1, int(o["max_steps"]) + 1):
         body.shift(features.follow(body.nodes))
-        _time_step(body, features.fields[phase], stiffness, features.bounds, steps, features.anchor)
+        _time_step(body, features.fields[phase], setup.stiffness, features.bounds, steps, features.anchor)
         if body.collapsed:
             break
-        if steps % max(int(history_every), 1) == 0:
+        if steps % max(int(o["history_every"]), 1) == 0:
             history.append(body.nodes + features.origin)
         stop = yield SegmentationProgress(steps, body.nodes + features.origin,
                                           "evolution" if phase == 0 else "refinement")
@@ -1337,7 +1386,8 @@ def _evolve(
             stop_reason = "cancelled"
             break
         if steps % LEAK_CHECK_EVERY == 0 and _spread_beyond_the_object(
-                body.nodes + features.origin, init, drawing, features, features.fields[phase], image.shape):
+                body.nodes + features.origin, setup.init, setup.drawing, features, features.fields[phase],
+                setup.shape):
             # Stopped at once: a leak crawls on for seconds (a circle on the
             # ground between nuclei, 200-1000 steps) and ends no nearer an object.
             stop_reason = "leaked"
@@ -1352,34 +1402,35 @@ def _evolve(
             # force alone may settle it.
             phase += 1
             settled = body.nodes + features.origin if at_rest else None
-            rest = _RestDetector(rest_tol, _phase_patience(phase, patience))
+            rest = _RestDetector(rest_tol, _phase_patience(phase, o["patience"]))
             body.cap_by_reach(features.fields[phase])
-    nodes = body.nodes
+    return stop_reason, steps, settled
+
+
+def _final_nodes(body: _ElasticBody, setup: _Setup, stop_reason: str, settled, steps: int,
+                 max_line_length: float) -> tuple[np.ndarray, str]:
+    """The result's nodes (image frame) and stop reason once the loop ended
+    with ``stop_reason``: what succeeded kept, a converged contour polished
+    on the raw image, and a converged one that spread beyond its object
+    called leaked."""
+    features, nodes = setup.features, body.nodes
     if stop_reason == "oscillating" and settled is not None:
         # The refinement swings about the border that the evolution found: keep that.
         nodes = settled - features.origin
         stop_reason = _rest_reason(features.fields[0], nodes)
     if stop_reason != "cancelled" and body.collapsed:
-        nodes, stop_reason = _before_collapse(features, settled, drawing, steps, max_line_length)
+        nodes, stop_reason = _before_collapse(features, settled, setup.drawing, steps, max_line_length)
     if stop_reason == "converged" and features.with_refinement:
         # At rest every node is within a few tenths of a pixel of the border,
         # read on smoothed images and each on its own noise: measure the border
         # on the raw image and fit the polygon to it (see subpixel.polish).
         nodes = _polished(features, nodes)
     nodes = nodes + features.origin
-    if stop_reason == "converged" and (_spread_beyond_the_object(nodes, init, drawing, features, features.fields[0],
-                                                                 image.shape)
+    if stop_reason == "converged" and (_spread_beyond_the_object(nodes, setup.init, setup.drawing, features,
+                                                                 features.fields[0], setup.shape)
                                        or _around_others(nodes, features.avoid)):
         stop_reason = "leaked"
-    if not np.array_equal(history[-1], nodes):
-        history.append(nodes.copy())
-    t_end = time.perf_counter()
-    return SegmentationResult(
-        contour=nodes, steps=steps, converged=stop_reason == "converged", stop_reason=stop_reason,
-        history=tuple(history), polarity=features.polarity,
-        timings={"features": t_features - t_start, "model": body.model_time,
-                 "evolution": t_end - t_features - body.model_time, "total": t_end - t_start},
-    )
+    return nodes, stop_reason
 
 
 def _avoiding_missing(avoid, missing, features: FrameFeatures | None, warn: bool = True):
@@ -1390,7 +1441,7 @@ def _avoiding_missing(avoid, missing, features: FrameFeatures | None, warn: bool
     if missing is not None and warn:
         warnings.warn(f"{int(missing.sum())} NaN pixels of the image ({missing.mean():.1%}) were read as no data: "
                       "the contour keeps out of them", UserWarning,
-                      stacklevel=5)  # the caller of segment() (through _avoiding_missing, _evolve, drain and segment)
+                      stacklevel=6)  # segment()'s caller (through _set_up, _evolve, drain and segment)
     if features is not None and features.missing is not None:
         missing = features.missing if missing is None else missing | features.missing
     if missing is None:

@@ -634,16 +634,8 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
     t_start = time.perf_counter()
     frames, n_frames, frame_shape = _check_frames(frames)
     inits = _check_inits(inits, frame_shape)
-    if isinstance(start, (bool, np.bool_)) or not isinstance(start, (int, np.integer)) or not 0 <= start < n_frames:
-        raise ValueError(f"start must be a frame index (an integer) in [0, {n_frames - 1}], got {start!r}")
-    start = int(start)
-    options = dict(segment_options or {})
-    options.setdefault("max_steps", int(max_steps))
-    taken = sorted({"features", "avoid", "callback"} & set(options))
-    if taken:
-        raise ValueError(f"segment_options cannot set {taken}: track() sets them for each object and frame")
-    # Checked once here: a bad option must not pass, frame after frame, for a lost object.
-    check_segment_options(**options)
+    start = _checked_start(start, n_frames)
+    options = _checked_segment_options(segment_options, max_steps)
     polarity = options.pop("polarity", "auto")  # then each object's, from its first frame
     n_obj = len(inits)
     run = _Run(inits=inits, start=start, options=options,
@@ -668,20 +660,9 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                 warnings.warn(said[-1], UserWarning, stacklevel=2)
                 stop_reason = "frame error"
                 break
-            # NaN pixels hold no data (a registration's margin): filled once
-            # for every object, which keeps out of them (see _without_missing).
-            image, missing = _measured(image)
-            if t == start and missing is not None and missing.all():
-                raise ValueError(f"the start frame {t} holds NaN pixels only (no data): draw the contours on a "
-                                 "frame with data and start there")
-            shared = replace(FrameFeatures.of(image, options.get("isef_b", 0.7)), missing=missing)
-            if missing is not None:
+            image, shared, looks = _frame_features(image, t, t == start, options.get("isef_b", 0.7))
+            if shared.missing is not None:
                 with_missing.append(t)
-            # The objects' looks with the illumination taken out: a slope of
-            # the background fixed under moving objects drew their matches
-            # toward no motion.
-            looks = plane_removed(image.astype(np.float64, copy=False), shared.plane,
-                                  (slice(0, image.shape[0]), slice(0, image.shape[1])))
             run.stage = np.zeros(2) if before is None else _stage_shift(run, before, looks, t, step)
             run.before, run.looks = before, looks
             before = looks
@@ -703,16 +684,52 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                     f"{min(with_missing)}): the contours keep out of them, and an object that goes into them has left "
                     "the field of view")
         warnings.warn(said[-1], UserWarning, stacklevel=2)
-    contours = run.contours
-    status = run.status
     t_segmented = time.perf_counter()
-    analysis = _correspondences(contours, start, match_options or {})
+    analysis = _correspondences(run.contours, start, match_options or {})
     t_end = time.perf_counter()
-    status = [[s if s is not None else "not processed" for s in row] for row in status]
+    status = [[s if s is not None else "not processed" for s in row] for row in run.status]
     return TrackingResult(
-        contours=contours, status=status, **analysis, start=start, stop_reason=stop_reason,
+        contours=run.contours, status=status, **analysis, start=start, stop_reason=stop_reason,
         timings={"segmentation": t_segmented - t_start, "correspondence": t_end - t_segmented,
                  "total": t_end - t_start}, warnings=tuple(said))
+
+
+def _checked_start(start, n_frames: int) -> int:
+    if isinstance(start, (bool, np.bool_)) or not isinstance(start, (int, np.integer)) or not 0 <= start < n_frames:
+        raise ValueError(f"start must be a frame index (an integer) in [0, {n_frames - 1}], got {start!r}")
+    return int(start)
+
+
+def _checked_segment_options(segment_options: dict | None, max_steps: int) -> dict:
+    """:func:`track`'s ``segment_options`` with its ``max_steps``, checked once
+    here: a bad option must not pass, frame after frame, for a lost object."""
+    options = dict(segment_options or {})
+    options.setdefault("max_steps", int(max_steps))
+    taken = sorted({"features", "avoid", "callback"} & set(options))
+    if taken:
+        raise ValueError(f"segment_options cannot set {taken}: track() sets them for each object and frame")
+    check_segment_options(**options)
+    return options
+
+
+def _frame_features(image: np.ndarray, t: int, is_start: bool, isef_b: float):
+    """Frame ``t`` with its NaN pixels filled, the features its objects share,
+    and their looks: the frame with its illumination taken out (a slope of
+    the background fixed under moving objects drew their matches toward no
+    motion).
+
+    NaN pixels hold no data (a registration's margin): filled once for every
+    object, which keeps out of them (see _without_missing); the start frame
+    must hold data.
+    """
+    image, missing = _measured(image)
+    if is_start and missing is not None and missing.all():
+        raise ValueError(f"the start frame {t} holds NaN pixels only (no data): draw the contours on a "
+                         "frame with data and start there")
+    shared = replace(FrameFeatures.of(image, isef_b), missing=missing)
+    looks = plane_removed(image.astype(np.float64, copy=False), shared.plane,
+                          (slice(0, image.shape[0]), slice(0, image.shape[1])))
+    return image, shared, looks
 
 
 def _measured(image: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
