@@ -212,6 +212,30 @@ def test_an_object_that_stops_after_a_dart_is_followed(back):
         assert np.hypot(*(tr.centroids(0)[t] - centres[t][0])) < 1.0
 
 
+def test_an_object_that_jumps_beyond_where_it_is_looked_for_is_linked_again():
+    """A cell that jumps twice its radius (a HeLa nucleus of the Cell
+    Tracking Challenge jumped 1.9 radii between its first two frames): its
+    drawing, and its looks searched one radius about where it was, miss it,
+    and it was lost for good. Once every object of the frame is done, the
+    unclaimed blob nearest where it was and likest it in area is segmented."""
+    centres = [[(48, 30), (20, 100)]] * 2 + [[(48, 52), (20, 100)]] * 2
+    frames = _disk_movie(centres, radius=11, shape=(96, 128))
+    tr = track(frames, [_circle((48, 30), 15), _circle((20, 100), 15)])
+    assert tr.status == [[TRACKED] * 4] * 2
+    for t in (2, 3):
+        assert np.hypot(*(tr.centroids(0)[t] - centres[t][0])) < 1.0
+
+
+def test_a_vanished_object_is_not_linked_to_an_untracked_neighbour_that_was_there_before():
+    """The unclaimed blob a lost object may be linked to is one that was not
+    there, unclaimed, on the frame before: a cell that vanishes 2.5 radii
+    from one nobody drew is lost, not continued on the other."""
+    centres = [[(48, 40), (48, 65)]] * 3 + [[(None, None), (48, 65)]] * 2
+    frames = _disk_movie(centres, radius=10, shape=(96, 112))
+    tr = track(frames, _circle((48, 40), 14))
+    assert tr.status[0] == [TRACKED] * 3 + [LOST] * 2
+
+
 def test_a_vanished_object_does_not_take_a_neighbour_that_moved_toward_it():
     """Three dark disks; the first vanishes on frame 2 while the third moves
     9 px toward where it was. Found by the tracking fuzz test with three

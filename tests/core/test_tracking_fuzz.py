@@ -128,6 +128,14 @@ def _circle(centre, radius, n=40):
 # lost, then taken by the vanished one, segmented after it.
 @example(movie=([[np.array([16.0, 12.0])] * 3 + [np.array([5.0, 12.0])] * 2, [np.array([-2.0, 21.0])] + [None] * 4],
                 5, [RADIUS] * 2, [0.8] * 2), dtype=np.uint8, bright=False, noise=0.0, seed=0, scale=1.5, start_at=0.0)
+# Found by this test in session 60: a disk that jumped beside another was lost
+# (parted on its way), and the other, vanished on the next frame, was linked
+# to it as an unclaimed blob (which lay there, unclaimed, the frame before,
+# and nearer the disk lost first).
+@example(movie=([[np.array([32.0, 22.0])] * 3 + [None] * 2, [np.array([32.0, 58.0])] * 5,
+                 [np.array([14.0, 34.9])] * 2 + [np.array([14.0, 23.13]), np.array([16.0, 23.13]), None]],
+                5, [9.0] * 3, [0.8] * 3),
+         dtype=np.uint8, bright=False, noise=0.125, seed=0, scale=1.5, start_at=0.0)
 # Found by this test with disks of other sizes (session 26): a small disk
 # vanished as a large one moved next to where it was; its contour took the
 # part of the large one no one owned yet, and the large one kept the rest.
