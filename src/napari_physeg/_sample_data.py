@@ -12,7 +12,8 @@ import numpy as np
 
 from . import data
 
-__all__ = ["hand_segmentation", "hand_poses", "hand_open_image", "hand_closed_image", "deforming_cell"]
+__all__ = ["hand_segmentation", "hand_poses", "hand_open_image", "hand_closed_image", "deforming_cell",
+           "coins_segmentation"]
 
 _CONTOUR_STYLE = {"shape_type": "polygon", "face_color": "transparent", "edge_width": 1.5}
 
@@ -79,3 +80,33 @@ def deforming_cell() -> list[tuple]:
         ([init.astype(np.float32)], {"name": "contour on frame 0", "edge_color": "yellow", **_CONTOUR_STYLE},
          "shapes"),
     ]
+
+
+#: A circle (row, col, radius) dragged around each coin of
+#: ``skimage.data.coins()`` with napari's ellipse tool, as people draw them:
+#: 1.15-1.35 times the coin's radius, a few pixels off its centre, some
+#: crossing a neighbour (placed from scikit-image's gallery segmentation of
+#: the coins, row by row).
+COIN_CIRCLES = ((55, 43, 25), (56, 99, 23), (52, 157, 30), (50, 215, 30), (53, 278, 26), (44, 336, 37),
+                (126, 45, 25), (125, 102, 23), (126, 153, 21), (124, 204, 23), (118, 270, 33), (126, 335, 26),
+                (198, 44, 22), (196, 102, 28), (197, 155, 23), (192, 214, 28), (194, 273, 26), (184, 346, 37),
+                (263, 46, 36), (267, 114, 25), (260, 173, 33), (262, 245, 31), (262, 300, 33), (267, 358, 25))
+
+
+def coins_segmentation() -> list[tuple]:
+    """scikit-image's coins (a real photograph, 303 x 384) and a rough circle
+    around each of its 24 coins, in a Shapes layer of ellipses.
+
+    Open the segmentation widget and press Run: each circle comes to rest
+    on its coin's border.
+    """
+    from skimage.data import coins
+
+    ellipses = [np.array([[r - s, c - s], [r - s, c + s], [r + s, c + s], [r + s, c - s]], dtype=np.float32)
+                for r, c, s in COIN_CIRCLES]
+    return [
+        (coins(), {"name": "coins", "colormap": "gray"}, "image"),
+        (ellipses, {"name": "circles around the coins", "edge_color": "yellow",
+                    **{**_CONTOUR_STYLE, "shape_type": "ellipse"}}, "shapes"),
+    ]
+

@@ -142,6 +142,36 @@ def test_sample_hand_end_to_end(viewer_widget, wait_done, errors, monkeypatch, r
     assert not widget.is_running and widget._run_btn.enabled and not widget._cancel_btn.enabled
 
 
+def _coin_labels():
+    """scikit-image's gallery segmentation of its coins: a watershed of the
+    Sobel image from markers below 30 and above 150, holes filled."""
+    from scipy import ndimage as ndi
+    from skimage import data as skdata, filters, measure, segmentation
+
+    image = skdata.coins()
+    markers = np.where(image < 30, 1, 0) + np.where(image > 150, 2, 0)
+    return measure.label(ndi.binary_fill_holes(segmentation.watershed(filters.sobel(image), markers) == 2))
+
+
+def test_sample_coins_end_to_end(viewer_widget, wait_done, errors):
+    """The real photograph of the samples: each of the 24 rough circles,
+    some crossing a neighbour, comes to rest on its own coin."""
+    viewer, widget = viewer_widget
+    viewer.open_sample("napari-physeg", "coins_segmentation")
+    circles = viewer.layers["circles around the coins"]
+    assert widget._image.value is viewer.layers["coins"] and widget._shapes.value is circles
+    assert circles.shape_type == ["ellipse"] * 24
+    widget.run()
+    wait_done(widget)
+    assert errors == [] and widget.last_outcome.ok
+    (out,) = output_layers(viewer)
+    assert len(out.data) == 24 and out.features["converged"].all()
+    labels = _coin_labels()
+    for contour in out.data:
+        row, col = np.round(contour.mean(0)).astype(int)
+        assert labels[row, col] > 0 and iou(contour, labels == labels[row, col]) >= 0.9
+
+
 def test_each_shape_is_segmented_ellipse_rectangle_polygon(viewer_widget, wait_done, errors, hand):
     viewer, widget = viewer_widget
     viewer.add_image(hand.image, name="hand")
@@ -576,6 +606,7 @@ def test_manifest_is_valid():
     assert keys["hand_poses"] == "Hand poses (matching)"
     assert {"hand_open", "hand_closed"} <= set(keys)
     assert keys["deforming_cell"] == "Deforming cell (tracking)"
+    assert keys["coins_segmentation"] == "Coins, real photograph (segmentation)"
     assert [m.command for m in contrib.menus["napari/layers/segment"]] == ["napari-physeg.segmentation_widget"]
     assert [m.command for m in contrib.menus["napari/layers/track"]] == ["napari-physeg.tracking_widget"]
     # the manifest is also visible at the top of the repository
