@@ -1271,15 +1271,7 @@ def _evolve(
     if view is not None:
         return (yield from _magnified(view, features, options, t_start))
 
-    body = _new_body(
-        setup.nodes - features.origin, features.bounds, spacing=setup.spacing, sigma=setup.sigma,
-        material=setup.material,
-        rayleigh=rayleigh_coefficients(damping_ratio, *reference_frequency_range(setup.spacing, setup.sigma,
-                                                                                 setup.material)),
-        integrator=integrator, dt=dt, divergence_limit=10.0 * float(np.hypot(*setup.shape)),
-        reference=reference, max_step_length=max_step_length, tol=tol,
-        grown_spacing=DEFAULT_NODE_SPACING if _finer_for_its_size(setup.first, n_nodes, sigma) else None)
-    body.cap_by_reach(features.fields[0])
+    body = _body_of(setup, options)
     history = [body.nodes + features.origin]
     stop_reason, steps, settled = yield from _time_loop(body, setup, options, history)
     nodes, stop_reason = _final_nodes(body, setup, stop_reason, settled, steps, max_line_length)
@@ -1349,6 +1341,22 @@ def _set_up(options: dict) -> _Setup:
                               pixel_noise=o["pixel_noise"], raw_model=o["raw_model"], evenly_lit=o["evenly_lit"])
     return _Setup(shape=image.shape, drawing=drawing, init=init, first=first, nodes=nodes, spacing=spacing,
                   sigma=sigma, material=material, stiffness=stiffness, features=features)
+
+
+def _body_of(setup: _Setup, options: dict) -> _ElasticBody:
+    """The elastic body on the first nodes (window frame), its material
+    damped as ``options`` say, its steps capped by the first force's reach."""
+    o, features = options, setup.features
+    rayleigh = rayleigh_coefficients(o["damping_ratio"], *reference_frequency_range(setup.spacing, setup.sigma,
+                                                                                      setup.material))
+    body = _new_body(
+        setup.nodes - features.origin, features.bounds, spacing=setup.spacing, sigma=setup.sigma,
+        material=setup.material, rayleigh=rayleigh, integrator=o["integrator"], dt=o["dt"],
+        divergence_limit=10.0 * float(np.hypot(*setup.shape)), reference=o["reference"],
+        max_step_length=o["max_step_length"], tol=o["tol"],
+        grown_spacing=DEFAULT_NODE_SPACING if _finer_for_its_size(setup.first, o["n_nodes"], o["sigma"]) else None)
+    body.cap_by_reach(features.fields[0])
+    return body
 
 
 def _time_loop(body: _ElasticBody, setup: _Setup, options: dict, history: list):
