@@ -218,9 +218,33 @@ def polish(image: np.ndarray, nodes: np.ndarray, *, polarity: int = 0, noise: fl
     """
     img = np.asarray(image, dtype=np.float64)
     nodes = np.asarray(nodes, dtype=np.float64)
-    n = len(nodes)
-    if n < 3:
+    if len(nodes) < 3:
         return nodes
+    levels = _border_levels(img, nodes, polarity, level)
+    if levels is None:
+        return nodes
+    outer, contrast = levels
+    spacing = float(segment_lengths(nodes).mean())
+    sigma_noise = _noise_sigma(img) if noise is None else float(noise)
+    frame, normals, local = _averaging_frame(nodes, spacing, sigma_noise / abs(contrast))
+    offsets, weights, lines = _crossings(img, frame, normals, spacing, outer, contrast, reach, local)
+    move = frame + _normal_moves(normals, lines, offsets, weights)[:, None] * normals - nodes
+    # A node on the image's side (or where the dynamics left it, a few
+    # hundredths of a pixel off) has no border across it to measure: the side
+    # is its border, and it ends there (the smoothed frame, which rounds the
+    # corner where the contour leaves the side, is no place for it).
+    on_side, onto_side = _on_image_side(nodes, img.shape)
+    move[on_side] = onto_side[on_side] - nodes[on_side]
+    dist = np.linalg.norm(move, axis=1)
+    move *= np.minimum(1.0, reach / np.maximum(dist, 1e-12))[:, None]
+    return nodes + _untangled(nodes, move)
+
+
+def _border_levels(img: np.ndarray, nodes: np.ndarray, polarity: int, level: float | None):
+    """The background's level and the object's contrast over it (object
+    minus background) read 2.5-4 px either side of the nodes, the
+    background's moved so that its half-contrast is ``level`` if that is
+    known; None when they show no border, or one of the other polarity."""
     normals = outward_normals(nodes)
     offs = np.concatenate([-_LEVEL_OFFSETS, _LEVEL_OFFSETS])
     ring = _bilinear(img, nodes[:, None, :] + offs[None, :, None] * normals[:, None, :])
@@ -230,25 +254,34 @@ def polish(image: np.ndarray, nodes: np.ndarray, *, polarity: int = 0, noise: fl
     contrast = inner - outer
     scale = max(float(np.abs(ring).max()), 1e-300)
     if not abs(contrast) > 1e-9 * scale or (polarity and np.sign(contrast) != np.sign(polarity)):
-        return nodes
+        return None
     if level is not None:  # the crossings of that level, not of the half-level
         outer = float(level) - 0.5 * contrast
+    return outer, contrast
 
-    spacing = float(segment_lengths(nodes).mean())
-    sigma_noise = _noise_sigma(img) if noise is None else float(noise)
-    rel = sigma_noise / abs(contrast)
-    # Averaging along the contour: length (px) growing with the noise
-    # variance, bounded so that a very noisy image is not smoothed into a
-    # circle, and cut near sharp bends.
-    length = min(_NOISE_LENGTH * rel * rel, _MAX_LENGTH)
-    if length > 0.05 * spacing:
-        local = np.minimum(length, _BEND * _curvature_radius(nodes, int(np.ceil(length / spacing))))
-        frame = _smooth(nodes, local / spacing, kind="quadratic")
-        normals = outward_normals(frame)
-    else:
-        local = None
-        frame = nodes
 
+def _averaging_frame(nodes: np.ndarray, spacing: float, rel_noise: float):
+    """The curve the border is measured across, its normals, and the length
+    (px, per node; None for none) the measures are averaged over along it.
+
+    Averaging along the contour: a length growing with the noise variance
+    (``rel_noise``: the noise over the contrast), bounded so that a very noisy
+    image is not smoothed into a circle, and cut near sharp bends; the frame
+    is the nodes smoothed over it."""
+    length = min(_NOISE_LENGTH * rel_noise * rel_noise, _MAX_LENGTH)
+    if length <= 0.05 * spacing:
+        return nodes, outward_normals(nodes), None
+    local = np.minimum(length, _BEND * _curvature_radius(nodes, int(np.ceil(length / spacing))))
+    frame = _smooth(nodes, local / spacing, kind="quadratic")
+    return frame, outward_normals(frame), local
+
+
+def _crossings(img, frame, normals, spacing: float, outer: float, contrast: float, reach: float, local):
+    """Where the border crosses lines across ``frame`` at samples along each
+    of its edges: the offsets (N, n_sub) along the lines, their weights (0
+    where none is measured; averaged along ``local`` px if given), and the
+    lines' directions (N, n_sub, 2)."""
+    n = len(frame)
     n_sub = int(np.clip(np.ceil(spacing * _PER_PX), 1, _PER_EDGE))
     t = np.arange(n_sub) / n_sub
     nxt = np.roll(np.arange(n), -1)
@@ -281,27 +314,25 @@ def polish(image: np.ndarray, nodes: np.ndarray, *, polarity: int = 0, noise: fl
         sums = _smooth(np.column_stack([b * w, w]), np.repeat(local / spacing * n_sub, n_sub))
         b = np.where(sums[:, 1] > 1e-6, sums[:, 0] / np.maximum(sums[:, 1], 1e-6), b)
         w = np.maximum(w, sums[:, 1])
-    b, w = b.reshape(n, n_sub), w.reshape(n, n_sub)
+    return b.reshape(n, n_sub), w.reshape(n, n_sub), M
 
-    # Least squares over the edge samples: moving node i by delta_i along its
-    # normal moves sample (i, t) by (1-t) delta_i (n_i . m) + t delta_{i+1} (n_{i+1} . m)
-    # along its line m. A small ridge keeps nodes without data on the frame.
-    a0 = (1 - t)[None, :] * (normals[:, None, :] * M).sum(2)
-    a1 = t[None, :] * (normals[nxt][:, None, :] * M).sum(2)
+
+def _normal_moves(normals: np.ndarray, lines: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Each node's move along its normal that best puts the edges through
+    the crossings ``b`` (weights ``w``) measured along ``lines``.
+
+    Least squares over the edge samples: moving node i by delta_i along its
+    normal moves sample (i, t) by (1-t) delta_i (n_i . m) + t delta_{i+1} (n_{i+1} . m)
+    along its line m. A small ridge keeps nodes without data on the frame."""
+    n_sub = b.shape[1]
+    t = np.arange(n_sub) / n_sub
+    nxt = np.roll(np.arange(len(normals)), -1)
+    a0 = (1 - t)[None, :] * (normals[:, None, :] * lines).sum(2)
+    a1 = t[None, :] * (normals[nxt][:, None, :] * lines).sum(2)
     diag = (w * a0 * a0).sum(1) + np.roll((w * a1 * a1).sum(1), 1) + 1e-3
     off = (w * a0 * a1).sum(1)
     rhs = (w * a0 * b).sum(1) + np.roll((w * a1 * b).sum(1), 1)
-    delta = _solve_cyclic_tridiagonal(diag, off, rhs)
-    move = frame + delta[:, None] * normals - nodes
-    # A node on the image's side (or where the dynamics left it, a few
-    # hundredths of a pixel off) has no border across it to measure: the side
-    # is its border, and it ends there (the smoothed frame, which rounds the
-    # corner where the contour leaves the side, is no place for it).
-    on_side, onto_side = _on_image_side(nodes, img.shape)
-    move[on_side] = onto_side[on_side] - nodes[on_side]
-    dist = np.linalg.norm(move, axis=1)
-    move *= np.minimum(1.0, reach / np.maximum(dist, 1e-12))[:, None]
-    return nodes + _untangled(nodes, move)
+    return _solve_cyclic_tridiagonal(diag, off, rhs)
 
 
 #: A node closer than this (px) to the image's side lies on it.
