@@ -9,6 +9,8 @@ plugin's sample data, docks each widget, runs it as a user would (Run button
 
 * ``guide-segmentation-before.png`` / ``guide-segmentation-after.png`` - the
   segmentation widget on the "Hand (segmentation)" sample, before and after Run;
+* ``guide-segmentation-coins.png`` - the segmentation widget after a run on
+  "Coins, real photograph (segmentation)": a rough circle around each coin, and each result.
 * ``guide-matching.png`` - the matching widget on "Hand poses (matching)":
   correspondence lines coloured by cost, counts in the widget;
 * ``guide-simulation.png`` - the simulation widget and its result on the
@@ -123,6 +125,23 @@ def segmentation(napari, app, out: Path):
         result.edge_width = 2.0
         viewer.layers.selection.active = result
         _save_window(app, viewer, out / "guide-segmentation-after.png")
+    finally:
+        viewer.close()
+
+
+def coins(napari, app, out: Path):
+    from napari_physeg._widgets.segmentation import SegmentationWidget
+
+    viewer = _viewer(napari, "napari-physeg: segmentation of a real photograph")
+    try:
+        viewer.open_sample("napari-physeg", "coins_segmentation")
+        widget = SegmentationWidget(viewer)
+        viewer.window.add_dock_widget(widget, name="Segmentation (physical contour)", area="right")
+        widget._run_btn.native.click()
+        _wait(app, widget)
+        viewer.layers.selection.active = viewer.layers["circles around the coins segmented (rubber)"]
+        viewer.reset_view()
+        _save_window(app, viewer, out / "guide-segmentation-coins.png")
     finally:
         viewer.close()
 
@@ -268,6 +287,7 @@ def main(argv=None) -> int:
 
     app = get_qapp()
     segmentation(napari, app, args.out)
+    coins(napari, app, args.out)
     matching_and_simulation(napari, app, args.out)
     tracking(napari, app, args.out)
     docked(napari, app, args.out)
