@@ -318,6 +318,58 @@ def _plane_2d(image_layer, leading, channel: str | None) -> np.ndarray:
     return plane
 
 
+def _checked_layers(image_layer, shapes_layer, world_point):
+    """The initial contours' layer (a Points layer read as one polygon),
+    once both layers are there and of the right kind (InputError saying
+    what to do if not)."""
+    if image_layer is None:
+        raise InputError("no image to segment: open an image (or File > Open Sample > napari-physeg > "
+                         "Hand (segmentation)) and select it in 'image'")
+    if not isinstance(image_layer, Image):
+        raise InputError(f"{getattr(image_layer, 'name', image_layer)!r} is not an Image layer; select an image")
+    if shapes_layer is None:
+        raise InputError("no initial contours: add a Shapes layer (layer list: 'New shapes layer' button), draw "
+                         "a polygon, ellipse or rectangle around (or inside) the object and select it in "
+                         "'initial contours'")
+    if isinstance(shapes_layer, Points):
+        shapes_layer = PointsAsPolygon(shapes_layer, world_point)
+        if not shapes_layer.data:
+            raise InputError(f"the Points layer {shapes_layer.name!r} has {shapes_layer.n_points} point(s) on this "
+                             "slice: a contour needs at least 3; click them around (or inside) the object, in order")
+    if len(shapes_layer.data) == 0:
+        raise InputError(f"the Shapes layer {shapes_layer.name!r} is empty: draw a polygon, lasso, ellipse or "
+                         "rectangle around (or inside) the object to segment, then press Run again")
+    return shapes_layer
+
+
+def _contours_on_image(sliced, image_shape, shapes_name: str, image_name: str):
+    """The contours of the current slice that lie on the image, their shapes'
+    indices, and warnings for those partly beyond it or left out (InputError
+    if none is left, or one has NaN coordinates)."""
+    hi = np.array(image_shape, dtype=float) - 1.0
+    contours, indices, warnings, off_images = [], [], [], []
+    for k, c in zip(sliced.indices, sliced.contours):
+        if not np.all(np.isfinite(c)):
+            raise InputError(f"shape {k} of {shapes_name!r} has non-finite coordinates (NaN); redraw it")
+        outside_image = off_image(c, tuple(image_shape), f"shape {k} of {shapes_name!r} lies outside the image "
+                                                         f"{image_name!r}")
+        if outside_image:
+            off_images.append(outside_image)
+            continue
+        outside = np.any((c < 0) | (c > hi), axis=1)
+        if outside.any():
+            # Passed as drawn: the part beyond the image tells the core where
+            # the background is (its copy clipped onto the image would not).
+            warnings.append(f"{int(outside.sum())} of {len(c)} vertices of shape {k} lie outside the image and "
+                            "were moved onto its border")
+        contours.append(c)
+        indices.append(k)
+    if not contours:
+        raise InputError("; ".join(off_images))
+    warnings.extend(f"{message}; it was left out" for message in sliced.refused + off_images)
+    return contours, indices, warnings
+
+
 def prepare_segmentation(image_layer, shapes_layer, *, world_point=None, channel: str | None = None,
                          dims_order=None, ndisplay: int = 2) -> SegmentationJob:
     """Read the current 2D slice of ``image_layer`` and the initial contours.
@@ -342,23 +394,7 @@ def prepare_segmentation(image_layer, shapes_layer, *, world_point=None, channel
     InputError
         With a message that says how to fix the input.
     """
-    if image_layer is None:
-        raise InputError("no image to segment: open an image (or File > Open Sample > napari-physeg > "
-                         "Hand (segmentation)) and select it in 'image'")
-    if not isinstance(image_layer, Image):
-        raise InputError(f"{getattr(image_layer, 'name', image_layer)!r} is not an Image layer; select an image")
-    if shapes_layer is None:
-        raise InputError("no initial contours: add a Shapes layer (layer list: 'New shapes layer' button), draw "
-                         "a polygon, ellipse or rectangle around (or inside) the object and select it in "
-                         "'initial contours'")
-    if isinstance(shapes_layer, Points):
-        shapes_layer = PointsAsPolygon(shapes_layer, world_point)
-        if not shapes_layer.data:
-            raise InputError(f"the Points layer {shapes_layer.name!r} has {shapes_layer.n_points} point(s) on this "
-                             "slice: a contour needs at least 3; click them around (or inside) the object, in order")
-    if len(shapes_layer.data) == 0:
-        raise InputError(f"the Shapes layer {shapes_layer.name!r} is empty: draw a polygon, lasso, ellipse or "
-                         "rectangle around (or inside) the object to segment, then press Run again")
+    shapes_layer = _checked_layers(image_layer, shapes_layer, world_point)
     ndim = int(image_layer.ndim)
     if ndim < 2:
         raise InputError(f"{image_layer.name!r} is {ndim}D: the segmentation needs a 2D image or a stack of them")
@@ -377,28 +413,7 @@ def prepare_segmentation(image_layer, shapes_layer, *, world_point=None, channel
         where = f" (slice {leading})" if leading else ""
         raise InputError(f"no shape of {shapes_layer.name!r} lies on the current slice{where}: draw an initial "
                          f"contour on this slice, or move to a slice with one ({sliced.off_slice} shapes elsewhere)")
-    h, w = plane.shape
-    hi = np.array([h - 1.0, w - 1.0])
-    contours, indices, warnings, off_images = [], [], [], []
-    for k, c in zip(sliced.indices, sliced.contours):
-        if not np.all(np.isfinite(c)):
-            raise InputError(f"shape {k} of {shapes_layer.name!r} has non-finite coordinates (NaN); redraw it")
-        outside_image = off_image(c, (h, w), f"shape {k} of {shapes_layer.name!r} lies outside the image "
-                                             f"{image_layer.name!r}")
-        if outside_image:
-            off_images.append(outside_image)
-            continue
-        outside = np.any((c < 0) | (c > hi), axis=1)
-        if outside.any():
-            # Passed as drawn: the part beyond the image tells the core where
-            # the background is (its copy clipped onto the image would not).
-            warnings.append(f"{int(outside.sum())} of {len(c)} vertices of shape {k} lie outside the image and "
-                            "were moved onto its border")
-        contours.append(c)
-        indices.append(k)
-    if not contours:
-        raise InputError("; ".join(off_images))
-    warnings.extend(f"{message}; it was left out" for message in sliced.refused + off_images)
+    contours, indices, warnings = _contours_on_image(sliced, plane.shape, shapes_layer.name, image_layer.name)
     missing = int(np.isnan(plane).sum()) if plane.dtype.kind == "f" else 0
     if missing:  # said here: the core's warning is not relayed (see relay_warnings)
         warnings.append(f"{missing} NaN pixels of {image_layer.name!r} ({missing / plane.size:.1%}) were read as no "
