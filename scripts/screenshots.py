@@ -125,18 +125,9 @@ def segmentation(napari, app, out: Path):
         result.edge_width = 2.0
         viewer.layers.selection.active = result
         _save_window(app, viewer, out / "guide-segmentation-after.png")
-    finally:
-        viewer.close()
-
-
-def coins(napari, app, out: Path):
-    from napari_physeg._widgets.segmentation import SegmentationWidget
-
-    viewer = _viewer(napari, "napari-physeg: segmentation of a real photograph")
-    try:
+        # A real photograph, in the same window: the coins sample.
+        viewer.layers.clear()
         viewer.open_sample("napari-physeg", "coins_segmentation")
-        widget = SegmentationWidget(viewer)
-        viewer.window.add_dock_widget(widget, name="Segmentation (physical contour)", area="right")
         widget._run_btn.native.click()
         _wait(app, widget)
         viewer.layers.selection.active = viewer.layers["circles around the coins segmented (rubber)"]
@@ -287,7 +278,6 @@ def main(argv=None) -> int:
 
     app = get_qapp()
     segmentation(napari, app, args.out)
-    coins(napari, app, args.out)
     matching_and_simulation(napari, app, args.out)
     tracking(napari, app, args.out)
     docked(napari, app, args.out)
