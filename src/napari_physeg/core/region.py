@@ -355,6 +355,7 @@ class _DrawingReading:
 
 
 def _read_drawing(intensity: np.ndarray, drawing: np.ndarray, noise: float | None) -> _DrawingReading:
+    """What :func:`drawing_levels` reads of ``drawing`` (``noise``: as there)."""
     shape = intensity.shape
     size = _drawing_size(drawing)
     half_width = int(np.clip(round(0.05 * size), 1, 3))

@@ -697,6 +697,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
 
 
 def _checked_start(start, n_frames: int) -> int:
+    """:func:`track`'s ``start``, a frame index (ValueError if it is not one)."""
     if isinstance(start, (bool, np.bool_)) or not isinstance(start, (int, np.integer)) or not 0 <= start < n_frames:
         raise ValueError(f"start must be a frame index (an integer) in [0, {n_frames - 1}], got {start!r}")
     return int(start)
