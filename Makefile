@@ -28,6 +28,7 @@ bench: setup
 	$(PY) benchmarks/matching.py
 	$(PY) benchmarks/real.py
 	$(PY) benchmarks/label_levels.py
+	$(PY) benchmarks/crowd_contacts.py
 	$(PY) benchmarks/drawings.py
 	$(PY) benchmarks/scale.py --scale 0.5 2 3 --invert --slope --vignette --dim
 	$(PY) benchmarks/noise.py

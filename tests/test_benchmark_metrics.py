@@ -24,7 +24,7 @@ def monkeypatch_module():
     yield mp
     mp.undo()
     for name in ("real", "real_data", "segmentation", "_common", "noise", "scale", "membranes", "fields", "tracking",
-                 "label_levels"):
+                 "label_levels", "crowd_contacts"):
         sys.modules.pop(name, None)
 
 
@@ -377,3 +377,29 @@ def test_a_border_on_a_blurred_disk_lies_half_way_up_its_ramp_and_lower_outside(
     narrower[disk((60, 60), 23)] = True
     assert label_levels.border_level(image, wider, obj_level, background) < at_half - 0.15
     assert label_levels.border_level(image, narrower, obj_level, background) > at_half + 0.15
+
+
+@pytest.fixture(scope="module")
+def crowd_contacts(monkeypatch_module):
+    monkeypatch_module.syspath_prepend(str(BENCHMARKS))
+    import crowd_contacts
+
+    return crowd_contacts
+
+
+@pytest.mark.parametrize("case, dip, step", [("alike", 0.0, 0.0), ("dark line", 4.0, 0.0), ("brighter", 0.0, 6.0),
+                                             ("overlapping", -3.0, 0.0)])
+def test_a_contact_shows_its_dip_and_step_in_noise_sigmas(crowd_contacts, case, dip, step):
+    """Two nuclei side by side, their labels meeting along a column: the
+    contact's dip and the nuclei's step, in units of the noise, as made (a
+    step's contact straddles both levels: half the step above the dimmer)."""
+    a, b = np.zeros((20, 30), bool), np.zeros((20, 30), bool)
+    a[5:15, 5:15], b[5:15, 15:25] = True, True
+    image = np.where(a, 1.0, 0.0) + np.where(b, 1.0 + 0.1 * step, 0.0)
+    contact = np.zeros_like(a)
+    contact[5:15, 14:16] = True
+    image[contact] -= 0.1 * dip
+    found = crowd_contacts.contact_contrasts(image, a, b, noise=0.1)
+    np.testing.assert_allclose(found, (dip - 0.5 * step, step), atol=1e-9)
+    assert crowd_contacts.contact_contrasts(image, a, np.roll(b, 3, axis=1), noise=0.1) is None
+
