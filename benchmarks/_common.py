@@ -63,6 +63,13 @@ def write_section(name: str, lines, heading: str, doc: str = "benchmarks.md") ->
     return doc
 
 
+def write_section_with_figure(name: str, lines, heading: str, draw, image: str, alt: str) -> Path:
+    """:func:`write_section` of ``lines`` and, under them, the figure that
+    ``draw(path)`` makes at ``docs/images/<image>`` (``alt``: its text)."""
+    draw(Path(__file__).resolve().parents[1] / "docs" / "images" / image)
+    return write_section(name, [*lines, "", f"![{alt}](images/{image})"], heading)
+
+
 def normal_velocity_errors(movie, result, k: int = 0) -> np.ndarray:
     """|tracked - true| normal velocity (px/frame) of every node of object ``k`` of a tracking
     ``result`` of a synthetic ``movie`` (``napari_physeg.data.deforming_cell``), each node

@@ -40,7 +40,7 @@ from scipy import ndimage as ndi  # noqa: E402
 from skimage.draw import polygon2mask  # noqa: E402
 
 import real_data  # noqa: E402
-from _common import machine, report, write_section  # noqa: E402
+from _common import machine, report, write_section_with_figure  # noqa: E402
 from napari_physeg.core import segment  # noqa: E402
 from napari_physeg.core.features import _noise_sigma  # noqa: E402
 
@@ -176,11 +176,10 @@ def main(argv=None):
     for line in table(rows, n_below):
         out(line)
     if args.write:
-        images = Path(__file__).resolve().parents[1] / "docs" / "images"
-        figure(rows, images / "real_crowd_contacts.png")
-        out()
-        out("![touching nuclei parted where the image shows neither a dip nor a step](images/real_crowd_contacts.png)")
-        print(f"wrote {write_section('crowd_contacts', lines, 'Where a crowd truth parts touching nuclei')}")
+        doc = write_section_with_figure("crowd_contacts", lines, "Where a crowd truth parts touching nuclei",
+                                        lambda path: figure(rows, path), "real_crowd_contacts.png",
+                                        "touching nuclei parted where the image shows neither a dip nor a step")
+        print(f"wrote {doc}")
 
 
 if __name__ == "__main__":

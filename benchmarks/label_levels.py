@@ -32,7 +32,6 @@ from __future__ import annotations
 import argparse
 import os
 import warnings
-from pathlib import Path
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
@@ -42,7 +41,7 @@ import numpy as np  # noqa: E402
 from skimage.draw import polygon2mask  # noqa: E402
 
 import real_data  # noqa: E402
-from _common import machine, report, write_section  # noqa: E402
+from _common import machine, report, write_section_with_figure  # noqa: E402
 from napari_physeg.core import segment  # noqa: E402
 
 _RIM = np.ones((3, 3), np.uint8)
@@ -141,11 +140,10 @@ def main(argv=None):
     for line in table(results):
         out(line)
     if args.write:
-        images = Path(__file__).resolve().parents[1] / "docs" / "images"
-        figure(results, images / "real_label_levels.png")
-        out()
-        out("![border levels per group](images/real_label_levels.png)")
-        print(f"wrote {write_section('label_levels', lines, 'Where the truths put the border')}")
+        doc = write_section_with_figure("label_levels", lines, "Where the truths put the border",
+                                        lambda path: figure(results, path), "real_label_levels.png",
+                                        "border levels per group")
+        print(f"wrote {doc}")
 
 
 if __name__ == "__main__":
