@@ -934,13 +934,14 @@ def _link_lost(run: _Run, image, shared, owner, t: int, step: int) -> None:
     never seen again); a far look by the object's looks alone matched
     neighbours, and a dividing cell's two daughters together.
     """
+    held_before = [c[t - step] for c in run.contours if c[t - step] is not None]  # (run.before's objects)
     bids = []
     for k in range(len(run.inits)):
         last, history = _history(run, k, t, step) if run.status[k][t] == LOST else (None, [])
         if last is None:
             continue
-        found = _unclaimed_blob(shared.intensity, owner, history[-1], run.seen[k].polarity,
-                                _there_before(run, history[-1], t - step))
+        found = _unclaimed_blob(shared.intensity, owner, history[-1], run.seen[k].polarity, run.before,
+                                [history[-1], *held_before])
         if found is not None:
             bids.append((found[0], k, found[1], last == t - step and t not in run.seen[k].parted))
     granted = []
@@ -958,42 +959,40 @@ def _link_lost(run: _Run, image, shared, owner, t: int, step: int) -> None:
             run.contours[k][t], run.status[k][t], run.seen[k] = kept
 
 
-def _there_before(run: _Run, last: np.ndarray, t: int):
-    """A function of a window (a pair of slices) that tells which of its
-    pixels were object-like on frame ``t`` (``run.before``; at the polarity
-    the caller gives) and held by no object's contour there, nor by ``last``
-    (a lost object's own): None if that frame is not known."""
-    if run.before is None:
-        return None
-
-    def unclaimed_then(box, sign: float) -> np.ndarray:
-        window = run.before[box]
-        like = sign * (window - threshold_otsu(window)) > 0 if np.ptp(window) > 0 else np.zeros(window.shape, bool)
-        corner, far = np.array([box[0].start, box[1].start]), np.array([box[0].stop, box[1].stop])
-        for contour in [last] + [c[t] for c in run.contours if c[t] is not None]:
-            if np.all(contour.max(0) >= corner) and np.all(contour.min(0) < far):  # (most lie elsewhere)
-                like &= ~_fill(contour, window.shape, corner)
-        return like
-
-    return unclaimed_then
+def _object_like(window: np.ndarray, sign: float) -> np.ndarray:
+    """The pixels of ``window`` beyond its Otsu level on the object's side
+    (``sign``: +1 bright objects, -1 dark ones); none in a flat window."""
+    if np.ptp(window) <= 0:
+        return np.zeros(window.shape, bool)
+    return sign * (window - threshold_otsu(window)) > 0
 
 
-def _unclaimed_blob(intensity: np.ndarray, owner: np.ndarray, last: np.ndarray, polarity: str, there_before=None):
+def _held(contours, box) -> np.ndarray:
+    """Which pixels of the window ``box`` (a pair of slices) lie inside any of ``contours``."""
+    corner, far = np.array([box[0].start, box[1].start]), np.array([box[0].stop, box[1].stop])
+    shape = (box[0].stop - box[0].start, box[1].stop - box[1].start)
+    held = np.zeros(shape, bool)
+    for contour in contours:
+        if np.all(contour.max(0) >= corner) and np.all(contour.min(0) < far):  # (most lie elsewhere)
+            held |= _fill(contour, shape, corner)
+    return held
+
+
+def _unclaimed_blob(intensity: np.ndarray, owner: np.ndarray, last: np.ndarray, polarity: str,
+                    before: np.ndarray | None = None, held_before=()):
     """The outline of the blob of object-like pixels (beyond the Otsu level
     of the neighbourhood, at the object's ``polarity``) that no object owns,
     whose centroid lies within LINK_REACH radii of ``last``'s, whose area is
-    within MAX_AREA_CHANGE of ``last``'s, that was not there before (see
-    THERE_BEFORE_SHARE and _there_before), and that is nearest and likest in
-    area (the distance in radii plus the log of the areas' ratio), with that
-    cost; None if there is none."""
+    within MAX_AREA_CHANGE of ``last``'s, that was not there on the frame
+    ``before`` (object-like there and inside none of ``held_before``, the
+    contours on it and the lost object's own, along THERE_BEFORE_SHARE of its
+    pixels), and that is nearest and likest in area (the distance in radii
+    plus the log of the areas' ratio), with that cost; None if there is none."""
     radius, centre, area = _radius(last), area_centroid(last), abs(signed_area(last))
     reach = LINK_REACH * radius
     box = bounding_window(np.array([centre - reach, centre + reach]), intensity.shape, radius)
-    window = intensity[box]
-    if np.ptp(window) <= 0:
-        return None
     sign = 1.0 if polarity == "bright" else -1.0
-    like = (sign * (window - threshold_otsu(window)) > 0) & (owner[box] < 0)
+    like = _object_like(intensity[box], sign) & (owner[box] < 0)
     labels, n = ndi.label(like)
     if n == 0:
         return None
@@ -1003,8 +1002,9 @@ def _unclaimed_blob(intensity: np.ndarray, owner: np.ndarray, last: np.ndarray, 
     distance = np.hypot(*(centroids - centre).T)
     cost = distance / radius + np.abs(np.log(np.maximum(sizes, 1) / area))
     cost[(distance > reach) | (sizes < area / MAX_AREA_CHANGE) | (sizes > MAX_AREA_CHANGE * area)] = np.inf
-    if there_before is not None and np.isfinite(cost).any():
-        cost[np.asarray(ndi.mean(there_before(box, sign), labels, index)) >= THERE_BEFORE_SHARE] = np.inf
+    if before is not None and np.isfinite(cost).any():
+        there_before = _object_like(before[box], sign) & ~_held(held_before, box)
+        cost[np.asarray(ndi.mean(there_before, labels, index)) >= THERE_BEFORE_SHARE] = np.inf
     best = int(np.argmin(cost))
     if not np.isfinite(cost[best]):
         return None
