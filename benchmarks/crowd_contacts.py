@@ -62,10 +62,10 @@ def contact_contrasts(smoothed: np.ndarray, a: np.ndarray, b: np.ndarray, noise:
     return (min(level_a, level_b) - float(np.median(smoothed[contact]))) / noise, abs(level_a - level_b) / noise
 
 
-def taken_neighbour(contour: np.ndarray, labels: np.ndarray, own: int, area: int) -> int | None:
-    """The label other than ``own`` that most of ``contour``'s pixels beyond its own fall on, if
-    they hold at least TAKEN_SHARE of ``area``; else None."""
-    inside = labels[polygon2mask(labels.shape, contour)]
+def taken_neighbour(found: np.ndarray, labels: np.ndarray, own: int, area: int) -> int | None:
+    """The label other than ``own`` that most of the pixels of the region ``found`` beyond its
+    own fall on, if they hold at least TAKEN_SHARE of ``area``; else None."""
+    inside = labels[found]
     others = inside[(inside != own) & (inside > 0)]
     return int(np.bincount(others).argmax()) if others.size >= TAKEN_SHARE * area else None
 
@@ -101,7 +101,7 @@ def measure(groups, below: float) -> tuple[list[dict], int]:
                 looks[key] = ndi.gaussian_filter(obj.image, 1.0), _noise_sigma(obj.image)
             smoothed, noise = looks[key]
             own = int(np.bincount(labels[obj.mask]).argmax())
-            other = taken_neighbour(contour, labels, own, int(obj.mask.sum()))
+            other = taken_neighbour(found, labels, own, int(obj.mask.sum()))
             contrasts = None if other is None else contact_contrasts(smoothed, labels == own, labels == other, noise)
             if contrasts is not None:
                 rows.append(dict(name=name, iou=iou, dip=contrasts[0], step=contrasts[1], contour=contour,
