@@ -142,18 +142,19 @@ def test_sample_hand_end_to_end(viewer_widget, wait_done, errors, monkeypatch, r
     assert not widget.is_running and widget._run_btn.enabled and not widget._cancel_btn.enabled
 
 
-def _coin_labels():
-    """scikit-image's gallery segmentation of its coins: a watershed of the
-    Sobel image from markers below 30 and above 150, holes filled."""
-    from scipy import ndimage as ndi
-    from skimage import data as skdata, filters, measure, segmentation
+def _coin_labels(monkeypatch):
+    """The real-image benchmark's truth of the coins (scikit-image's gallery segmentation)."""
+    import sys
+    from pathlib import Path
 
-    image = skdata.coins()
-    markers = np.where(image < 30, 1, 0) + np.where(image > 150, 2, 0)
-    return measure.label(ndi.binary_fill_holes(segmentation.watershed(filters.sobel(image), markers) == 2))
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    monkeypatch.delitem(sys.modules, "real_data", raising=False)
+    import real_data
+
+    return real_data.coins_truth()
 
 
-def test_sample_coins_end_to_end(viewer_widget, wait_done, errors):
+def test_sample_coins_end_to_end(viewer_widget, wait_done, errors, monkeypatch):
     """The real photograph of the samples: each of the 24 rough circles,
     some crossing a neighbour, comes to rest on its own coin."""
     viewer, widget = viewer_widget
@@ -166,7 +167,7 @@ def test_sample_coins_end_to_end(viewer_widget, wait_done, errors):
     assert errors == [] and widget.last_outcome.ok
     (out,) = output_layers(viewer)
     assert len(out.data) == 24 and out.features["converged"].all()
-    labels = _coin_labels()
+    labels = _coin_labels(monkeypatch)
     for contour in out.data:
         row, col = np.round(contour.mean(0)).astype(int)
         assert labels[row, col] > 0 and iou(contour, labels == labels[row, col]) >= 0.9
