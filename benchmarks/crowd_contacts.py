@@ -71,12 +71,13 @@ def taken_neighbour(found: np.ndarray, labels: np.ndarray, own: int, area: int) 
 
 
 def _labelled_images(group: str) -> dict:
-    """Per image of ``group`` (its objects' names up to the last part), the labels of its
-    objects (1, 2, ... in their order)."""
+    """Per image of ``group`` (see ``real_data.Obj.image_name``), the labels of its objects (1,
+    2, ... in their order)."""
     labels = {}
-    for obj in real_data.GROUPS[group]():
-        image_labels = labels.setdefault(obj.name.rpartition("/")[0], np.zeros(obj.image.shape, np.int32))
-        image_labels[obj.mask] = image_labels.max() + 1
+    for name, objects in real_data.objects_by_image(group).items():
+        labels[name] = np.zeros(objects[0].image.shape, np.int32)
+        for obj in objects:
+            labels[name][obj.mask] = labels[name].max() + 1
     return labels
 
 
@@ -95,7 +96,7 @@ def measure(groups, below: float) -> tuple[list[dict], int]:
             if iou >= below:
                 continue
             n_below += 1
-            key = obj.name.rpartition("/")[0]
+            key = obj.image_name
             labels = labelled[key]
             if key not in looks:
                 looks[key] = ndi.gaussian_filter(obj.image, 1.0), _noise_sigma(obj.image)

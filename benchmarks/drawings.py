@@ -142,11 +142,8 @@ GROUND_RADII = (8, 14, 24)
 def ground_circles(groups=GROUND_GROUPS):
     """(image name, image, circle) for every circle on the ground (see the module's docstring)."""
     for group in groups:
-        images = {}
-        for obj in real_data.GROUPS[group]():
-            name = "/".join(filter(None, (group, obj.name.rpartition("/")[0])))
-            images.setdefault(name, [obj.image, np.zeros(obj.image.shape, bool)])[1] |= obj.mask
-        for name, (image, labelled) in images.items():
+        for name, objects in real_data.objects_by_image(group).items():
+            image, labelled = objects[0].image, np.any([obj.mask for obj in objects], axis=0)
             rng = np.random.default_rng(zlib.crc32(name.encode()))
             free = ndi.distance_transform_edt(~labelled)
             for radius in GROUND_RADII:

@@ -175,6 +175,19 @@ class Obj:
         """Equivalent radius: that of the disc of the same area."""
         return float(np.sqrt(self.mask.sum() / np.pi))
 
+    @property
+    def image_name(self) -> str:
+        """The image it lies on: its group and its name but the last part ("dsb", "nuclei/z26")."""
+        return "/".join(filter(None, (self.group, self.name.rpartition("/")[0])))
+
+
+def objects_by_image(group: str) -> dict[str, list[Obj]]:
+    """``group``'s objects by the image they lie on (see ``Obj.image_name``), in their order."""
+    images = {}
+    for obj in GROUPS[group]():
+        images.setdefault(obj.image_name, []).append(obj)
+    return images
+
 
 def package_files(package: str, install: str, *folders: str) -> Path:
     """A folder of an installed package, found without importing it (the image wheels are
