@@ -608,6 +608,19 @@ def test_a_saturated_neighbour_in_broad_contact_is_left_out(dsb, label, drawing)
     assert iou > 0.7, iou
 
 
+def test_a_click_by_a_saturated_neighbour_does_not_take_the_rim_around_it(dsb):
+    """A click (radius 3.5, as benchmarks/real.py draws inside) on the dim
+    nucleus 156, beside the saturated one it touches. The saturated nucleus'
+    blurred rim passes through the dim nucleus' level all around it, and the
+    dim nucleus' core reached around the neighbour along that rim: the
+    contour outlined the saturated nucleus and its rim (IoU 0.28)."""
+    image, labels = dsb
+    truth = ndi.binary_fill_holes(labels == 156)
+    res, iou = segmented(image, truth, circle(np.array([338.0, 92.0]), 3.5))
+    assert polygon2mask(truth.shape, res.contour).sum() < 1.5 * truth.sum()
+    assert iou > 0.6, iou
+
+
 @pytest.mark.parametrize("label, drawing, least", [(91, "click", 0.7), (113, "box 1.3x", 0.65)])
 def test_a_brighter_neighbour_apart_from_the_nucleus_is_left_out(dsb, label, drawing, least):
     """A dim nucleus touching a brighter one along a broad contact, its

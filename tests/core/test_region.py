@@ -666,3 +666,27 @@ def test_valley_hessian_is_scikit_images(seed):
     _, valley = _valleys(groove)
     assert valley[:, 28:33].all(axis=1)[10:40].all()
     assert not valley[:, :20].any() and not valley[:, 41:].any()
+
+
+@pytest.mark.parametrize("dim_level, radius", [(0.4, 9), (0.45, 7), (0.4, 7)])
+def test_a_click_on_a_small_dim_disk_does_not_take_the_rim_around_a_saturated_one(dim_level, radius):
+    """A click inside a small dim disk touching a saturated disk twice its
+    size. The saturated disk's blurred rim passes through the dim disk's
+    level all around it, and the dim disk's core, one blob with the rim,
+    reached around the neighbour along it: the region was a band around the
+    saturated disk (IoU 0.14-0.55 with the dim one). The band is thinner
+    than the dim disk's body and lies beyond its reach; it is left out."""
+    shape = (96, 96)
+    bright = disk(shape, (48, 38), 14)
+    dim = disk(shape, (48, 38 + 14 + radius), radius) & ~bright
+    image = ndi.gaussian_filter(np.where(bright, 1.0, np.where(dim, dim_level, 0.1)), 2.0)
+    image = image + 0.02 * np.random.default_rng(0).standard_normal(shape)
+    drawing = circle((48, 38 + 14 + radius), 3)
+    model = drawing_levels(image, drawing)
+    region = object_region(objectness(image, model), drawing, model, stronger=level_beyond_object(image, model))
+    assert model.polarity == 1 and not model.drawn_around
+    assert (region & dim).sum() > 0.8 * dim.sum()
+    # Nothing on the saturated disk's far half, around it; near the contact,
+    # its rim within the dim disk's depth of the body may stay.
+    assert not region[:, : 38 + 1].any()
+    assert (region & bright).sum() < 0.25 * region.sum()

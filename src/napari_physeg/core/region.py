@@ -1782,14 +1782,37 @@ def _split_at_cores(depth, like, blobs, seed, drawn, reach, side_distance=None, 
     mine = _flags(ours, n).take(cores)
     own = _flags(blobs[mine], n_blobs).take(blobs)
     others = own & (cores > 0) & ~mine
-    if stronger is not None:
-        others |= own & _stronger_neighbours(stronger, like, depth, seed)
+    strong = None if stronger is None else own & _stronger_neighbours(stronger, like, depth, seed)
+    if strong is not None:
+        others |= strong
     if not others.any():
         return own  # no neighbour touches it
     markers = np.where(cores > 0, 2, 0).astype(np.int32)
     markers[mine] = 1
     markers[others] = 2
-    return segmentation.watershed(-depth, markers, mask=like) == 1
+    region = segmentation.watershed(-depth, markers, mask=like) == 1
+    return region if strong is None or not strong.any() else _without_thin_arms(region, seed)
+
+
+def _without_thin_arms(region: np.ndarray, seed: np.ndarray) -> np.ndarray:
+    """``region`` without the arms thinner than its body that lie beyond
+    the body's reach: its pixels as deep as half the depth under the seed,
+    where the seed marks them, and what lies within that depth of them
+    inside ``region``. A stronger neighbour's rim passes through the
+    object's level all around it: the object's flood took that rim, a band
+    around the neighbour."""
+    depth = _depth(region)
+    half = 0.5 * float(depth[seed].max())
+    pieces, n = _label(depth >= half)
+    body = _flags(pieces[seed], n).take(pieces)
+    if not body.any():
+        return region
+    # Steps of a 3 x 3 square: a pixel's chessboard distance is at most its
+    # Euclidean one, so each pixel within that depth of the body is reached.
+    grown, r8, square = body.view(np.uint8), region.view(np.uint8), np.ones((3, 3), np.uint8)
+    for _ in range(int(np.ceil(half)) + 1):
+        grown = cv2.dilate(grown, square) & r8
+    return grown.view(bool)
 
 
 #: A blob of a level beyond the object's is a neighbour when it is at least
@@ -1817,13 +1840,23 @@ def _stronger_neighbours(excess, like, depth, seed) -> np.ndarray:
     return strong | _apart_neighbours(excess, like, depth, seed, smallest, strong)
 
 
+def _grown_halfway(blobs, excess, like, level, seed) -> np.ndarray:
+    """``blobs`` (found ``level`` beyond the object's level) grown down to
+    half that level, where the border between the two levels lies, but not
+    onto the seed: a marker on a neighbour's bright core alone let the
+    object's flood take its rim."""
+    halfway, _ = _label((excess >= 0.5 * level) & like)
+    reach = np.unique(halfway[blobs])
+    reach = reach[(reach > 0) & ~np.isin(reach, halfway[seed])]
+    return blobs | np.isin(halfway, reach)
+
+
 def _apart_neighbours(excess, like, depth, seed, smallest, strong) -> np.ndarray:
     """The blobs APART_LEVEL beyond the object's level, of at least
     ``smallest`` px, untouched by the seed and holding none of the ``strong``
     neighbours, that lie apart from the object (see APART_LEVEL); grown down
-    to half that level, toward where the border between two levels lies (a
-    marker on their bright core alone let the object's flood take their
-    rim). Only when the seed lies on a plateau at the object's level."""
+    to half that level (see _grown_halfway). Only when the seed lies on a
+    plateau at the object's level."""
     beyond = (excess >= APART_LEVEL) & like
     if np.count_nonzero(beyond) < smallest:  # no blob that large: nothing to label
         return np.zeros(like.shape, bool)
@@ -1840,10 +1873,7 @@ def _apart_neighbours(excess, like, depth, seed, smallest, strong) -> np.ndarray
     area = np.maximum(np.bincount(pieces.ravel(), minlength=n + 1), 1)
     in_our_basin = np.bincount(pieces[groups == ours], minlength=n + 1) / area
     apart = large & (convex | (in_our_basin < 0.5))
-    halfway, _ = _label((excess >= 0.5 * APART_LEVEL) & like)
-    reach = np.unique(halfway[apart[pieces]])
-    reach = reach[(reach > 0) & ~np.isin(reach, halfway[seed])]
-    return apart[pieces] | np.isin(halfway, reach)
+    return _grown_halfway(apart[pieces], excess, like, APART_LEVEL, seed)
 
 
 def _on_a_plateau(excess, like, depth, seed) -> bool:
