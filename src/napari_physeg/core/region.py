@@ -1446,12 +1446,13 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
     seed_blob = _flags(blobs[0][seed], blobs[1]).take(blobs[0])  # the blob the seed lies in, which two steps read
     if model.drawn_around:
         region = _split_at_cores(depth, like, blobs, seed, drawn, reach, stronger=stronger,
-                                 centred=model.user_drawing)
+                                 user_drawing=model.user_drawing)
         region &= ~_crossed_neighbours(depth, like, seed_blob, seed, drawn)
     else:
         # No drawing line bounds it: neighbours touching at a neck narrow
         # for their own size are parted too (small crowded nuclei).
-        region = (_split_at_cores(depth, like, blobs, seed, None, reach, _side_distance(shape, image_sides), stronger)
+        region = (_split_at_cores(depth, like, blobs, seed, None, reach, _side_distance(shape, image_sides), stronger,
+                                  model.user_drawing)
                   & _marked_basins(depth, like, seed))
     if stronger is not None:
         region = _without_valley_neighbours(region, stronger, like, seed_blob, depth, seed,
@@ -1741,14 +1742,16 @@ def _side_distance(shape, image_sides) -> np.ndarray:
 
 
 def _split_at_cores(depth, like, blobs, seed, drawn, reach, side_distance=None, stronger=None,
-                    centred=False) -> np.ndarray:
+                    user_drawing=False) -> np.ndarray:
     """The blob of ``like`` the seed marks, split from neighbours at their
     necks by a watershed of the depth from the blobs' cores (see _cores). The
     cores lying mostly inside ``drawn`` (the drawing around the object, or
-    None) are the object's lobes (behind a neck, if the drawing is
-    ``centred`` on them too: see _drawn_around_too). Blobs of a level beyond
-    the object's (``stronger``, see _stronger_neighbours) seed neighbours too.
-    ``blobs``: the labels of ``like`` and their number (see _label)."""
+    None) are the object's lobes (behind a neck, if the drawing is a
+    person's, centred on them too: see _drawn_around_too). Blobs of a level
+    beyond the object's (``stronger``, see _stronger_neighbours) seed
+    neighbours too, and around a person's drawing their rims are no arms of
+    the object (see _without_thin_arms). ``blobs``: the labels of ``like``
+    and their number (see _label)."""
     cores, n = _cores(depth, seed, reach, side_distance)
     ours = np.unique(cores[seed])
     ours = ours[ours > 0]
@@ -1772,7 +1775,7 @@ def _split_at_cores(depth, like, blobs, seed, drawn, reach, side_distance=None, 
             lobes = lobes[~_flags(ours, n)[lobes]]
             joined = _across_no_neck(lobes, cores, ours, depth, like)
             behind_a_neck = np.setdiff1d(lobes, joined)
-            if centred and behind_a_neck.size:
+            if user_drawing and behind_a_neck.size:
                 joined = np.union1d(joined, _drawn_around_too(behind_a_neck, cores, np.union1d(ours, joined), depth,
                                                               like, drawn))
             lobes = joined
@@ -1791,7 +1794,14 @@ def _split_at_cores(depth, like, blobs, seed, drawn, reach, side_distance=None, 
     markers[mine] = 1
     markers[others] = 2
     region = segmentation.watershed(-depth, markers, mask=like) == 1
-    return region if strong is None or not strong.any() else _without_thin_arms(region, seed)
+    # A program's drawing (a tracked frame's margin about the last contour)
+    # bounds the object closely: a rim beyond it is cut anyway. Read as lying
+    # inside an object at the ground's level, arms cut between the nuclei
+    # changed how the ground's reading gave way to the nucleus', and a HeLa
+    # nucleus was lost for 19 frames.
+    if not user_drawing or strong is None or not strong.any():
+        return region
+    return _without_thin_arms(region, seed)
 
 
 def _without_thin_arms(region: np.ndarray, seed: np.ndarray) -> np.ndarray:
