@@ -1805,12 +1805,13 @@ def _split_at_cores(depth, like, blobs, seed, drawn, reach, side_distance=None, 
 
 
 def _without_thin_arms(region: np.ndarray, seed: np.ndarray) -> np.ndarray:
-    """``region`` without the arms thinner than its body that lie beyond
-    the body's reach: its pixels as deep as half the depth under the seed,
-    where the seed marks them, and what lies within that depth of them
-    inside ``region``. A stronger neighbour's rim passes through the
-    object's level all around it: the object's flood took that rim, a band
-    around the neighbour."""
+    """``region`` without the arms that lie beyond its body's reach. The
+    body: the pieces of ``region`` at least half as deep as the deepest
+    pixel under ``seed``, that the seed marks; its reach: the pixels of
+    ``region`` within that depth of it. A stronger neighbour's blurred rim
+    passes through the object's level all around the neighbour: one blob
+    with the object, it is such an arm (the object's flood took it, a band
+    around the neighbour)."""
     depth = _depth(region)
     half = 0.5 * float(depth[seed].max())
     pieces, n = _label(depth >= half)
