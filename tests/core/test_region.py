@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
+from napari_physeg.core.contour import polygon_mask
 from napari_physeg.core.region import (drawing_levels, level_beyond_object, object_region, objectness,
                                        traced_border_level)
 
@@ -690,3 +691,31 @@ def test_a_click_on_a_small_dim_disk_does_not_take_the_rim_around_a_saturated_on
     # its rim within the dim disk's depth of the body may stay.
     assert not region[:, : 38 + 1].any()
     assert (region & bright).sum() < 0.25 * region.sum()
+
+
+@pytest.mark.parametrize("dim_level, dim_radius, bright_radius, angle",
+                         [(0.44, 7, 12, 0.0), (0.44, 7, 16, 0.0), (0.44, 7, 12, 2.0), (0.4, 9, 14, 1.0)])
+def test_a_click_on_a_small_dim_disk_beside_a_less_saturated_one_does_not_take_it(dim_level, dim_radius,
+                                                                                bright_radius, angle):
+    """A click (radius 0.36 of the disk's) inside a small dim disk touching a
+    larger bright one only 1.3-1.6 times its contrast beyond its level (not
+    twice: no stronger neighbour), in any direction. That neighbour lies
+    apart from the disk only when the click lies on a plateau at the disk's
+    level, and the plateau was measured against the depth of the whole blob,
+    the larger neighbour's: a small disk was never one, and its segment
+    outlined the neighbour with it (found by fuzzing, session 61). A plateau
+    as deep as a disk of its own area is one; a rim around a bright nucleus,
+    a band, is not."""
+    from napari_physeg.core import segment
+
+    rr, cc = np.mgrid[:128, :128]
+    axis = np.array([np.sin(angle), np.cos(angle)])
+    dim_centre = np.array([64.0, 64.0]) + (bright_radius + dim_radius - 1) * axis
+    bright = disk((128, 128), (64, 64), bright_radius)
+    dim = disk((128, 128), dim_centre, dim_radius) & ~bright
+    image = ndi.gaussian_filter(np.where(bright, 1.0, np.where(dim, dim_level, 0.1)), 2.0)
+    image = image + 0.02 * np.random.default_rng(0).standard_normal(image.shape)
+    res = segment(image, circle(dim_centre, 0.36 * dim_radius, 32))
+    found = polygon_mask(res.contour, image.shape)
+    assert (found & bright).sum() < 0.1 * found.sum()
+    assert (found & dim).sum() > 0.6 * dim.sum()

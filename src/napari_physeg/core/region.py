@@ -1891,15 +1891,17 @@ def _on_a_plateau(excess, like, depth, seed) -> bool:
     """Whether the seed lies on a plateau at the object's level: the pixels
     of ``like`` less than half APART_LEVEL beyond it that the seed touches
     hold a disk STRONGER_CORE times as deep as the blob of ``like`` it lies
-    in. A click on the blurred rim of a bright nucleus reads the rim's level:
-    its nucleus is no neighbour."""
+    in, or as deep as a disk of its own area (a small dim nucleus beside a
+    large bright one is such a disk). A click on the blurred rim of a bright
+    nucleus reads the rim's level: its nucleus is no neighbour, and the rim
+    is a band, far shallower than a disk of its area."""
     blobs, _ = _label(like)
     body = float(depth[np.isin(blobs, blobs[seed])].max())
     low, _ = _label(like & (excess < 0.5 * APART_LEVEL))
     touched = np.unique(low[seed])
     plateau = np.isin(low, touched[touched > 0])
-    plateau_depth = _depth(plateau)
-    return bool(plateau_depth.max() >= STRONGER_CORE * body)
+    deepest = float(_depth(plateau).max())
+    return deepest >= STRONGER_CORE * min(body, np.sqrt(np.count_nonzero(plateau) / np.pi))
 
 
 def _large_blobs(pieces, n, seed, smallest) -> np.ndarray:
