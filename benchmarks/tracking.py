@@ -302,13 +302,12 @@ def drift_over_seeds(out, seeds=range(8)) -> None:
         tr = track(movie.frames, movie.init)
         ours.append(float(np.max(_drift(movie, tr.contours[0], tr.origin[0]))))
         alone.append(float(np.max(_bound_drifts(movie, len(tr.contours[0][0]))[0][0])))
-    ours, alone = np.array(ours), np.array(alone)
-    above = [str(s) for s, o in zip(seeds, ours) if o > 1]
+    above = [i for i, v in enumerate(ours) if v > 1]
     out(f"- worst drift (node spacings) on the deforming cell made with seeds {seeds[0]}-{seeds[-1]} (the table's is "
         f"seed 0): ours {', '.join(f'{v:.2f}' for v in ours)}; the true outlines alone, as track() follows them, "
-        f"{', '.join(f'{v:.2f}' for v in alone)}. Ours is at most 1 on {int(np.sum(ours <= 1))} of {len(ours)}"
-        + (f"; above 1 on seed{'s' if len(above) > 1 else ''} {', '.join(above)}, where the true outlines alone give "
-           f"{', '.join(f'{alone[list(seeds).index(int(s))]:.2f}' for s in above)}" if above else ""))
+        f"{', '.join(f'{v:.2f}' for v in alone)}. Ours is at most 1 on {len(ours) - len(above)} of {len(ours)}"
+        + (f"; above 1 on seed{'s' if len(above) > 1 else ''} {', '.join(str(seeds[i]) for i in above)}, where the "
+           f"true outlines alone give {', '.join(f'{alone[i]:.2f}' for i in above)}" if above else ""))
 
 
 def synthetic_scores_masks(movie, masks):

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
+from napari_physeg.core import segment
 from napari_physeg.core.contour import polygon_mask
 from napari_physeg.core.region import (drawing_levels, level_beyond_object, object_region, objectness,
                                        traced_border_level)
@@ -257,14 +258,20 @@ def test_box_around_a_dim_object_with_a_far_brighter_neighbour_in_its_corner():
     assert overlap(region, dim) > 0.95 and not (region & bright).any()
 
 
+def dim_and_bright_disks(shape, dim_centre, dim_radius, dim_level, bright_centre, bright_radius, seed=0):
+    """A dim disk (at ``dim_level``, the background at 0.1) and a saturated one
+    (1.0) drawn over it, blurred (sigma 2 px) and noisy, as in a crowded
+    fluorescence field: the image, the dim disk's pixels, the bright one's."""
+    dim, bright = disk(shape, dim_centre, dim_radius), disk(shape, bright_centre, bright_radius)
+    image = ndi.gaussian_filter(np.where(bright, 1.0, np.where(dim, dim_level, 0.1)), 2.0)
+    return image + 0.02 * np.random.default_rng(seed).standard_normal(shape), dim & ~bright, bright
+
+
 def dim_disk_beside_a_saturated_one(gap, seed=0):
     """A dim disk (radius 14, a quarter of the contrast) and a saturated disk
     (radius 11) ``gap`` px from its centre, overlapping it: a broad contact,
-    no neck. Blurred (sigma 2 px) and noisy, as in a crowded fluorescence field."""
-    shape = (160, 160)
-    dim, bright = disk(shape, (80, 66), 14), disk(shape, (80, 66 + gap), 11)
-    image = ndi.gaussian_filter(np.where(bright, 1.0, np.where(dim, 0.35, 0.1)), 2.0)
-    return image + 0.02 * np.random.default_rng(seed).standard_normal(shape), dim & ~bright, bright
+    no neck."""
+    return dim_and_bright_disks((160, 160), (80, 66), 14, 0.35, (80, 66 + gap), 11, seed)
 
 
 @pytest.mark.parametrize("gap", [20, 22, 24])
@@ -677,11 +684,7 @@ def test_a_click_on_a_small_dim_disk_does_not_take_the_rim_around_a_saturated_on
     reached around the neighbour along it: the region was a band around the
     saturated disk (IoU 0.14-0.55 with the dim one). The band is thinner
     than the dim disk's body and lies beyond its reach; it is left out."""
-    shape = (96, 96)
-    bright = disk(shape, (48, 38), 14)
-    dim = disk(shape, (48, 38 + 14 + radius), radius) & ~bright
-    image = ndi.gaussian_filter(np.where(bright, 1.0, np.where(dim, dim_level, 0.1)), 2.0)
-    image = image + 0.02 * np.random.default_rng(0).standard_normal(shape)
+    image, dim, bright = dim_and_bright_disks((96, 96), (48, 38 + 14 + radius), radius, dim_level, (48, 38), 14)
     drawing = circle((48, 38 + 14 + radius), 3)
     model = drawing_levels(image, drawing)
     region = object_region(objectness(image, model), drawing, model, stronger=level_beyond_object(image, model))
@@ -706,15 +709,9 @@ def test_a_click_on_a_small_dim_disk_beside_a_less_saturated_one_does_not_take_i
     outlined the neighbour with it (found by fuzzing, session 61). A plateau
     as deep as a disk of its own area is one; a rim around a bright nucleus,
     a band, is not."""
-    from napari_physeg.core import segment
-
-    rr, cc = np.mgrid[:128, :128]
     axis = np.array([np.sin(angle), np.cos(angle)])
     dim_centre = np.array([64.0, 64.0]) + (bright_radius + dim_radius - 1) * axis
-    bright = disk((128, 128), (64, 64), bright_radius)
-    dim = disk((128, 128), dim_centre, dim_radius) & ~bright
-    image = ndi.gaussian_filter(np.where(bright, 1.0, np.where(dim, dim_level, 0.1)), 2.0)
-    image = image + 0.02 * np.random.default_rng(0).standard_normal(image.shape)
+    image, dim, bright = dim_and_bright_disks((128, 128), dim_centre, dim_radius, dim_level, (64, 64), bright_radius)
     res = segment(image, circle(dim_centre, 0.36 * dim_radius, 32))
     found = polygon_mask(res.contour, image.shape)
     assert (found & bright).sum() < 0.1 * found.sum()

@@ -6,7 +6,7 @@ import pytest
 from napari_physeg import data
 from napari_physeg.core._drain import drain
 from napari_physeg.core import LEFT, LOST, TRACKED, iter_track, match, track
-from napari_physeg.core.contour import polygon_mask, signed_area
+from napari_physeg.core.contour import outward_normals, polygon_mask, resample, signed_area
 from napari_physeg.core.tracking import curvature, node_origins
 
 
@@ -1068,8 +1068,6 @@ def test_a_real_nucleus_read_first_on_the_ground_is_still_tracked(hela_start):
     that parts a saturated neighbour's rim from a person's click) changed
     how it gave way, and the nucleus was lost from frame 1 on."""
     from skimage import measure
-
-    from napari_physeg.core.contour import outward_normals, resample
 
     frames, labels = hela_start
     nucleus = labels[0] == 43

@@ -1851,23 +1851,13 @@ def _stronger_neighbours(excess, like, depth, seed) -> np.ndarray:
     return strong | _apart_neighbours(excess, like, depth, seed, smallest, strong)
 
 
-def _grown_halfway(blobs, excess, like, level, seed) -> np.ndarray:
-    """``blobs`` (found ``level`` beyond the object's level) grown down to
-    half that level, where the border between the two levels lies, but not
-    onto the seed: a marker on a neighbour's bright core alone let the
-    object's flood take its rim."""
-    halfway, _ = _label((excess >= 0.5 * level) & like)
-    reach = np.unique(halfway[blobs])
-    reach = reach[(reach > 0) & ~np.isin(reach, halfway[seed])]
-    return blobs | np.isin(halfway, reach)
-
-
 def _apart_neighbours(excess, like, depth, seed, smallest, strong) -> np.ndarray:
     """The blobs APART_LEVEL beyond the object's level, of at least
     ``smallest`` px, untouched by the seed and holding none of the ``strong``
     neighbours, that lie apart from the object (see APART_LEVEL); grown down
-    to half that level (see _grown_halfway). Only when the seed lies on a
-    plateau at the object's level."""
+    to half that level, toward where the border between two levels lies (a
+    marker on their bright core alone let the object's flood take their
+    rim). Only when the seed lies on a plateau at the object's level."""
     beyond = (excess >= APART_LEVEL) & like
     if np.count_nonzero(beyond) < smallest:  # no blob that large: nothing to label
         return np.zeros(like.shape, bool)
@@ -1884,7 +1874,10 @@ def _apart_neighbours(excess, like, depth, seed, smallest, strong) -> np.ndarray
     area = np.maximum(np.bincount(pieces.ravel(), minlength=n + 1), 1)
     in_our_basin = np.bincount(pieces[groups == ours], minlength=n + 1) / area
     apart = large & (convex | (in_our_basin < 0.5))
-    return _grown_halfway(apart[pieces], excess, like, APART_LEVEL, seed)
+    halfway, _ = _label((excess >= 0.5 * APART_LEVEL) & like)
+    reach = np.unique(halfway[apart[pieces]])
+    reach = reach[(reach > 0) & ~np.isin(reach, halfway[seed])]
+    return apart[pieces] | np.isin(halfway, reach)
 
 
 def _on_a_plateau(excess, like, depth, seed) -> bool:
