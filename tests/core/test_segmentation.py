@@ -9,7 +9,7 @@ from skimage.draw import polygon2mask
 from napari_physeg import data
 from napari_physeg.core._drain import drain
 from napari_physeg.core import DivergenceError, iter_segment, segment
-from napari_physeg.core.contour import segment_lengths
+from napari_physeg.core.contour import segment_lengths, signed_area
 
 
 def iou(contour, mask):
@@ -720,6 +720,33 @@ def test_a_contour_that_spreads_over_the_whole_image_has_leaked(centre, radius):
     res = segment(image, np.column_stack([centre[0] + radius * np.sin(t), centre[1] + radius * np.cos(t)]))
     assert res.stop_reason == "leaked" and not res.converged
     assert np.allclose(res.contour.min(axis=0), -0.5) and np.allclose(res.contour.max(axis=0), [79.5, 89.5])
+
+
+#: A jagged star (37 vertices) drawn across the bottom of skimage's clock:
+#: over its lit rim, the dark band under it and the grey wall below.
+STAR_ON_THE_CLOCK = np.array([
+    [213.1, 216.7], [216.5, 218.9], [217.8, 214.5], [219.7, 213.5], [222.8, 213.7], [223.5, 211.7], [227.4, 211.5],
+    [226.7, 209.3], [232.1, 208.4], [228.1, 206.1], [227.8, 204.5], [225.4, 203.2], [226.4, 201.3], [223.9, 200.5],
+    [222.3, 199.4], [221.6, 197.5], [220.1, 195.5], [216.5, 197.2], [214.9, 191.3], [211.4, 193.3], [208.6, 194.5],
+    [208.2, 198.7], [205.1, 198.0], [198.2, 195.6], [201.5, 200.1], [204.2, 202.8], [191.9, 201.5], [199.2, 204.6],
+    [201.1, 206.1], [203.7, 207.0], [196.5, 210.1], [201.3, 210.5], [205.1, 210.3], [203.0, 213.9], [208.1, 211.5],
+    [209.3, 212.7], [210.2, 216.8]])
+
+
+def test_a_drawing_over_no_object_like_pixel_keeps_the_contour_near_it():
+    """Read as drawn around a faintly darker object (a contrast of three
+    noise floors) of which no pixel lies under the drawing, the star found
+    no region: unbounded, the contour followed the wall's faint mottling
+    across the image for 1000 steps. The drawing's limit still holds it."""
+    from skimage import data as skdata
+
+    from napari_physeg.core.region import hasty_margin
+
+    res = segment(skdata.clock().astype(float), STAR_ON_THE_CLOCK)
+    assert res.stop_reason != "max_steps" and res.steps < 300
+    margin = hasty_margin(abs(signed_area(STAR_ON_THE_CLOCK)))
+    assert np.all(res.contour >= STAR_ON_THE_CLOCK.min(0) - margin - 1.5)
+    assert np.all(res.contour <= STAR_ON_THE_CLOCK.max(0) + margin + 1.5)
 
 
 def test_a_contour_along_the_image_s_sides_leaked_only_if_the_drawing_did_not_reach_them():

@@ -1409,24 +1409,34 @@ def _within_hasty_margin(drawn: np.ndarray) -> np.ndarray:
     return within
 
 
+def drawing_limit(drawing: np.ndarray, shape, model: RegionModel, drawn: np.ndarray | None = None) -> np.ndarray:
+    """The pixels the object of ``drawing`` (read as ``model``) may take.
+
+    The object is about where the user drew it: nothing beyond the drawing
+    (and a margin for a hasty hand) when drawn around it, within a few times
+    the drawing when drawn inside it (its reach). Growth past that is a
+    leak. ``drawn``: the pixels the drawing encloses, if already filled.
+    """
+    if not model.drawn_around:
+        return _fill(_scaled(drawing, _INSIDE_LIMIT), shape)
+    drawn = _fill(drawing, shape) if drawn is None else drawn
+    # A line traced on the border was drawn with care, or is an earlier
+    # result: no margin beyond it, else each run from the last result took
+    # that much more of a look-alike neighbour it touches.
+    return drawn if model.border_level is not None else _within_hasty_margin(drawn)
+
+
 def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
                         image_sides, stronger=None) -> np.ndarray | None:
     """:func:`object_region` on a crop around the drawing."""
     shape = signed.shape
     drawn = _fill(drawing, shape)
-    # The object is about where the user drew it: nothing beyond the drawing
-    # (and a margin for a hasty hand) when drawn around it, within a few
-    # times the drawing when drawn inside it (its reach). Growth past that
-    # is a leak.
+    limit = drawing_limit(drawing, shape, model, drawn)
     if model.drawn_around:
-        # A line traced on the border was drawn with care, or is an earlier
-        # result: no margin beyond it, else each run from the last result
-        # took that much more of a look-alike neighbour it touches.
-        reach = limit = drawn if model.border_level is not None else _within_hasty_margin(drawn)
+        reach = limit
         marked = _middle(drawing, shape)
     else:
         reach = _fill(_scaled(drawing, _INSIDE_REACH), shape)
-        limit = _fill(_scaled(drawing, _INSIDE_LIMIT), shape)
         marked = drawn
     # Neighbours are split off whole (their cores lie beyond the drawing),
     # then the limit applies. Holes of dark texture would make false necks:

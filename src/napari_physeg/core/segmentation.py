@@ -33,7 +33,7 @@ from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .magnify import MagnifiedView, magnification
 from .materials import Material, get_material, suggested_stiffness
 from .region import (_INSIDE_LIMIT, RegionModel, _box_of, _disk, _fill, _least_contrast, _scaled, drawing_levels,
-                     level_beyond_object, object_region, objectness)
+                     drawing_limit, level_beyond_object, object_region, objectness)
 from .subpixel import level_along, polish
 from ._validation import signature_of, with_defaults
 
@@ -280,6 +280,13 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
     if avoid is not None:
         signed[avoid] = -1.0
     if region is None:
+        if model.is_visible:
+            # No object region under the drawing (no object-like pixel
+            # there): whatever looks like the object beyond the drawing's
+            # limit is not what was drawn (unbounded, a star drawn over the
+            # shadow under a clock followed the wall's faint mottling across
+            # the image for 1000 steps).
+            signed[~drawing_limit(drawing, signed.shape, model)] = -1.0
         return signed, edges, model.polarity
     if avoid is not None:
         region &= ~avoid
