@@ -554,3 +554,24 @@ def test_compute_features_rejects_non_finite(bad, match):
     image[3, 4] = bad
     with pytest.raises(ValueError, match=match):
         compute_features(image)
+
+
+@pytest.mark.parametrize("blur", [0.5, 1.0, 2.0])
+def test_spikes_are_taken_out_and_blurred_spots_kept(blur):
+    """A hot and a dead pixel (a camera's) are replaced by their neighbours'
+    median; the peak of a spot blurred by even half a pixel, which an optical
+    image cannot be sharper than, is kept, as is every other pixel."""
+    from napari_physeg.core.features import _without_spikes
+
+    rng = np.random.default_rng(1)
+    image = 100.0 + rng.normal(0.0, 2.0, (64, 64))
+    rr, cc = np.mgrid[:64, :64]
+    for centre in ((20.0, 20.0), (40.0, 40.5)):  # on a pixel, and between two
+        image += 400.0 * np.exp(-((rr - centre[0]) ** 2 + (cc - centre[1]) ** 2) / (2 * blur**2))
+    clean = image.copy()
+    image[10, 50], image[50, 10] = 60000.0, 0.0
+    out = _without_spikes(image)
+    changed = np.argwhere(out != image)
+    assert {tuple(p) for p in changed} == {(10, 50), (50, 10)}
+    assert abs(out[10, 50] - np.median(clean[9:12, 49:52])) < 10 and abs(out[50, 10] - 100.0) < 10
+    assert _without_spikes(clean) is clean

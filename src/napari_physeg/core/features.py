@@ -194,6 +194,56 @@ def _without_missing(image, *, name: str = "image") -> tuple[np.ndarray, np.ndar
     return filled.astype(np.float64), missing
 
 
+#: A pixel is a spike (a hot or dead pixel of the camera, a cosmic ray) when
+#: it lies beyond all 8 of its neighbours by more than SPIKE_RATIO times their
+#: own spread, or than that many times the spread of most pixels' neighbours
+#: (the median: the noise's, where the ground is flat; an 8-bit movie's dark
+#: ground holds single pixels one grey level off). An optical image is sampled
+#: finer than its blur: the peak of a spot blurred over even half a pixel
+#: (Gaussian sigma 0.5 px) rises above its nearest neighbours by 7.4 times
+#: their spread, and a wider spot by less.
+SPIKE_RATIO = 10.0
+
+
+def _without_spikes(image: np.ndarray) -> np.ndarray:
+    """``image`` with its single-pixel spikes (see SPIKE_RATIO) replaced by
+    the median of their 8 neighbours; ``image`` itself when it has none.
+
+    Three hot pixels within 15 px of a nucleus (50 times the image's
+    brightest) took a drawing's reading of its levels in 10 of 1128 real
+    runs, one read as a spot drawn around (IoU 0.84 -> 0.00): the drawing's
+    centre is read on few pixels, more so on a magnified view, where a hot
+    pixel becomes a blob.
+    """
+    if np.asarray(image).dtype.kind not in "biuf":  # not real numbers: refused, with a clear error, later
+        return image
+    values = np.asarray(image, dtype=np.float64)
+    if values.ndim != 2 or min(values.shape) < 3:
+        return image
+    # Found in single precision (OpenCV's morphology is 3 times faster on it;
+    # a spike stands out by far more than its rounding), mended in double.
+    single = values.astype(np.float32)
+    ring = np.ones((3, 3), np.uint8)
+    ring[1, 1] = 0
+    highest = cv2.dilate(single, ring, borderType=cv2.BORDER_REFLECT)
+    lowest = cv2.erode(single, ring, borderType=cv2.BORDER_REFLECT)
+    beyond = highest - lowest
+    typical = float(np.median(_subsample(beyond)))
+    np.maximum(beyond, max(typical, 1e-6 * float(np.abs(single).max())), out=beyond)
+    beyond *= SPIKE_RATIO
+    spikes = (single - highest) > beyond
+    spikes |= (lowest - single) > beyond
+    if not spikes.any():
+        return image
+    rows, cols = np.nonzero(spikes)
+    padded = np.pad(values, 1, mode="symmetric")
+    neighbours = np.stack([padded[rows + 1 + dr, cols + 1 + dc]
+                           for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc])
+    cleaned = values.copy()
+    cleaned[rows, cols] = np.median(neighbours, axis=0)
+    return cleaned
+
+
 def _folded(index: np.ndarray, n: int) -> np.ndarray:
     """Indices folded into ``[0, n)`` by reflection about the sides (edge pixels repeated)."""
     index = np.mod(index, 2 * n)
