@@ -8,7 +8,9 @@ morphological Chan-Vese on the same crops) on the same drawings, in one run:
 * ``poissonN``: photon counting, the image (in [0, 1]) scaled to ``N`` photons at its brightest,
   over a background of 2 photons: ``Poisson(N * image + 2)``;
 * ``snrS``: white Gaussian noise of ``contrast / S`` per pixel, ``contrast`` the difference
-  between the object's median and that of the ring 2-6 px outside it (the truth's).
+  between the object's median and that of the ring 2-6 px outside it (the truth's);
+* ``hotN``: ``N`` hot pixels of a camera, each 50 times the image's brightest, at random within
+  15 px of the drawing's centre (on the object, or about it), the image otherwise as it is.
 
 Each case's noise is drawn ``--draws`` times (seeded; once by default) and shared by the methods;
 the table averages over the draws. One draw is enough to rank methods that differ by a tenth,
@@ -43,10 +45,17 @@ METHODS = ("ours", "MGAC", "MCV")
 GROUPS = ("nuclei", "heldout", "small", "timelapse", "dsb", "stack3d", "u2os")
 
 
-def noisy(obj, noise: str, rng: np.random.Generator):
-    """``obj`` with ``noise`` ("clean", "poissonN" or "snrS") added to its image."""
+def noisy(obj, noise: str, rng: np.random.Generator, init=None):
+    """``obj`` with ``noise`` ("clean", "poissonN", "snrS" or "hotN", about ``init``'s centre)
+    added to its image."""
     check_noise(noise)
     image = obj.image
+    if noise.startswith("hot"):
+        hot, centre = image.copy(), np.asarray(init, dtype=float).mean(0).astype(int)
+        for _ in range(int(noise[len("hot"):])):
+            row, col = np.clip(centre + rng.integers(-15, 16, 2), 0, np.array(image.shape) - 1)
+            hot[row, col] = 50.0 * image.max()
+        return replace(obj, image=hot)
     if noise.startswith("poisson"):
         photons = float(noise[len("poisson"):])
         return replace(obj, image=rng.poisson(np.clip(image, 0.0, None) * photons + 2.0).astype(np.float64))
@@ -57,11 +66,12 @@ def noisy(obj, noise: str, rng: np.random.Generator):
 
 
 def check_noise(noise: str) -> None:
-    """Raise ValueError if ``noise`` is not "clean", "poissonN" or "snrS" (N, S positive numbers)."""
-    level = re.fullmatch(r"(poisson|snr)(\d+\.?\d*|\.\d+)", noise)
-    if noise != "clean" and (level is None or float(level[2]) <= 0):
-        raise ValueError(f"unknown noise {noise!r}: use poissonN (N photons at the brightest) or snrS (S the "
-                         "object's contrast over the noise), e.g. poisson30 snr2")
+    """Raise ValueError if ``noise`` is not "clean", "poissonN", "snrS" (N, S positive numbers) or
+    "hotN" (N a positive whole number)."""
+    level = re.fullmatch(r"(poisson|snr)(\d+\.?\d*|\.\d+)|hot([1-9]\d*)", noise)
+    if noise != "clean" and (level is None or (level[2] is not None and float(level[2]) <= 0)):
+        raise ValueError(f"unknown noise {noise!r}: use poissonN (N photons at the brightest), snrS (S the "
+                         "object's contrast over the noise) or hotN (N hot pixels), e.g. poisson30 snr2 hot3")
 
 
 def run_group(job):
@@ -72,7 +82,7 @@ def run_group(job):
     for i, (_, kind, obj, init) in enumerate(real_data.cases([group], every=every)):
         for noise in noises:
             for draw in range(draws if noise != "clean" else 1):
-                case = noisy(obj, noise, np.random.default_rng(i if draw == 0 else (i, draw)))
+                case = noisy(obj, noise, np.random.default_rng(i if draw == 0 else (i, draw)), init)
                 ours, _ = real.run_ours(case, init)
                 anchors, _, _ = real.run_anchors(case, init, kind)
                 rows.append((group, noise, {"ours": ours["iou"], **{m: anchors[m]["iou"] for m in METHODS[1:]}},
@@ -93,7 +103,7 @@ def table(rows, noises) -> str:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--noise", nargs="+", default=["poisson30", "snr2"], help="poissonN and/or snrS")
+    ap.add_argument("--noise", nargs="+", default=["poisson30", "snr2"], help="poissonN, snrS and/or hotN")
     ap.add_argument("--every", type=int, default=4, help="every n-th object of each group, all its drawings")
     ap.add_argument("--draws", type=int, default=1, help="noise draws per case (the table averages them)")
     ap.add_argument("--groups", nargs="+", choices=GROUPS, default=list(GROUPS))

@@ -183,7 +183,11 @@ def test_the_noise_probe_adds_the_noise_it_names(real, monkeypatch_module):
     snr = noisy(obj, "snr4", rng).image - obj.image
     assert abs(snr.std() - 0.7 / 4) < 0.01
     assert noisy(obj, "clean", rng) is obj
-    for wrong in ("gauss", "poisson", "snr0", "poisson-3"):
+    hot = noisy(obj, "hot3", rng, init=np.array([[50.0, 50.0], [70.0, 70.0]])).image
+    changed = np.argwhere(hot != obj.image)
+    assert 1 <= len(changed) <= 3 and np.all(hot[tuple(changed.T)] == 40.0)
+    assert np.all(np.abs(changed - 60) <= 15)
+    for wrong in ("gauss", "poisson", "snr0", "poisson-3", "hot0", "hot"):
         with pytest.raises(ValueError, match=f"unknown noise '{wrong}'.*poisson30 snr2"):
             noisy(obj, wrong, rng)
 
