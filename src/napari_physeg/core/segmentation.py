@@ -636,7 +636,7 @@ class FrameFeatures:
     @classmethod
     def of(cls, image, isef_b: float = 0.7) -> FrameFeatures:
         image, missing = _without_missing(_validate_image(image))
-        image = _as_image(_without_spikes(image))
+        image = _without_spikes(_as_image(image))
         plane = background_plane(image)
         image = plane_removed(image, plane, (slice(0, image.shape[0]), slice(0, image.shape[1])))
         return cls(*_edges_and_intensity(normalized_intensity(image), isef_b), plane=plane, missing=missing)
@@ -717,7 +717,7 @@ class _FeatureWindow:
 
     def evenly_lit(self, window) -> np.ndarray:
         """The image on ``window`` (float64), the background's plane taken out."""
-        return plane_removed(_as_image(_without_spikes(self.image[window])), self.plane, window)
+        return plane_removed(_without_spikes(_as_image(self.image[window])), self.plane, window)
 
     @property
     def _whole_image(self):
