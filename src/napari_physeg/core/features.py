@@ -206,8 +206,9 @@ SPIKE_RATIO = 10.0
 
 
 def _without_spikes(image: np.ndarray) -> np.ndarray:
-    """``image`` with its single-pixel spikes (see SPIKE_RATIO) replaced by
-    the median of their 8 neighbours; ``image`` itself when it has none.
+    """``image`` (2D float64, as :func:`_as_image` checks and casts it) with
+    its single-pixel spikes (see SPIKE_RATIO) replaced by the median of their
+    8 neighbours; ``image`` itself when it has none.
 
     Three hot pixels within 15 px of a nucleus (50 times the image's
     brightest) took a drawing's reading of its levels in 10 of 1128 real
@@ -216,14 +217,11 @@ def _without_spikes(image: np.ndarray) -> np.ndarray:
     pixel becomes a blob. Taken out, 2 runs remain, where two of them touch
     (each has the other for a neighbour: no spike by this rule).
     """
-    if np.asarray(image).dtype.kind not in "biuf":  # not real numbers: refused, with a clear error, later
-        return image
-    values = np.asarray(image, dtype=np.float64)
-    if values.ndim != 2 or min(values.shape) < 3:
+    if min(image.shape) < 3:  # no pixel with 8 neighbours
         return image
     # Found in single precision (OpenCV's morphology is 3 times faster on it;
     # a spike stands out by far more than its rounding), mended in double.
-    single = values.astype(np.float32)
+    single = image.astype(np.float32)
     ring = np.ones((3, 3), np.uint8)
     ring[1, 1] = 0
     highest = cv2.dilate(single, ring, borderType=cv2.BORDER_REFLECT)
@@ -237,10 +235,10 @@ def _without_spikes(image: np.ndarray) -> np.ndarray:
     if not spikes.any():
         return image
     rows, cols = np.nonzero(spikes)
-    padded = np.pad(values, 1, mode="symmetric")
+    padded = np.pad(image, 1, mode="symmetric")
     neighbours = np.stack([padded[rows + 1 + dr, cols + 1 + dc]
                            for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc])
-    cleaned = values.copy()
+    cleaned = image.copy()
     cleaned[rows, cols] = np.median(neighbours, axis=0)
     return cleaned
 
