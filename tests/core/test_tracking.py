@@ -534,6 +534,28 @@ def test_a_nucleus_that_condenses_is_followed_one_that_shrinks_to_a_part_is_lost
         assert abs(np.sqrt(abs(signed_area(tr.contours[0][4])) / np.pi) - 9) < 1
 
 
+@pytest.mark.parametrize("dimming, followed", [(0.36, True), (1.0, False)],
+                         ids=["signal kept: spread", "signal grown: more than the object"])
+def test_a_nucleus_that_spreads_is_followed_one_that_grows_as_bright_is_lost(dimming, followed):
+    """A daughter nucleus decondenses its chromatin over more than twice its
+    area within a few frames, dimmer for it: its signal (contrast times
+    area) is kept, and it is the same object (the real HeLa movie read every
+    second frame lost such nuclei). A contour on a body of that size as bright
+    as the object holds far more than its signal (it took in a neighbour, or
+    another object lies there): lost, as before."""
+    rr, cc = np.mgrid[:96, :96]
+    rng = np.random.default_rng(0)
+
+    def frame(radius, contrast):
+        return 0.2 + contrast * ((rr - 48) ** 2 + (cc - 48) ** 2 <= radius**2) + 0.01 * rng.standard_normal(rr.shape)
+
+    frames = np.stack([frame(9, 0.45)] * 3 + [frame(15, 0.45 * dimming)] * 2)  # 2.8 times the area
+    tr = track(frames, _circle((48, 48), 12))
+    assert tr.status[0] == [TRACKED] * 3 + [TRACKED if followed else LOST] * 2
+    if followed:
+        assert abs(np.sqrt(abs(signed_area(tr.contours[0][4])) / np.pi) - 15) < 1
+
+
 def test_an_object_that_moves_out_of_the_image_has_left_the_field_of_view():
     centres = [[(48, 60 + 8 * t)] for t in range(7)]  # out by the right side
     tr = track(_disk_movie(centres), _circle((48, 60), 16))
