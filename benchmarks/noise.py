@@ -51,6 +51,8 @@ def noisy(obj, noise: str, rng: np.random.Generator, init=None):
     check_noise(noise)
     image = obj.image
     if noise.startswith("hot"):
+        if init is None:
+            raise ValueError(f"{noise!r} puts hot pixels about a drawing's centre: pass the drawing as init")
         hot, centre = image.copy(), np.asarray(init, dtype=float).mean(0).astype(int)
         for _ in range(int(noise[len("hot"):])):
             row, col = np.clip(centre + rng.integers(-15, 16, 2), 0, np.array(image.shape) - 1)

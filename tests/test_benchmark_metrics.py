@@ -187,6 +187,8 @@ def test_the_noise_probe_adds_the_noise_it_names(real, monkeypatch_module):
     changed = np.argwhere(hot != obj.image)
     assert 1 <= len(changed) <= 3 and np.all(hot[tuple(changed.T)] == 40.0)
     assert np.all(np.abs(changed - 60) <= 15)
+    with pytest.raises(ValueError, match="pass the drawing as init"):
+        noisy(obj, "hot3", rng)
     for wrong in ("gauss", "poisson", "snr0", "poisson-3", "hot0", "hot"):
         with pytest.raises(ValueError, match=f"unknown noise '{wrong}'.*poisson30 snr2"):
             noisy(obj, wrong, rng)
