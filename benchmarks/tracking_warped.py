@@ -196,8 +196,8 @@ def _every(step: int):
 
 
 # name: the movie's frames and its labels, linked over time (see real_data.linked_labels).
-REAL_MOVIES = {"HeLa (real)": _hela, "HeLa (real), every 2nd frame": _every(2), "HeLa (real), every 3rd frame": _every(3),
-               "CHO (real, held out)": real_data.cho_movie}
+REAL_MOVIES = {"HeLa (real)": _hela, "HeLa (real), every 2nd frame": _every(2),
+               "HeLa (real), every 3rd frame": _every(3), "CHO (real, held out)": real_data.cho_movie}
 
 
 def _smooth_field(shape, scale, rng):
