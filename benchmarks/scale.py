@@ -19,10 +19,14 @@ objects replaced by its ground and the background's noise, a sparse field (whose
 no intensity percentile), then zoomed. With ``--cut`` the unzoomed images are also cut across the object's
 middle, the part above it missing: once as NaN pixels (the margin a registration leaves, which
 ``segment`` reads as no data) and once cropped away, both scored against the truth below the cut;
-the two should score alike. Ours only: the probe asks whether the defaults hold, not who wins.
+the two should score alike. With ``--turn`` they are also turned by 90 degrees and mirrored (the
+drawing with them), which a method without a direction on the pixel grid should score alike. Under
+the table, how many cases each variant moved by more than ``MOVED`` from the same case as it comes.
+Ours only: the probe asks whether the defaults hold, not who wins.
 
     python benchmarks/scale.py --scale 0.5 2 3 --invert --slope --vignette --dim --every 4
     python benchmarks/scale.py --scale 1 --cut --every 2
+    python benchmarks/scale.py --scale 1 --turn --every 2
 
 Zoom: ``cv2.resize`` of the image (area averaging to shrink, bilinear to enlarge), the truth
 resized bilinearly and cut at 0.5, the drawing's nodes mapped with the pixel grid
@@ -124,19 +128,34 @@ def cut_cropped(obj, init):
     return replace(obj, image=obj.image[cut:], mask=obj.mask[cut:]), init - [cut, 0]
 
 
+def turned(obj, init):
+    """``obj`` and ``init`` turned by 90 degrees, counterclockwise."""
+    width = obj.image.shape[1]
+    image, mask = (np.ascontiguousarray(np.rot90(a)) for a in (obj.image, obj.mask))
+    return replace(obj, image=image, mask=mask), np.column_stack([width - 1 - init[:, 1], init[:, 0]])
+
+
+def mirrored(obj, init):
+    """``obj`` and ``init`` mirrored left to right (the drawing's nodes in reverse, so that it
+    turns the same way)."""
+    width = obj.image.shape[1]
+    image, mask = (np.ascontiguousarray(a[:, ::-1]) for a in (obj.image, obj.mask))
+    return replace(obj, image=image, mask=mask), np.column_stack([init[:, 0], width - 1 - init[:, 1]])[::-1]
+
+
 VARIANTS = {"inverted": lambda obj, init: (inverted(obj), init), "sloped": lambda obj, init: (sloped(obj), init),
             "vignetted": lambda obj, init: (vignetted(obj), init), "dimmed": lambda obj, init: (dimmed(obj), init),
-            "cut (NaN)": cut_nan, "cut (cropped)": cut_cropped}
+            "cut (NaN)": cut_nan, "cut (cropped)": cut_cropped, "turned": turned, "mirrored": mirrored}
 
 
 def run_group(job):
-    """Rows ``(group, variant, iou, raised, steps)`` of one group in every variant (a zoom
-    factor, "inverted", "sloped", "vignetted", "dimmed", "alone" or a cut)."""
+    """Rows ``(group, variant, iou, raised, steps, case)`` of one group in every variant (a zoom
+    factor, "inverted", "sloped", "vignetted", "dimmed", "alone", a cut, "turned" or "mirrored")."""
     group, variants, every = job
     warnings.simplefilter("ignore")
     labels = _labels(group) if any(str(v).startswith("alone") for v in variants) else {}
     rows = []
-    for _, _, obj, init in real_data.cases([group], every=every):
+    for name, _, obj, init in real_data.cases([group], every=every):
         for variant in variants:
             if str(variant).startswith("alone"):  # "alone", or "alone x<zoom>": alone, then zoomed
                 by_itself = alone(obj, labels[_image_key(obj.image)] & ~obj.mask)
@@ -144,7 +163,7 @@ def run_group(job):
             else:
                 case = VARIANTS[variant](obj, init) if variant in VARIANTS else zoomed(obj, init, variant)
             result, _ = real.run_ours(*case)
-            rows.append((group, variant, result["iou"], bool(result["error"]), result["steps"] or np.nan))
+            rows.append((group, variant, result["iou"], bool(result["error"]), result["steps"] or np.nan, name))
     return rows
 
 
@@ -177,6 +196,19 @@ def table(rows, variants) -> str:
     return "\n".join(lines)
 
 
+#: A case moved when its IoU differs from the same case's as it comes by more than this.
+MOVED = 0.1
+
+
+def moved(rows, variants) -> str:
+    """How many cases each variant moved (see MOVED) from the same case as it comes (1.0)."""
+    as_it_comes = {r[5]: r[2] for r in rows if r[1] == 1.0}
+    names = [v if isinstance(v, str) else f"x{v:g}" for v in variants]
+    counts = [sum(abs(r[2] - as_it_comes[r[5]]) > MOVED for r in rows if r[1] == v) for v in variants]
+    return (f"- cases whose IoU moved by more than {MOVED} from the same case as it comes: "
+            + ", ".join(f"{n} {c}" for n, c, v in zip(names, counts, variants) if v != 1.0))
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scale", nargs="+", type=float, default=[0.5, 1.0, 2.0])
@@ -185,6 +217,7 @@ def main(argv=None):
     ap.add_argument("--vignette", action="store_true", help="also the unzoomed images vignetted")
     ap.add_argument("--dim", action="store_true", help="also the unzoomed images with the object dimmed")
     ap.add_argument("--cut", action="store_true", help="also the unzoomed images cut by NaN pixels, and cropped")
+    ap.add_argument("--turn", action="store_true", help="also the unzoomed images turned by 90 degrees, and mirrored")
     ap.add_argument("--alone", action="store_true",
                     help="also each object alone on its image (a sparse field), at each scale")
     ap.add_argument("--every", type=int, default=4, help="every n-th object of each group, all its drawings")
@@ -196,15 +229,17 @@ def main(argv=None):
         (["sloped"] if args.slope else []) + (["vignetted"] if args.vignette else []) + \
         (["dimmed"] if args.dim else []) + \
         ([f"alone x{s:g}" if s != 1 else "alone" for s in sorted(set(args.scale) | {1.0})] if args.alone else []) + \
-        (["cut (NaN)", "cut (cropped)"] if args.cut else [])
+        (["cut (NaN)", "cut (cropped)"] if args.cut else []) + (["turned", "mirrored"] if args.turn else [])
     with Pool(2) as pool:
         rows = [r for part in pool.map(run_group, [(g, variants, args.every) for g in args.groups]) for r in part]
     print(f"Command: `python benchmarks/scale.py --scale {' '.join(f'{s:g}' for s in args.scale)}"
           f"{' --invert' if args.invert else ''}{' --slope' if args.slope else ''}"
           f"{' --vignette' if args.vignette else ''}{' --dim' if args.dim else ''}{' --alone' if args.alone else ''}"
-          f"{' --cut' if args.cut else ''}"
+          f"{' --cut' if args.cut else ''}{' --turn' if args.turn else ''}"
           f" --every {args.every}`\n")
     print(table(rows, variants))
+    print()
+    print(moved(rows, variants))
 
 
 if __name__ == "__main__":

@@ -214,6 +214,33 @@ def test_the_scale_probe_dims_and_vignettes_as_it_says(real, monkeypatch_module)
     assert np.isclose(vig[0, 0] / (0.2 + 0.3 * 0.8), 1 - 1.2 * 2 * 0.5 ** 2, atol=0.02)
 
 
+def test_the_scale_probe_turns_and_mirrors_the_drawing_with_the_image(real, monkeypatch_module):
+    """``benchmarks/scale.py --turn``: the drawing goes with the image (the same pixels of the
+    object under it), still counterclockwise in (row, col) as drawn, and a case that moved is
+    counted against the same case as it comes."""
+    import real_data
+    from scale import moved, mirrored, turned
+    from skimage.draw import polygon2mask
+
+    from napari_physeg.core.contour import signed_area
+
+    mask = np.zeros((60, 90), bool)
+    mask[10:30, 20:70] = True
+    image = np.where(mask, 1.0, 0.0) + np.linspace(0, 0.1, 90)[None, :]
+    obj = real_data.Obj("test", "n1", image, mask)
+    init = np.array([[8.0, 18.0], [32.0, 18.0], [32.0, 45.0], [8.0, 45.0]])  # around the left half
+    for change in (turned, mirrored):
+        obj2, init2 = change(obj, init)
+        assert obj2.image.shape == (90, 60) if change is turned else obj2.image.shape == (60, 90)
+        drawn, drawn2 = polygon2mask(mask.shape, init), polygon2mask(obj2.mask.shape, init2)
+        assert drawn2.sum() == drawn.sum() and (obj2.mask & drawn2).sum() == (mask & drawn).sum()
+        assert np.isclose(np.sort(obj2.image[drawn2]), np.sort(image[drawn])).all()
+        assert np.sign(signed_area(init2)) == np.sign(signed_area(init))
+    rows = [("g", 1.0, 0.9, False, 10, "a"), ("g", "turned", 0.5, False, 10, "a"),
+            ("g", 1.0, 0.5, False, 10, "b"), ("g", "turned", 0.55, False, 10, "b")]
+    assert moved(rows, [1.0, "turned"]).endswith("turned 1")
+
+
 def test_the_membrane_probe_draws_the_cells_it_scores(real, monkeypatch_module):
     """``benchmarks/membranes.py``: the scored cell is the left one, out to its ring's outer edge,
     and its inside is as dark as the ground when asked (and a quarter of the ring otherwise)."""
