@@ -706,6 +706,10 @@ class _FeatureWindow:
         # out: a plane may remain across the window, not a dome (a window's
         # crowd of objects would read as one).
         self.plane = shared.plane if shared is not None else background_plane(image, curved=not evenly_lit)
+        # A magnified view's image was made of the image's own evenly lit
+        # window, its spikes already taken out (see evenly_lit).
+        self._spiked = not evenly_lit
+        self._lit = None  # the last window evenly_lit made, and its image
         self.weights, self.max_line_length, self.isef_b = weights, max_line_length, isef_b
         # A second phase with the region force alone (sub-pixel refinement).
         self.with_refinement = refine and weights.get("intensity", 0) > 0 and len(weights) > 1
@@ -716,8 +720,13 @@ class _FeatureWindow:
                                     FORCE_WINDOW_MAX_FRACTION))
 
     def evenly_lit(self, window) -> np.ndarray:
-        """The image on ``window`` (float64), the background's plane taken out."""
-        return plane_removed(_without_spikes(_as_image(self.image[window])), self.plane, window)
+        """The image on ``window`` (float64, not to be written to), its spikes
+        and the background's plane taken out. The last window's is kept: the
+        polish reads the window the forces were computed on."""
+        if self._lit is None or self._lit[0] != window:
+            image = _as_image(self.image[window])
+            self._lit = window, plane_removed(_without_spikes(image) if self._spiked else image, self.plane, window)
+        return self._lit[1]
 
     @property
     def _whole_image(self):
