@@ -150,6 +150,13 @@ def _disk_movie(centres, radius=12, shape=(96, 96), noise=0.05):
     return np.stack(frames)
 
 
+def _centred_disk(radius, contrast, rng, shape=(96, 96)):
+    """A frame of a disk of ``contrast`` over a ground of 0.2 in its middle, with white noise of 0.01."""
+    rr, cc = np.mgrid[: shape[0], : shape[1]]
+    disk = (rr - shape[0] // 2) ** 2 + (cc - shape[1] // 2) ** 2 <= radius**2
+    return 0.2 + contrast * disk + 0.01 * rng.standard_normal(shape)
+
+
 def _circle(centre, radius, n=48):
     t = np.linspace(0, 2 * np.pi, n, endpoint=False)
     return np.column_stack([centre[0] + radius * np.sin(t), centre[1] + radius * np.cos(t)])
@@ -521,13 +528,8 @@ def test_a_nucleus_that_condenses_is_followed_one_that_shrinks_to_a_part_is_lost
     is the same object (the real HeLa movie lost such nuclei). A contour on a
     body of that size that keeps only its share of the signal is not the
     object (a part of it, or a speck where it vanished): lost, as before."""
-    rr, cc = np.mgrid[:96, :96]
     rng = np.random.default_rng(0)
-
-    def frame(radius, contrast):
-        return 0.2 + contrast * ((rr - 48) ** 2 + (cc - 48) ** 2 <= radius**2) + 0.01 * rng.standard_normal(rr.shape)
-
-    frames = np.stack([frame(15, 0.2)] * 3 + [frame(9, 0.2 * brightening)] * 2)
+    frames = np.stack([_centred_disk(15, 0.2, rng)] * 3 + [_centred_disk(9, 0.2 * brightening, rng)] * 2)
     tr = track(frames, _circle((48, 48), 19))
     assert tr.status[0] == [TRACKED] * 3 + [TRACKED if followed else LOST] * 2
     if followed:
@@ -543,13 +545,8 @@ def test_a_nucleus_that_spreads_is_followed_one_that_grows_as_bright_is_lost(dim
     second frame lost such nuclei). A contour on a body of that size as bright
     as the object holds far more than its signal (it took in a neighbour, or
     another object lies there): lost, as before."""
-    rr, cc = np.mgrid[:96, :96]
     rng = np.random.default_rng(0)
-
-    def frame(radius, contrast):
-        return 0.2 + contrast * ((rr - 48) ** 2 + (cc - 48) ** 2 <= radius**2) + 0.01 * rng.standard_normal(rr.shape)
-
-    frames = np.stack([frame(9, 0.45)] * 3 + [frame(15, 0.45 * dimming)] * 2)  # 2.8 times the area
+    frames = np.stack([_centred_disk(9, 0.45, rng)] * 3 + [_centred_disk(15, 0.45 * dimming, rng)] * 2)  # 2.8x area
     tr = track(frames, _circle((48, 48), 12))
     assert tr.status[0] == [TRACKED] * 3 + [TRACKED if followed else LOST] * 2
     if followed:
