@@ -197,11 +197,74 @@ def test_nan_pixels_are_no_data_where_the_object_ends_as_at_the_image_side(brigh
         (dict(n_nodes=100000), "n_nodes must be between 3 and 5000"),
         (dict(reference="sideways"), "reference"),
         (dict(polarity="grey"), "polarity"),
+        # Found by an outside probe (session 64): these reached numpy, cv2 or
+        # the element ("init gives a singular element" for dt=0), or hung.
+        (dict(dt=0), "dt"),
+        (dict(dt=1e300), "dt"),
+        (dict(dt="1"), "dt"),
+        (dict(max_line_length=np.nan), "max_line_length"),
+        (dict(max_line_length=1e6), "max_line_length"),
+        (dict(patience=-1), "patience"),
+        (dict(max_steps=np.inf), "max_steps"),
+        (dict(max_steps=10.5), "max_steps"),
+        (dict(n_nodes=np.nan), "n_nodes"),
+        (dict(history_every=0), "history_every"),
+        (dict(refine="no"), "refine"),
     ],
 )
 def test_bad_parameters_get_a_clear_error(kwargs, message):
     with pytest.raises(ValueError, match=message):
         segment(GOOD_IMAGE, GOOD_INIT, **kwargs)
+
+
+@pytest.mark.parametrize("low, high", [(0.0, 1.7e308), (-1e308, 1e308), (0.0, 1e-310), (0.0, 1e-40)])
+def test_images_of_extreme_but_finite_values_are_segmented_as_any_other(low, high):
+    """Found by an outside probe (session 64): NaN errors deep in the features
+    ("noise must be a finite non-negative number", an option never passed)."""
+    obj = data.ellipse((64, 64), noise=0.0)
+    res = segment(np.where(obj.mask, high, low), obj.init_near)
+    assert res.converged and iou(res.contour, obj.mask) > 0.95
+
+
+def test_a_drawing_in_other_units_is_refused_at_once():
+    """A drawing a million pixels across (nanometres for pixels) read its
+    line for 11 s, and at 1e9 ran out of memory."""
+    centre = GOOD_INIT.mean(axis=0)
+    with pytest.raises(ValueError, match="beyond the image.*microns"):
+        segment(GOOD_IMAGE, centre + (GOOD_INIT - centre) * 1e6)
+
+
+def _bright_disk(radius: float, shape: int, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    yy, xx = np.mgrid[:shape, :shape]
+    disk = (yy - shape / 2) ** 2 + (xx - shape / 2) ** 2 < radius ** 2
+    return np.where(disk, 200.0, 10.0) + np.random.default_rng(seed).normal(0, 2, disk.shape), disk
+
+
+def test_a_small_circle_over_the_edge_of_a_large_disk_gives_the_disk_whole():
+    """Found by an outside probe (session 64): a circle a sixth of a disk's
+    radius, over its edge, was read as drawn across it (the body whole), but
+    that body was looked for on a crop of three drawing sizes: the contour
+    ended on the crop's side, in the middle of the uniform disk, and said
+    "converged" (IoU 0.25)."""
+    image, disk = _bright_disk(40, 100)
+    t = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    res = segment(image, np.column_stack([50 + 7 * np.sin(t), 10 + 7 * np.cos(t)]), polarity="bright")
+    assert res.converged and iou(res.contour, disk) > 0.97
+
+
+def test_a_drawing_that_cuts_the_object_off_is_not_converged():
+    """Around an object the drawing is its limit; where it cuts the object
+    off, the contour rests on the drawing, not on the object's border: it
+    says so, "limited", not "converged" (as it did, session 63)."""
+    yy, xx = np.mgrid[:160, :160]
+    bar = ((yy - 80) / 15) ** 2 + ((xx - 80) / 60) ** 2 < 1
+    image = np.where(bar, 200.0, 10.0) + np.random.default_rng(0).normal(0, 2, bar.shape)
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    middle = segment(image, np.column_stack([80 + 22 * np.sin(t), 80 + 22 * np.cos(t)]))
+    assert middle.stop_reason == "limited" and not middle.converged
+    assert iou(middle.contour, bar & (np.abs(xx - 80) <= 24)) > 0.9  # the part drawn around
+    whole = segment(image, np.column_stack([80 + 22 * np.sin(t), 80 + 66 * np.cos(t)]))
+    assert whole.converged and iou(whole.contour, bar) > 0.95
 
 
 def test_contour_partly_outside_is_clipped_with_a_warning():

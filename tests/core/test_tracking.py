@@ -96,6 +96,9 @@ def test_arc_origin_is_carried_and_maps_have_the_movie_shape(tracked):
     assert np.isfinite(curvature_map).all() and curvature_map.mean() > 0
     with pytest.raises(ValueError, match="quantity"):
         tracked.membrane_map(0, "speed")
+    for ask in (tracked.membrane_map, tracked.centroids):  # numpy's bare IndexError before session 64
+        with pytest.raises(IndexError, match="object 3 is not one of the 1 tracked"):
+            ask(3)
 
 
 def test_tidy_table(tracked):
@@ -593,7 +596,9 @@ def test_a_frame_without_data_is_a_gap_the_objects_are_followed_across():
     with pytest.warns(UserWarning, match="in 1 of 6 frames"):
         tr = track(frames, _circle((48, 44), 16))
     assert tr.stop_reason == "completed" and tr.contours[0][3] is None
-    assert tr.status[0][:3] == [TRACKED] * 3 and tr.status[0][4:] == [TRACKED] * 2
+    # Lost there, not "left the field of view" (it did, session 63: an
+    # outside probe found it; the object sits mid-field).
+    assert tr.status[0] == [TRACKED] * 3 + [LOST] + [TRACKED] * 2
     assert iou(tr.contours[0][5], polygon_mask(_circle((48, 54), 12, n=200), frames.shape[1:])) > 0.9
     with pytest.raises(ValueError, match="start frame 3 holds NaN pixels only"):
         track(frames, _circle((48, 50), 16), start=3)
@@ -664,6 +669,12 @@ def test_generator_and_lazy_frames(movie):
     (np.full((3, 32, 32), "a"), _circle((16, 16), 5), {}, "real numeric dtype"),
     (np.zeros((3, 32, 32), complex), _circle((16, 16), 5), {}, "complex dtype"),
     (np.zeros((3, 32, 32), object), _circle((16, 16), 5), {}, "real numeric dtype"),
+    # Found by an outside probe (session 64): numpy's "inhomogeneous shape", and
+    # match's TypeErrors once every frame was segmented.
+    ([np.zeros((32, 32)), np.zeros((30, 32))], _circle((16, 16), 5), {}, r"frame 1 has shape \(30, 32\)"),
+    (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"match_options": {"method": "local"}}, "cannot set"),
+    (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"match_options": {"n_mode": 3}}, "not options of match"),
+    (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"match_options": {"n_modes": -3}}, "match_options: n_modes"),
 ])
 def test_bad_input_gets_a_clear_error(frames, inits, kwargs, message):
     with pytest.raises(ValueError, match=message):

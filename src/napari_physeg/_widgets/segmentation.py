@@ -461,6 +461,8 @@ def _failure_message(index, err, job) -> str:
 #: warnings are given ("{steps}": the steps the first of them took).
 _NOT_CONVERGED_ADVICE = {
     "max_steps": "were still moving after {steps} steps: raise 'max steps' (or draw closer to the object)",
+    "limited": "came to rest against their drawing where the object runs on beyond it (the drawing is the "
+               "object's limit): draw them around all of the object, or keep them as the part you drew around",
     "stalled": "came to rest away from any border (nothing in reach pulled them further): draw them closer "
                "to the object's border, or raise the stiffness r",
     "leaked": "spread far beyond the drawing, over the image (nothing told the object from its surroundings, "

@@ -1284,7 +1284,7 @@ def _disk(radius: int) -> np.ndarray:
 
 
 def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
-                  image_sides=(True, True, True, True), stronger=None) -> np.ndarray | None:
+                  image_sides=(True, True, True, True), stronger=None, *, with_cut: bool = False):
     """The object's own pixels: the object-like blob the drawing marks, split from its neighbours.
 
     Object-like pixels (``signed > 0``) are split into blobs at necks by a
@@ -1313,21 +1313,55 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
         contrast (see :func:`level_beyond_object`): where the pixels far
         enough beyond make a large blob the drawing does not mark, that blob
         is a neighbour, even without a neck between it and the object.
+    with_cut : bool, optional
+        Also return the pixels of the object the drawing's limit cut off (see
+        :func:`drawing_limit`): where the region ends there, it ends on no
+        border of the object.
 
     Returns
     -------
     ndarray of bool, or None
         The object's region, or None when no object-like pixel lies under the
-        drawing.
+        drawing. With ``with_cut``, ``(region, cut)``, or None.
     """
     # Everything happens near the drawing: within its reach (below) and one
     # drawing size beyond, where neighbours that could take the object lie.
-    extent = _scaled(drawing, 1.0 if model.drawn_around else _INSIDE_LIMIT)
+    region = _object_region_on_crop(signed, drawing, model, image_sides, stronger,
+                                    1.0 if model.drawn_around else _INSIDE_LIMIT)
+    if region is not None and model.drawn_around and _cut_by_crop(region):
+        # Read as drawn across a body larger than the crop around the
+        # drawing (see _drawn_across): the body whole, up to the reach of a
+        # drawing inside it. On the drawing's crop, a circle a sixth of a
+        # disk's radius over its edge ended on the crop's side, "converged".
+        # Seen whole, the body may be no body (touching nuclei, not convex
+        # together): then the crop's part of it stands.
+        whole = _object_region_on_crop(signed, drawing, model, image_sides, stronger, _INSIDE_LIMIT)
+        if whole is not None and np.count_nonzero(region[1] & ~whole[1]) <= 0.05 * np.count_nonzero(region[1]):
+            region = whole
+    if region is None:
+        return None
+    return region[1:] if with_cut else region[1]
+
+
+def _cut_by_crop(cropped) -> bool:
+    """Whether a region found on a crop of ``signed`` (see
+    _object_region_on_crop) meets a side of the crop that is not one of
+    ``signed``'s."""
+    box, region, _ = cropped
+    local = region[box]
+    cut = (box[0].start > 0 and local[0].any(), box[0].stop < region.shape[0] and local[-1].any(),
+           box[1].start > 0 and local[:, 0].any(), box[1].stop < region.shape[1] and local[:, -1].any())
+    return any(cut)
+
+
+def _object_region_on_crop(signed, drawing, model, image_sides, stronger, scale: float):
+    """object_region on a crop around ``drawing`` scaled by ``scale`` and a
+    drawing size more: ``(crop, region, cut)`` (see object_region), or None."""
+    extent = _scaled(drawing, scale)
     size = _drawing_size(drawing)
     box = bounding_window(extent, signed.shape, size + 10)
     lo = np.array([box[0].start, box[1].start])
     hi = np.array([box[0].stop, box[1].stop])
-    region = np.zeros(signed.shape, bool)
     if np.any(hi <= lo):
         return None
     # The crop's sides that are the image's: those where it meets an image side.
@@ -1336,8 +1370,9 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
     local = _recalled_region_near(signed[box], drawing - lo, model, sides, None if stronger is None else stronger[box])
     if local is None:
         return None
-    region[box] = local
-    return region
+    region, cut = np.zeros(signed.shape, bool), np.zeros(signed.shape, bool)
+    region[box], cut[box] = local
+    return box, region, cut
 
 
 #: The last few questions object_region answered on a crop, with their
@@ -1347,7 +1382,7 @@ _RECENT_REGIONS_SIZE = 3
 _RECENT_REGIONS_LOCK = threading.Lock()
 
 
-def _recalled_region_near(signed, drawing, model, image_sides, stronger=None) -> np.ndarray | None:
+def _recalled_region_near(signed, drawing, model, image_sides, stronger=None) -> tuple[np.ndarray, np.ndarray] | None:
     """:func:`_object_region_near`, or its answer when the same question (the
     same pixels, drawing, levels and sides) is among the last few asked.
 
@@ -1427,8 +1462,9 @@ def drawing_limit(drawing: np.ndarray, shape, model: RegionModel, drawn: np.ndar
 
 
 def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
-                        image_sides, stronger=None) -> np.ndarray | None:
-    """:func:`object_region` on a crop around the drawing."""
+                        image_sides, stronger=None) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`object_region` on a crop around the drawing: the region and what
+    the drawing's limit cut off it."""
     shape = signed.shape
     drawn = _fill(drawing, shape)
     limit = drawing_limit(drawing, shape, model, drawn)
@@ -1471,12 +1507,13 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
             return None
     if model.drawn_around and _drawn_across(region, limit):
         limit = _fill(_scaled(drawing, _INSIDE_LIMIT), shape)
+    cut = region & ~limit
     region = _smoothed(region & limit, image_sides)
     # A person's drawing around the object holds all of it: bodies of its
     # own region that lie apart (the two masses of a dividing cell) are
     # joined, else the contour pinched between them and kept one. (A
     # program's drawing follows one object: the tracker keeps one daughter.)
-    return _bridged(region, seed, depth) if model.drawn_around and model.user_drawing else region
+    return (_bridged(region, seed, depth) if model.drawn_around and model.user_drawing else region), cut
 
 
 def _bridged(region: np.ndarray, seed: np.ndarray, depth: np.ndarray) -> np.ndarray:

@@ -35,7 +35,7 @@ from .materials import Material, get_material, suggested_stiffness
 from .region import (_INSIDE_LIMIT, RegionModel, _box_of, _disk, _fill, _least_contrast, _scaled, drawing_levels,
                      drawing_limit, level_beyond_object, object_region, objectness)
 from .subpixel import level_along, polish
-from ._validation import signature_of, with_defaults
+from ._validation import check_count, check_number, signature_of, with_defaults
 
 __all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "FrameFeatures", "region_features"]
 
@@ -94,8 +94,11 @@ class SegmentationResult:
         ``stop_reason``).
     stop_reason : str
         ``"converged"`` (at rest, at least 70 % of the nodes on an edge or an
-        object/background switch), ``"stalled"`` (at rest elsewhere: nothing
-        in reach pulls it), ``"leaked"`` (along all four sides of the
+        object/background switch), ``"limited"`` (at rest so, but for the
+        nodes against the drawing where it cuts off a part of the object at
+        least 5 px thick: the object runs on beyond the drawing, which is its
+        limit; the contour is the part drawn around), ``"stalled"`` (at rest
+        elsewhere: nothing in reach pulls it), ``"leaked"`` (along all four sides of the
         image, which the drawing did not reach, or, from a drawing read as
         lying inside the object, along the farthest it may reach, 25 times the
         drawing's size, with a tenth of its nodes: nothing told the object
@@ -146,6 +149,24 @@ def _validate_image(image) -> np.ndarray:
     return arr
 
 
+#: Images whose largest magnitude lies beyond this range are scaled into it
+#: (by that magnitude: a change of units, which no result depends on): their
+#: squares, and their casts to float32, overflow or flush to zero.
+WORKING_RANGE = (1e-30, 1e30)
+
+
+def _in_working_range(image: np.ndarray) -> np.ndarray:
+    """``image``, or ``image`` divided by its largest magnitude when that lies
+    outside WORKING_RANGE (0-1e308 or 1e-310 images gave NaN errors deep in
+    the features, naming an option never passed)."""
+    if image.dtype.kind != "f":
+        return image
+    largest = float(np.max(np.abs(image)))
+    if largest == 0.0 or not np.isfinite(largest) or WORKING_RANGE[0] <= largest <= WORKING_RANGE[1]:
+        return image  # (infinite pixels are refused where the features read them)
+    return image.astype(np.float64) / largest
+
+
 #: A drawing that crosses itself is a figure-8 when the loops a contour
 #: cannot keep hold at least this share of what it encloses; a lasso that
 #: overshoots its start makes a small loop, which is just cut.
@@ -168,6 +189,13 @@ def _warn_if_figure_eight(drawing: np.ndarray) -> None:
                       "not cross itself, around (or inside) the object", UserWarning, stacklevel=6)
 
 
+#: A drawing may reach beyond the image (around an object its side cuts), by
+#: up to this many times the image's larger side: one beyond is in other
+#: units (nanometres, microns) or another image's coordinates, and reading
+#: its line would take minutes.
+MAX_REACH_BEYOND = 4.0
+
+
 def _clip_to_image(init: np.ndarray, shape, warn: bool = True) -> np.ndarray:
     hi = np.array(shape, dtype=float) - 1.0
     outside = np.any((init < 0) | (init > hi), axis=1)
@@ -179,6 +207,12 @@ def _clip_to_image(init: np.ndarray, shape, warn: bool = True) -> np.ndarray:
                 f"{lo_box[0]:.1f}..{hi_box[0]:.1f}, cols {lo_box[1]:.1f}..{hi_box[1]:.1f}); "
                 "check that the contour and image use the same coordinates"
             )
+    beyond = float(np.max(np.maximum(-init, init - hi)))
+    if beyond > MAX_REACH_BEYOND * max(shape):
+        raise ValueError(
+            f"init reaches {beyond:.3g} px beyond the image (image shape {tuple(shape)}): check that the contour "
+            "is in pixels of this image (not in microns or nanometres, or another image's coordinates), "
+            "and draw it on or near the image")
     if outside.any():
         if warn:
             warnings.warn(
@@ -232,7 +266,7 @@ EDGE_GATE = 3.0
 
 
 def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_sides=(True, True, True, True),
-                    noise=None, model=None):
+                    noise=None, model=None, *, with_cut: bool = False):
     """Object-ness and edge images for the object the user drew.
 
     Parameters
@@ -258,6 +292,9 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
         The drawing's levels when already read (on a larger view of the same
         image, in the units of ``intensity``); ``polarity`` and ``noise`` are
         then not used.
+    with_cut : bool, optional
+        Also return the object's pixels the drawing's limit cut off its
+        region (see :func:`~.region.object_region`), or None.
 
     Returns
     -------
@@ -266,6 +303,8 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
         background and on look-alike neighbours), and the edge map gated to a
         band around that region.
     polarity : int
+    cut : ndarray of bool or None
+        With ``with_cut`` only.
     """
     if model is None:
         model = drawing_levels(intensity, drawing, polarity, noise)
@@ -275,8 +314,9 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
     # The region is split from its neighbours with their pixels as they look:
     # a neighbour's part that moved beyond its claim is still its own (as
     # background, that part would be a shallow blob the object could take).
-    region = object_region(signed, drawing, model, image_sides, level_beyond_object(intensity, model)) \
+    found = object_region(signed, drawing, model, image_sides, level_beyond_object(intensity, model), with_cut=True) \
         if model.is_visible else None
+    region, cut = (None, None) if found is None else found
     if avoid is not None:
         signed[avoid] = -1.0
     if region is None:
@@ -287,7 +327,7 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
             # shadow under a clock followed the wall's faint mottling across
             # the image for 1000 steps).
             signed[~drawing_limit(drawing, signed.shape, model)] = -1.0
-        return signed, edges, model.polarity
+        return (signed, edges, model.polarity) + ((cut,) if with_cut else ())
     if avoid is not None:
         region &= ~avoid
     signed = np.where(region, np.where(signed > 0, signed, 1.0), np.where(signed > 0, -1.0, signed))
@@ -315,7 +355,7 @@ def region_features(intensity, edges, drawing, polarity=None, avoid=None, image_
     near_edge = cv2.dilate((edges[box] > 0).view(np.uint8), _disk(rim + 1)).view(bool)
     edges[box][outline & ~near_edge] = 1.0
     signed[box][cv2.erode(r8, _disk(rim)).view(bool)] = 1.0
-    return signed.astype(np.float32), edges, model.polarity
+    return (signed.astype(np.float32), edges, model.polarity) + ((cut,) if with_cut else ())
 
 
 #: Non-neighbouring nodes closer than this many node spacings pinch the
@@ -581,10 +621,32 @@ def _sides_met(contour: np.ndarray, shape, within: float = 1.0) -> int:
     return int(low.any(axis=0).sum()) + int(high.any(axis=0).sum())
 
 
-def _rest_reason(field: ForceField, nodes: np.ndarray) -> str:
-    """Why a contour at rest stopped: on the object's border, or not."""
-    return "stalled" if field.on_border(nodes).mean() < ON_BORDER_FRACTION else "converged"
+def _rest_reason(features: _FeatureWindow, nodes: np.ndarray, phase: int = 0) -> str:
+    """Why a contour at rest (window frame) stopped: on the object's border,
+    partly on the drawing's limit where that cuts the object off, or elsewhere."""
+    on_border, on_limit = features.on_border(nodes, phase)
+    if on_border.mean() >= ON_BORDER_FRACTION:
+        return "converged"
+    return "limited" if (on_border | on_limit).mean() >= ON_BORDER_FRACTION else "stalled"
 
+
+#: Where the drawing's limit cut off a part of the object at least
+#: 2 CUT_OFF_DEPTH + 1 px thick, the region ends on no border of the object:
+#: nodes within CUT_OFF_REACH px of that part rest on the drawing's limit.
+#: (Thinner slivers are the ramp of an edge that a line traced on it, or a
+#: hasty hand's margin, leaves out: the contour rests on the border there.)
+CUT_OFF_DEPTH = 2
+CUT_OFF_REACH = 2
+
+
+def _cut_off_near(cut: np.ndarray | None) -> np.ndarray | None:
+    """The pixels (uint8, 1) within CUT_OFF_REACH of the parts of ``cut`` (the
+    object's pixels the drawing's limit cut off) thicker than a sliver; None
+    when there are none."""
+    if cut is None or not cut.any():
+        return None
+    thick = cv2.morphologyEx(cut.view(np.uint8), cv2.MORPH_OPEN, _disk(CUT_OFF_DEPTH))
+    return cv2.dilate(thick, _disk(CUT_OFF_REACH)) if thick.any() else None
 
 #: A drawing fewer pixels across than this is a click: if it collapses, the
 #: error says to draw larger.
@@ -636,7 +698,7 @@ class FrameFeatures:
     @classmethod
     def of(cls, image, isef_b: float = 0.7) -> FrameFeatures:
         image, missing = _without_missing(_validate_image(image))
-        image = _without_spikes(_as_image(image))
+        image = _without_spikes(_as_image(_in_working_range(image)))  # (as segment reads it: the plane's units)
         plane = background_plane(image)
         image = plane_removed(image, plane, (slice(0, image.shape[0]), slice(0, image.shape[1])))
         return cls(*_edges_and_intensity(normalized_intensity(image), isef_b), plane=plane, missing=missing)
@@ -802,8 +864,14 @@ class _FeatureWindow:
             return self._compute(self._whole_image)  # nothing here: look at the whole image
         avoid = None if self.avoid is None else self.avoid[window]
         image_sides = self._image_sides(window)
-        signed, edges, _ = region_features(intensity, edges, self.drawing - origin, avoid=avoid,
-                                           image_sides=image_sides, model=self.model)
+        signed, edges, _, cut = region_features(intensity, edges, self.drawing - origin, avoid=avoid,
+                                                image_sides=image_sides, model=self.model, with_cut=True)
+        # Not for a line traced on the border: drawn with care (or an earlier
+        # result), it is the limit meant (a nucleus traced among touching
+        # neighbours). Nor for a program's drawing, a tracked frame's: it is
+        # drawn again around a contour against its limit (tracking._redrawn).
+        traced = self.model.border_level is not None
+        self.cut_off = _cut_off_near(cut) if self.user_drawing and not traced else None
         distance = _distance_with_image_border(edges, signed, window, self.image.shape)
         self.anchor = _anchor(signed, self.drawing - origin)
         field = ForceField.from_features(edges, distance, signed, self.weights, max_length=self.max_line_length,
@@ -814,6 +882,18 @@ class _FeatureWindow:
         self.window, self.origin = window, origin
         # Nodes stay within the image's pixel edges.
         self.bounds = np.array(sub.shape, dtype=float) - 0.5
+
+    def on_border(self, nodes: np.ndarray, phase: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Which ``nodes`` (window frame) rest on the object's border (on a
+        feature of the phase's forces), and which on the drawing's limit
+        where that cut the object off (the region's outline stands in for an
+        edge there, but it is the drawing's, not the object's)."""
+        on = self.fields[phase].on_border(nodes)
+        if self.cut_off is None:
+            return on, np.zeros(len(nodes), bool)
+        rows, cols = np.clip(np.rint(nodes).astype(int), 0, np.array(self.cut_off.shape) - 1).T
+        on_limit = on & (self.cut_off[rows, cols] > 0)
+        return on & ~on_limit, on_limit
 
     def follow(self, nodes: np.ndarray) -> np.ndarray:
         """Grow the window if ``nodes`` (window frame) near its border; the shift of the frame."""
@@ -1118,9 +1198,11 @@ MAX_SIGMA_FACTOR = 2.0
 
 
 def _checked_options(material, forces, weights, stiffness, reference, integrator, polarity, max_step_length, tol,
-                     max_steps, n_nodes, sigma, sigma_factor):
+                     max_steps, n_nodes, sigma, sigma_factor, dt=1.0, damping_ratio=1.0, patience=5,
+                     max_line_length=40.0, history_every=5, refine=True, magnify=True):
     """The material, the force weights and the stiffness (None: the one that
     suits the material), once every option is checked (ValueError naming the bad one)."""
+    _check_run_options(dt, damping_ratio, max_steps, patience, max_line_length, history_every, refine, magnify)
     material = get_material(material)
     weights = normalize_weights(forces, weights)
     if stiffness is None:
@@ -1137,9 +1219,9 @@ def _checked_options(material, forces, weights, stiffness, reference, integrator
         raise ValueError(f"integrator must be 'newmark' or 'modal', got {integrator!r}")
     if polarity not in ("auto", "bright", "dark"):
         raise ValueError(f"polarity must be 'auto', 'bright' or 'dark', got {polarity!r}")
-    if not (max_step_length > 0 and tol > 0 and int(max_steps) >= 0):
-        raise ValueError("max_step_length and tol must be positive and max_steps non-negative")
-    if n_nodes is not None and not 3 <= int(n_nodes) <= MAX_NODES:
+    check_number(max_step_length, "max_step_length", inclusive=False)
+    check_number(tol, "tol", inclusive=False)
+    if check_count(n_nodes, "n_nodes", 3, allow_none=True) is not None and n_nodes > MAX_NODES:
         raise ValueError(f"n_nodes must be between 3 and {MAX_NODES}, got {n_nodes!r}: one node every 2-5 px "
                          "is typical (contour.nodes_for_spacing)")
     if sigma is None and not (isinstance(sigma_factor, (int, float, np.number)) and not isinstance(sigma_factor, bool)
@@ -1147,6 +1229,28 @@ def _checked_options(material, forces, weights, stiffness, reference, integrator
         raise ValueError(f"sigma_factor must be above 0 and at most {MAX_SIGMA_FACTOR:g}, got {sigma_factor!r}; "
                          "typical values are 0.75-1.5")
     return material, weights, r
+
+
+#: The widest range of the time step, the normal lines' half-length and the
+#: damping ratio that make sense: beyond them, the numbers overflow or the
+#: lines cross the largest images many times (and their cost grows with them).
+MAX_DT = 1e6
+MAX_LINE_LENGTH = 2000.0
+MIN_LINE_LENGTH = 2.0
+MAX_DAMPING_RATIO = 100.0
+
+
+def _check_run_options(dt, damping_ratio, max_steps, patience, max_line_length, history_every, refine, magnify):
+    """A ValueError naming the first of these options of segment that is out of its range."""
+    check_number(dt, "dt (the time step)", inclusive=False, maximum=MAX_DT)
+    check_number(damping_ratio, "damping_ratio", maximum=MAX_DAMPING_RATIO)
+    check_count(max_steps, "max_steps", 0)
+    check_count(patience, "patience (steps at rest)", 1)
+    check_count(history_every, "history_every", 1)
+    check_number(max_line_length, "max_line_length (px)", minimum=MIN_LINE_LENGTH, maximum=MAX_LINE_LENGTH)
+    for name, flag in (("refine", refine), ("magnify", magnify)):
+        if not isinstance(flag, (bool, np.bool_)):
+            raise ValueError(f"{name} must be True or False, got {flag!r}")
 
 
 def check_segment_options(**options) -> None:
@@ -1323,12 +1427,12 @@ def _set_up(options: dict) -> _Setup:
     the first nodes laid on the drawing, and the feature window read."""
     o = options
     image, missing = _without_missing(_validate_image(o["image"]))
+    image = _in_working_range(image)
     from ._validation import check_contour  # the one validation of segment, match and simulate
 
     init = check_contour(o["init"], "init")
-    material, weights, stiffness = _checked_options(
-        o["material"], o["forces"], o["weights"], o["stiffness"], o["reference"], o["integrator"], o["polarity"],
-        o["max_step_length"], o["tol"], o["max_steps"], o["n_nodes"], o["sigma"], o["sigma_factor"])
+    checked = signature_of(_checked_options).parameters
+    material, weights, stiffness = _checked_options(**{name: o[name] for name in checked})
     # The drawing as the user made it (partly beyond the image, maybe) tells
     # the object from its background; the clipped one starts the contour.
     drawing, start, warn = init, o["start"], o["warn"]
@@ -1419,7 +1523,7 @@ def _time_loop(body: _ElasticBody, setup: _Setup, options: dict, history: list):
         at_rest = rest.at_rest(body.nodes, body.shifts, body.remeshes)
         if at_rest or rest.plateau.swinging():
             if phase == len(features.fields) - 1:
-                stop_reason = _rest_reason(features.fields[phase], body.nodes) if at_rest else "oscillating"
+                stop_reason = _rest_reason(features, body.nodes, phase) if at_rest else "oscillating"
                 break
             # An evolution that swings without progress (edges either side of
             # a blurred border pulling in turn) hands over too: the region
@@ -1441,18 +1545,18 @@ def _final_nodes(body: _ElasticBody, setup: _Setup, stop_reason: str, settled, s
     if stop_reason == "oscillating" and settled is not None:
         # The refinement swings about the border that the evolution found: keep that.
         nodes = settled - features.origin
-        stop_reason = _rest_reason(features.fields[0], nodes)
+        stop_reason = _rest_reason(features, nodes)
     if stop_reason != "cancelled" and body.collapsed:
         nodes, stop_reason = _before_collapse(features, settled, setup.drawing, steps, max_line_length)
-    if stop_reason == "converged" and features.with_refinement:
+    if stop_reason in ("converged", "limited") and features.with_refinement:
         # At rest every node is within a few tenths of a pixel of the border,
         # read on smoothed images and each on its own noise: measure the border
         # on the raw image and fit the polygon to it (see subpixel.polish).
         nodes = _polished(features, nodes)
     nodes = nodes + features.origin
-    if stop_reason == "converged" and (_spread_beyond_the_object(nodes, setup.init, setup.drawing, features,
-                                                                 features.fields[0], setup.shape)
-                                       or _around_others(nodes, features.avoid)):
+    if stop_reason in ("converged", "limited") and (
+            _spread_beyond_the_object(nodes, setup.init, setup.drawing, features, features.fields[0], setup.shape)
+            or _around_others(nodes, features.avoid)):
         stop_reason = "leaked"
     return nodes, stop_reason
 
@@ -1573,7 +1677,7 @@ def _before_collapse(features: _FeatureWindow, settled, drawing, steps: int, max
         # The refinement lost an object a few pixels across that the evolution
         # had found (the region force's lines cross it): keep what succeeded.
         nodes = settled - features.origin
-        return nodes, _rest_reason(features.fields[0], nodes)
+        return nodes, _rest_reason(features, nodes)
     # Nothing held it: the region force shrinks a contour drawn on a uniform
     # background until it is a point. Say so rather than return it.
     across = float(np.ptp(drawing, axis=0).max())
@@ -1597,7 +1701,7 @@ def _first_phase(features: _FeatureWindow, nodes: np.ndarray, carried: bool) -> 
     (ON_BORDER_FRACTION of its nodes): bringing it there is the evolution's
     job. On the Cell Tracking Challenge movie this halved the steps of a
     tracked frame and moved the median centroid error by 0.04 px."""
-    if carried and len(features.fields) > 1 and features.fields[0].on_border(nodes).mean() >= ON_BORDER_FRACTION:
+    if carried and len(features.fields) > 1 and features.on_border(nodes)[0].mean() >= ON_BORDER_FRACTION:
         return 1
     return 0
 

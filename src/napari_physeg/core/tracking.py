@@ -44,14 +44,14 @@ from skimage.filters import threshold_otsu
 from skimage.segmentation import watershed
 
 from ._drain import drain
-from ._validation import check_contour
+from ._validation import check_contour, signature_of
 from .contour import (area_centroid, as_contour, bounding_window, closest_on_polyline, depth_inside, nearest_node,
                       outward_normals, perimeter, positively_oriented, remove_loops, resample, rotation_matrix,
                       signed_area, window_mask)
 from .background import plane_removed
 from .dynamics import DivergenceError
 from .features import _without_missing
-from .matching import _match_pairs
+from .matching import _match_pairs, match
 from .region import _fill, hasty_margin
 from .segmentation import FrameFeatures, _segment_from, check_segment_options, segment
 
@@ -246,9 +246,17 @@ class TrackingResult:
     def n_frames(self) -> int:
         return len(self.contours[0]) if self.contours else 0
 
+    def _object(self, k) -> int:
+        """``k`` as the index of one of the objects, or an IndexError saying how many there are."""
+        is_index = isinstance(k, (int, np.integer)) and not isinstance(k, (bool, np.bool_))
+        if not (is_index and -self.n_objects <= k < self.n_objects):
+            raise IndexError(f"object {k!r} is not one of the {self.n_objects} tracked (0 to {self.n_objects - 1})")
+        return int(k)
+
     def centroids(self, k: int) -> np.ndarray:
         """``(T, 2)`` area centroids of object ``k`` (NaN where it has no contour)."""
-        return np.array([area_centroid(c) if c is not None else (np.nan, np.nan) for c in self.contours[k]])
+        return np.array([area_centroid(c) if c is not None else (np.nan, np.nan)
+                         for c in self.contours[self._object(k)]])
 
     def membrane_map(self, k: int, quantity: str = "normal_velocity", n_arc: int = 100) -> np.ndarray:
         """Object ``k``'s ``quantity`` as an image, arc position x time.
@@ -267,6 +275,7 @@ class TrackingResult:
             Rows are frames (NaN where the object has no value), as QuimP's
             motility and convexity maps and MorphoDynamics' maps.
         """
+        k = self._object(k)
         values = {"normal_velocity": self.normal_velocity, "curvature": self.curvature}
         if quantity not in values:
             raise ValueError(f"quantity must be 'normal_velocity' or 'curvature', got {quantity!r}")
@@ -307,7 +316,12 @@ class TrackingResult:
 
 def _check_frames(frames):
     shape = getattr(frames, "shape", None)
-    if shape is None:
+    if shape is None:  # a list of frames
+        shapes = [np.shape(frame) for frame in frames]
+        if len(set(shapes)) > 1:
+            other = next(t for t, s in enumerate(shapes) if s != shapes[0])
+            raise ValueError(f"frame {other} has shape {shapes[other]} and frame 0 {shapes[0]}: a movie's frames "
+                             "must share one shape (crop or pad them to one)")
         frames = np.asarray(frames)
         shape = frames.shape
     if len(shape) != 3:
@@ -580,7 +594,7 @@ def _touches_side(contour: np.ndarray, shape, missing: np.ndarray | None = None)
     next to its ``missing`` pixels (no data: the view ends there too)."""
     if np.any((contour <= 0.0) | (contour >= np.array(shape) - 1.0)):
         return True
-    if missing is None:
+    if missing is None or missing.all():  # (a frame of no data at all is a gap, not a side: see _measured)
         return False
     near = np.clip(np.rint(contour).astype(int)[:, None, :] + _NEXT_TO, 0, np.array(shape) - 1)
     return bool(missing[near[..., 0], near[..., 1]].any())
@@ -648,6 +662,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
     inits = _check_inits(inits, frame_shape)
     start = _checked_start(start, n_frames)
     options = _checked_segment_options(segment_options, max_steps)
+    match_options = _checked_match_options(match_options)
     polarity = options.pop("polarity", "auto")  # then each object's, from its first frame
     n_obj = len(inits)
     run = _Run(inits=inits, start=start, options=options,
@@ -722,6 +737,28 @@ def _checked_segment_options(segment_options: dict | None, max_steps: int) -> di
     if taken:
         raise ValueError(f"segment_options cannot set {taken}: track() sets them for each object and frame")
     check_segment_options(**options)
+    return options
+
+
+def _checked_match_options(match_options: dict | None) -> dict:
+    """:func:`track`'s ``match_options``, checked before any frame is read (a
+    bad one failed only once the frames were segmented, from inside the
+    matching): options of :func:`match` but those track() sets."""
+    options = dict(match_options or {})
+    taken = sorted({"method", "callback"} & set(options))
+    if taken:
+        raise ValueError(f"match_options cannot set {taken}: track() matches consecutive contours with the "
+                         "order-preserving method, without a callback of its own")
+    unknown = sorted(set(options) - set(signature_of(match).parameters))
+    if unknown:
+        raise ValueError(f"match_options has {unknown}, which are not options of match()")
+    # Matched once on two small outlines: match's own checks, with its words.
+    turn = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
+    circle = np.column_stack([np.sin(turn), np.cos(turn)]) * 10.0
+    try:
+        _match_pairs(circle, circle * [1.2, 0.9], method="order", **options)
+    except ValueError as err:
+        raise ValueError(f"match_options: {err}") from None
     return options
 
 
@@ -1555,7 +1592,9 @@ def _found(image, shared, avoid, t, drawing: _Drawing, predicted, previous, seen
         # it was to start from; its drawing, moved with it, may reach beyond
         # the side while the object lies wholly inside).
         return None, LEFT if previous is not None and _touches_side(predicted, image.shape, shared.missing) else LOST
-    if not res.converged:
+    # The drawing on the start frame is the user's: what it holds of an object
+    # it cuts off (a touching neighbour's blob) is the object to follow.
+    if not (res.converged or (previous is None and res.stop_reason == "limited")):
         return None, LOST
     contour = positively_oriented(res.contour)
     if previous is None:
