@@ -684,6 +684,27 @@ def test_channel_of_an_rgb_image_is_still_read(tmp_path):
         assert stack.shape == (1, 20, 30) and int(stack.max()) == 9
 
 
+def test_a_tiff_of_pages_written_one_by_one_is_read_whole_and_one_of_mixed_shapes_refused(tmp_path):
+    """Found by an outside probe (session 64): a TIFF whose pages are each a
+    series of their own (written a page at a time) gave its first page only,
+    and the other frames were dropped without a word."""
+    tifffile = pytest.importorskip("tifffile")
+    from napari_physeg.io import open_stack
+
+    frames = np.arange(5 * 20 * 30, dtype=np.uint16).reshape(5, 20, 30)
+    with tifffile.TiffWriter(tmp_path / "pages.tif") as tif:
+        for frame in frames:
+            tif.write(frame, contiguous=False)
+    with open_stack(tmp_path / "pages.tif") as stack:
+        np.testing.assert_array_equal(np.asarray(stack), frames)
+    with tifffile.TiffWriter(tmp_path / "mixed.tif") as tif:
+        tif.write(frames[0], contiguous=False)
+        tif.write(frames[1, :10], contiguous=False)
+    with pytest.raises(ValueError, match="holds 2 images of shapes 20 x 30, 10 x 30, not one stack"):
+        with open_stack(tmp_path / "mixed.tif"):
+            pass
+
+
 def test_channel_of_a_hyperstack_and_of_an_rgb_zarr_movie_is_taken(tmp_path, capsys, no_work):
     # Seen: "tcyx.tif has no channels (a 3 x 2 x 20 x 30 stack): leave out --channel", the same for the zarr.
     tifffile, zarr = pytest.importorskip("tifffile"), pytest.importorskip("zarr")

@@ -306,11 +306,16 @@ def open_stack(path, *, channel: int | None = None):
                 with tifffile.TiffFile(path) as tif:
                     axes = tif.series[0].axes
                     cut = _cut_short(tif.series[0], path)
+                    pages = _pages_as_frames(tif, path)
                 if cut:
                     raise _Refused(cut)
                 try:
                     import zarr
-                except ImportError:  # without zarr: a memory map if the file allows, else read whole
+                except ImportError:
+                    zarr = None
+                if pages is not None:  # one series a page: read whole, a frame a page
+                    axes, stack = None, da.from_array(pages, chunks=(1, *pages.shape[1:]))
+                elif zarr is None:  # a memory map if the file allows, else read whole
                     stack = da.from_array(_tiff_without_zarr(path))
                 else:
                     store = tifffile.imread(path, aszarr=True)
@@ -403,6 +408,25 @@ def _need(module: str, path) -> None:
     except ImportError:
         raise ValueError(f"{path} needs the {module} package: pip install {module} "
                          "(or napari-physeg[batch])") from None
+
+
+def _pages_as_frames(tif, path):
+    """A TIFF whose pages are each a series of their own (written one at a
+    time, or by a program that names no stack) as a ``(pages, H, W)`` array;
+    None for a TIFF of one series. Only the first series would be read
+    otherwise, and the other frames dropped without a word. Series of other
+    shapes (an OME file's positions, a page of another size) are refused."""
+    series = tif.series
+    if len(series) < 2:
+        return None
+    shapes = [tuple(s.shape) for s in series]
+    if tif.is_ome or any(len(shape) != 2 for shape in shapes) or len(set(shapes)) > 1 \
+            or len({s.dtype for s in series}) > 1:
+        shown = ", ".join(" x ".join(map(str, shape)) for shape in shapes[:4]) + (", ..." if len(shapes) > 4 else "")
+        raise _Refused(f"{path} holds {len(series)} images of shapes {shown}, not one stack: save the movie's "
+                       "frames as one stack of one shape (e.g. tifffile.imwrite(path, np.stack(frames))), or "
+                       "each image to a file of its own")
+    return np.stack([s.asarray() for s in series])
 
 
 def _tiff_without_zarr(path):
