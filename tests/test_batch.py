@@ -295,6 +295,26 @@ def test_a_track_task_on_a_movie_without_the_object_is_not_ok_and_keeps_its_warn
     assert row["tracks"] == "results/blank.tif/tracks.csv"  # the CSV, written with or without pyarrow
 
 
+def test_one_input_path_given_alone_is_one_input(tmp_path):
+    # Read letter by letter before session 64: "no such input: .../c, .../e, .../l and 5 more".
+    with pytest.raises(ValueError, match=r"no such input: \S*cells\.tif$"):
+        batch.segment_files(str(tmp_path / "cells.tif"), [[[0, 0], [0, 9], [9, 5]]], tmp_path / "out",
+                            progress=False)
+
+
+def test_a_track_task_stopped_by_an_unreadable_frame_fails_and_keeps_the_frames_done(tmp_path, movie):
+    """Found by an outside probe (session 64): a movie whose frame 2 had an
+    infinite pixel stopped tracking there (the single-file command exits 1),
+    but its batch row said "ok", and a rerun skipped it as done."""
+    frames = movie.frames.astype(np.float32)
+    frames[2, 0, 0] = np.inf
+    path = tmp_path / "inf.tif"
+    tifffile.imwrite(path, frames, photometric="minisblack")
+    (row,) = batch._execute(_track_task(path, tmp_path / "out", [movie.outlines[0][::6]]))
+    assert row["status"] == "failed" and "frame 2 has infinite pixels" in row["error"]
+    assert row["tracked"] == 2 and row["last_status"] == "not processed"  # what succeeded is kept
+
+
 def test_the_summary_line_counts_lost_objects_and_the_exit_status_as_track_does(capsys):
     from napari_physeg.cli import _batch_report
 

@@ -232,13 +232,18 @@ def _track_task(task: _Task, tmp: Path) -> list[dict]:
                                      channel=task.channel, node_spacing=task.node_spacing, max_steps=task.max_steps,
                                      match_options=task.match_options, **task.options)
     seconds = time.perf_counter() - t0
+    # A frame that could not be read stops the tracking there: the frames
+    # done are written, but the task failed (a rerun does it again).
+    stopped = "" if tr.stop_reason == "completed" else " ".join(
+        f"tracking stopped ({tr.stop_reason}): {' | '.join(tr.warnings) or 'no frame after it was processed'}".split())
     rows = []
     for k in range(tr.n_objects):
         counts = {s: tr.status[k].count(s) for s in (TRACKED, LOST, LEFT)}
         found = counts[TRACKED] > 0  # else lost (or left) on every frame: not an outcome to call ok
-        rows.append({"input": task.path, "object": k, "status": OK if found else NOT_FOUND,
-                     "error": "" if found else f"object {k} was found on none of the {tr.n_frames} frames: check "
-                     "that the contours were drawn on this movie", "frames": tr.n_frames,
+        error = stopped or ("" if found else f"object {k} was found on none of the {tr.n_frames} frames: check "
+                            "that the contours were drawn on this movie")
+        rows.append({"input": task.path, "object": k, "status": FAILED if stopped else OK if found else NOT_FOUND,
+                     "error": error, "frames": tr.n_frames,
                      "tracked": counts[TRACKED], "lost": counts[LOST], "left": counts[LEFT],
                      "last_status": tr.status[k][-1], "seconds": seconds / tr.n_objects,
                      # The CSV, written with or without pyarrow (the .parquet, if any, is next to it).
@@ -551,7 +556,8 @@ def _checked_run(inputs, inits, out):
     from .core.contour import as_contour
 
     # Absolute: the workers of a cluster may start elsewhere (the files on a shared file system).
-    paths = [str(Path(p).absolute()) for p in inputs]
+    # One path is one input (a string is not a list of its letters).
+    paths = [str(Path(p).absolute()) for p in ([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)]
     if not paths:
         raise ValueError("no input file given")
     missing = [p for p in paths if not Path(p).exists()]
