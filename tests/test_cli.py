@@ -488,6 +488,14 @@ def test_match_and_simulate_from_one_csv(tmp_path, capsys):
     np.testing.assert_allclose(shapes[0], a)
     assert np.abs(shapes[-1] - b[table["node_b"].astype(int)]).max() > 0  # moved toward b
     assert main(["simulate", str(hands), "--out", str(frames)]) == 2  # exists
+    # A custom material, as docs/batch.md says of every command (simulate took none before session 64):
+    # a stiffer a keeps more of its shape on the way.
+    soft, stiff = tmp_path / "soft.csv", tmp_path / "stiff.csv"
+    for out, young in ((soft, "1"), (stiff, "100000")):
+        assert main(["simulate", str(hands), "--out", str(out), "--n-frames", "3", "--young", young,
+                     "--density", "1000"]) in (0, 1)
+    middle = [read_shapes_csv(out)[1] for out in (soft, stiff)]
+    assert not np.allclose(*middle)
     assert main(["match", str(hands), "--out", str(pairs), "--overwrite", "--b-shape", "2"]) == 2
     assert "holds 2 shape(s)" in capsys.readouterr().err
 

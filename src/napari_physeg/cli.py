@@ -95,23 +95,15 @@ def _weights(text):
 
 
 def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> None:
-    from .core import MATERIALS, segment
+    from .core import segment
     from .core.forces import DEFAULT_WEIGHTS
     from .core.materials import suggested_stiffness
     from .core.segmentation import MAX_NODES, MAX_SIGMA_FACTOR, MIN_NODE_SPACING
 
     d = _defaults(segment)
     g = p.add_argument_group("contour model (the Segmentation widget's options; defaults are segment()'s)")
-    g.add_argument("--material", help=f"virtual material of the contour: {', '.join(MATERIALS)}; default "
-                   f"{d['material']}. Soft materials move fast and follow details; stiff metals keep the contour "
-                   "smooth and need a larger --stiffness")
-    g.add_argument("--young", type=_number(float, 0, True), metavar="MPA",
-                   help="a custom material: Young's modulus E in MPa instead of the --material preset's (rubber "
-                   "~100, soft tissue ~0.1, copper ~117000); higher E: a stiffer, smoother, slower contour")
-    g.add_argument("--poisson", type=float, metavar="NU", help="a custom material: Poisson's ratio nu instead "
-                   "of the preset's, typically 0.25-0.49 (rubber 0.49, metals ~0.3)")
-    g.add_argument("--density", type=_number(float, 0, True), metavar="RHO", help="a custom material: mass "
-                   "density in kg/m^3 instead of the preset's, typically 1000-9000 (rubber 1100, copper 8960)")
+    _add_material_options(g, "the contour", d["material"], "Soft materials move fast and follow details; stiff "
+                          "metals keep the contour smooth and need a larger --stiffness")
     g.add_argument("--stiffness", type=_number(float, 0, True), metavar="R",
                    help=f"stiffness constant r (N/m) scaling the image forces: force on a node = r x its feature "
                    f"force; default: the one that suits --material ({suggested_stiffness(d['material']):g} for "
@@ -147,22 +139,47 @@ def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> 
                        help=f"upper bound on time steps per contour; default {d['max_steps']}")
 
 
+def _add_material_options(g, of: str, default: str, advice: str) -> None:
+    """--material and the custom material's constants (--young, --poisson, --density)."""
+    from .core import MATERIALS
+
+    g.add_argument("--material", help=f"virtual material of {of}: {', '.join(MATERIALS)}; default {default}. "
+                   + advice)
+    g.add_argument("--young", type=_number(float, 0, True), metavar="MPA",
+                   help="a custom material: Young's modulus E in MPa instead of the --material preset's (rubber "
+                   "~100, soft tissue ~0.1, copper ~117000); higher E: a stiffer, smoother, slower contour")
+    g.add_argument("--poisson", type=float, metavar="NU", help="a custom material: Poisson's ratio nu instead "
+                   "of the preset's, typically 0.25-0.49 (rubber 0.49, metals ~0.3)")
+    g.add_argument("--density", type=_number(float, 0, True), metavar="RHO", help="a custom material: mass "
+                   "density in kg/m^3 instead of the preset's, typically 1000-9000 (rubber 1100, copper 8960)")
+
+
+def _material_option(args, default: str):
+    """The --material given (a name), a custom Material made of it (or of ``default``) and
+    --young, --poisson, --density, or None when none of them is given."""
+    from .core import get_material
+
+    changes = {name: value for name, value in (("young", args.young and args.young * 1e6),
+                                               ("poisson", args.poisson), ("density", args.density))
+               if value is not None}
+    if not changes:
+        return args.material
+    preset = get_material(args.material or default)
+    return preset.with_(name=f"custom ({preset.name})", **changes)
+
+
 def _segment_options(args) -> dict:
     """The segment() options given on the command line (the others keep the
     core's defaults), checked as segment() would before any image is read."""
     from .core.segmentation import check_segment_options
 
-    opts = {name: getattr(args, name) for name in ("material", "stiffness", "n_nodes", "sigma_factor",
-                                                     "polarity", "max_steps")
-            if getattr(args, name, None) is not None}
-    changes = {name: value for name, value in (("young", args.young and args.young * 1e6),
-                                               ("poisson", args.poisson), ("density", args.density))
-               if value is not None}
-    if changes:  # a custom material: the preset (or the default) with these constants changed
-        from .core import get_material, segment
+    from .core import segment
 
-        preset = get_material(opts.get("material", _defaults(segment)["material"]))
-        opts["material"] = preset.with_(name=f"custom ({preset.name})", **changes)
+    opts = {name: getattr(args, name) for name in ("stiffness", "n_nodes", "sigma_factor", "polarity", "max_steps")
+            if getattr(args, name, None) is not None}
+    material = _material_option(args, _defaults(segment)["material"])
+    if material is not None:
+        opts["material"] = material
     if args.weights is not None:
         opts["forces"] = tuple(k for k, w in args.weights.items() if w > 0)
         opts["weights"] = {k: args.weights[k] for k in opts["forces"]}
@@ -428,10 +445,10 @@ def _simulate(args) -> int:
     a, b = _pair(args)
     _check_output(args.out, args, [args.a, args.b])
     _check_csv_out(args.out)
-    options = {name: getattr(args, name) for name in ("q", "material", "n_frames", "max_steps")
-               if getattr(args, name) is not None}
-    if "material" in options:
-        get_material(options["material"])  # a misspelt material: before matching
+    options = {name: getattr(args, name) for name in ("q", "n_frames", "max_steps") if getattr(args, name) is not None}
+    material = _material_option(args, _defaults(simulate)["material"])
+    if material is not None:
+        options["material"] = get_material(material)  # a misspelt material: before matching
     sim = simulate(a, b, match(a, b, **_match_options(args)), **options)
     write_shapes_csv(args.out, list(sim.frames), leading=[(t,) for t in range(len(sim.frames))])
     state = "came to rest" if sim.converged else "stopped before rest (raise --max-steps)"
@@ -636,7 +653,7 @@ def _add_match(sub):
 
 
 def _add_simulate(sub):
-    from .core import MATERIALS, simulate
+    from .core import simulate
 
     d = _defaults(simulate)
     p = _subparser(sub, "simulate", "simulate the deformation of one contour into another",
@@ -649,7 +666,8 @@ def _add_simulate(sub):
     g.add_argument("--q", type=_number(float, 0, True), help=f"global stiffness constant q (N/m) of the forces "
                    f"pulling each node toward its partner (eq. 17); default {d['q']:g}. Larger: ends closer to b; "
                    "stiff materials need ~1e6-1e8")
-    g.add_argument("--material", help=f"virtual material of a: {', '.join(MATERIALS)}; default {d['material']}")
+    _add_material_options(g, "a", d["material"], "Soft materials follow b's details; stiff ones keep a's shape "
+                          "smooth on the way and need a larger --q")
     g.add_argument("--n-frames", type=_number(int, 2), metavar="T",
                    help=f"frames written, a and the rest shape included; default {d['n_frames']}")
     g.add_argument("--max-steps", type=_number(int, 1), metavar="N",

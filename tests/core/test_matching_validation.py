@@ -138,8 +138,18 @@ def test_a_line_drawn_there_and_back_is_said_to_enclose_no_area():
     # Its nodes spaced along it (as the widgets space a drawing's) repeat on the way back: the message
     # was "a has 9 identical node(s) ... pass each node once".
     there = np.linspace([10.0, 10.0], [30.0, 30.0], 10)
-    with pytest.raises(ValueError, match="a is degenerate: its nodes lie on one line and enclose no area"):
+    with pytest.raises(ValueError, match="a is degenerate: its nodes lie on one line"):
         match(np.vstack([there, there[-2:0:-1]]), HAND)
+
+
+def test_a_sliver_and_complex_coordinates_are_refused_by_name():
+    """Found by an outside probe (session 64): a triangle a millionth as high
+    as long failed in the element ("sigma = 0.00226 is too large"); complex
+    coordinates lost their imaginary part with numpy's warning only."""
+    with pytest.raises(ValueError, match="b is degenerate: its nodes lie on one line.*millionth"):
+        match(HAND, [[0, 0], [0, 10], [1e-6, 5]])
+    with pytest.raises(ValueError, match="a has complex coordinates"):
+        match(HAND + 0j, HAND)
 
 
 def test_a_figure_eight_whose_nodes_meet_where_it_crosses_is_told_to_be_redrawn():

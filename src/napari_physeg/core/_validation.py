@@ -29,13 +29,16 @@ __all__ = ["check_contour", "check_count", "check_number", "node_array", "NEAR_D
 #: simulation diverge, 1e-6 did not).
 NEAR_DUPLICATE = 1e-5
 #: Smallest ratio of the second to the first singular value of the centred
-#: nodes: below it they lie on one line.
-_COLLINEAR = 1e-9
+#: nodes: below it they lie on one line (a triangle a millionth as high as
+#: long reached the matching, whose element then failed on its spacing).
+_COLLINEAR = 1e-6
 
 
 def node_array(points, name: str = "contour", *, min_nodes: int = 3) -> np.ndarray:
     """``points`` as a float64 ``(N, 2)`` copy; ValueError if it cannot be
     one: empty, another shape, NaN or infinite values."""
+    if np.iscomplexobj(points):  # numpy would drop the imaginary part with a warning only
+        raise ValueError(f"{name} has complex coordinates: pass (row, col) as two real columns")
     try:
         arr = np.array(points, dtype=np.float64)
     except (TypeError, ValueError) as err:
@@ -88,7 +91,8 @@ def check_contour(points, name: str = "contour", *, min_nodes: int = 3) -> np.nd
     singular = np.linalg.svd(centred, compute_uv=False)
     if singular[1] <= _COLLINEAR * singular[0]:
         _check_distinct(arr, name, min_nodes)  # (too few distinct nodes says more)
-        raise ValueError(f"{name} is degenerate: its nodes lie on one line and enclose no area")
+        raise ValueError(f"{name} is degenerate: its nodes lie on one line (or within a millionth of its length "
+                         "of one) and enclose no area")
     try:
         _check_repeats(centred, name)
     except ValueError:
