@@ -201,6 +201,22 @@ def test_ellipse_saved_by_napari_is_read_as_an_ellipse(tmp_path):
     np.testing.assert_allclose(data_back[0], np.c_[np.full(len(ellipse), 3.0), ellipse])
 
 
+def test_a_shape_across_frames_or_between_frames_is_refused(tmp_path):
+    """Found by an outside probe (session 64): a polygon whose vertices lie on
+    frames 0, 1 and 2 was read on frame 0 only, and one at axis-0 = 1.5 was
+    tracked from frame 2, both without a word."""
+    from napari_physeg.batch import drawn_frame
+
+    lines = ["index,shape-type,vertex-index,axis-0,axis-1,axis-2"]
+    lines += [f"0,polygon,{k},{k},{r},{c}" for k, (r, c) in enumerate([(10, 10), (10, 30), (30, 20)])]
+    (tmp_path / "across.csv").write_text("\n".join(lines) + "\n")
+    with pytest.raises(ValueError, match=r"shape 0 has vertices on 3 planes \(leading coordinates \(0\), \(1\)"):
+        read_shapes_csv(tmp_path / "across.csv")
+    with pytest.raises(ValueError, match="axis-0 = 1.5, between frames"):
+        drawn_frame([(1.5,)], "init.csv")
+    assert drawn_frame([(2.0,), (2.0,)], "init.csv") == 2 and drawn_frame([(), ()], "init.csv") is None
+
+
 def test_rotated_and_nd_ellipses_keep_their_axes_and_frame(tmp_path):
     angle = np.deg2rad(30)
     rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])

@@ -544,7 +544,13 @@ def drawn_frame(leading, name) -> int | None:
     """The one frame that contours with leading coordinates ``leading`` (as
     :func:`~napari_physeg.io.read_shapes_csv` gives them) lie on, or None for 2D
     ones; ``name`` names the contours in the message."""
-    drawn = sorted({int(round(lead[0])) for lead in leading if lead})
+    frames = [lead[0] for lead in leading if lead]
+    between = [f for f in frames if abs(f - round(f)) > 1e-6]
+    if between:  # rounded, it would name a frame the user did not draw on
+        raise ValueError(f"a contour of {name} lies at axis-0 = {between[0]:g}, between frames: draw the "
+                         "contours on a frame (in a Shapes layer of the image's scale), or say which with start "
+                         "(--start)")
+    drawn = sorted({int(round(f)) for f in frames})
     if len(drawn) > 1:
         raise ValueError(f"the contours of {name} lie on frames {drawn}: draw them all on one frame, "
                          "or say which with start (--start)")

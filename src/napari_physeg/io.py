@@ -78,6 +78,7 @@ def read_shapes_csv(path, *, leading: bool = False):
             full = _napari_shapes(header, rows[1:], path)
             out = [v[:, -2:] for v in full]
             before = [tuple(v[0, :-2]) for v in full]
+            _check_one_plane(full)
         else:
             try:
                 [float(c) for c in rows[0][-2:]]
@@ -101,6 +102,17 @@ def read_shapes_csv(path, *, leading: bool = False):
     if bad:
         raise ValueError(f"could not read contours from {path}: shape {bad[0]} has a NaN or infinite coordinate")
     return (out, before) if leading else out
+
+
+def _check_one_plane(shapes) -> None:
+    """A ValueError unless every shape's vertices share their leading
+    coordinates (a frame, a slice): only the first vertex's were read."""
+    for k, vertices in enumerate(shapes):
+        planes = np.unique(vertices[:, :-2], axis=0)
+        if len(planes) > 1 and np.isfinite(planes).all():  # (NaN ones are named below)
+            shown = ", ".join("(" + ", ".join(f"{x:g}" for x in plane) + ")" for plane in planes[:3])
+            raise ValueError(f"shape {k} has vertices on {len(planes)} planes (leading coordinates {shown}"
+                             f"{', ...' if len(planes) > 3 else ''}): draw each contour on one frame")
 
 
 def _csv_rows(path: Path) -> list[list[str]]:
