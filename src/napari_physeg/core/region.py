@@ -71,6 +71,13 @@ _BORDER_STEP = 0.6
 #: its centre when at least this share of it differs from the line more
 #: than twice what anything outside does (see drawing_levels).
 _OFF_CENTRE_SHARE = 0.15
+#: A box about a thin cell lying across it holds it in twice its width over
+#: its length of its pixels: a tenth for a cell 20 times as long as wide
+#: (see _object_on_open_ground).
+_HELD_SHARE = 0.05
+#: ... where the outside's level is one of its own (not the ground's shading)
+#: when it differs from the line's by this share of the object's contrast.
+_OWN_LEVEL = 0.25
 
 #: A drawn line that crosses neighbours is around the object when its
 #: quarter nearest the background's level lies at least this share of the
@@ -441,6 +448,10 @@ def _around_after_all(s: _DrawingReading, beyond) -> tuple[float, float] | None:
         # within the drawing, as for a drawing around it; its background is
         # beyond the line.
         return centre, beyond
+    # (Before the neighbours' rules: the line of a box about a thin cell
+    # lies on the ground, where faint halos differ from its middle.)
+    if (held := _object_on_open_ground(s)) is not None:
+        return held, on_line
     if (crossed := _line_among_neighbours(s.along, centre, outside)) is not None:
         return centre, crossed
     if _line_over_neighbours(s.intensity, s.drawing, s.middle, s.line, centre, outside):
@@ -1094,6 +1105,41 @@ def _off_centre_level(within: np.ndarray, span: float, on_line: float, outside: 
         return None
     other, share = _other_class(within, on_line, floor)
     return other if share >= _OFF_CENTRE_SHARE and abs(other - on_line) > least else None
+
+
+def _object_on_open_ground(s: _DrawingReading) -> float | None:
+    """The level of an object the drawing holds off its middle, its line and
+    middle both on the open ground around it; None if there is none.
+
+    A box about a thin cell that lies across it has its middle mostly on the
+    ground, and the far rings' level (the neighbours') hides the cell from
+    :func:`_off_centre_level`: read as drawn inside the ground, the contour
+    spread over the image (phase-contrast PSC cells of the Cell Tracking
+    Challenge). There is one when the middle's level lies nearer the line's
+    than the other class's, at least :data:`_HELD_SHARE` of the drawing's
+    pixels lie in that class, the piece of that class the drawing holds lies
+    within it (a tight box's line may touch the ends of the cell), and the
+    ground the line lies on (its level, away from the other class's and from
+    the outside's) runs across the view, to three of its sides, as it does
+    between objects: inside a textured nucleus, the line's level away from
+    its background's is the nucleus, which reaches one side at most.
+    """
+    on_line, outside, floor = s.on_line, s.outside, s.floor
+    other, share = _other_class(s.within, on_line, floor)
+    if share < _HELD_SHARE or abs(s.centre - on_line) >= 0.5 * abs(other - on_line):
+        return None
+    body, _ = _marked_piece(s.intensity, other, on_line, s.drawn)
+    if body is None or (body & ~s.drawn).any():
+        return None
+    # The ground at the line's level: off the other class, and off the
+    # outside's level too when that is a level of its own (inside a nucleus
+    # it is the background, and what is left, the nucleus, reaches no side;
+    # on the ground, halos and shading differ from the line by a few
+    # hundredths of the object's contrast).
+    own_level = np.isfinite(outside) and abs(outside - on_line) > max(floor, _OWN_LEVEL * abs(other - on_line))
+    away = _on_side(s.intensity, on_line, outside) if own_level else None
+    ground, _ = _marked_piece(s.intensity, on_line, other, s.line, within=away)
+    return other if ground is not None and _sides_reached(ground) >= 3 else None
 
 
 def _side_width(size: float) -> int:
