@@ -1372,21 +1372,27 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
     """
     # Everything happens near the drawing: within its reach (below) and one
     # drawing size beyond, where neighbours that could take the object lie.
-    region = _object_region_on_crop(signed, drawing, model, image_sides, stronger,
-                                    1.0 if model.drawn_around else _INSIDE_LIMIT)
-    if region is not None and model.drawn_around and _cut_by_crop(region):
+    found = _object_region_on_crop(signed, drawing, model, image_sides, stronger,
+                                   1.0 if model.drawn_around else _INSIDE_LIMIT)
+    if found is not None and model.drawn_around and _cut_by_crop(found):
         # Read as drawn across a body larger than the crop around the
         # drawing (see _drawn_across): the body whole, up to the reach of a
         # drawing inside it. On the drawing's crop, a circle a sixth of a
         # disk's radius over its edge ended on the crop's side, "converged".
         # Seen whole, the body may be no body (touching nuclei, not convex
-        # together): then the crop's part of it stands.
+        # together, are limited to the drawing): then the crop's part stands.
         whole = _object_region_on_crop(signed, drawing, model, image_sides, stronger, _INSIDE_LIMIT)
-        if whole is not None and np.count_nonzero(region[1] & ~whole[1]) <= 0.05 * np.count_nonzero(region[1]):
-            region = whole
-    if region is None:
+        if whole is not None and np.count_nonzero(found[1] & ~whole[1]) <= WHOLE_HOLDS * np.count_nonzero(found[1]):
+            found = whole
+    if found is None:
         return None
-    return region[1:] if with_cut else region[1]
+    _, region, cut = found
+    return (region, cut) if with_cut else region
+
+
+#: A region seen on a larger crop is the same body seen whole when it holds
+#: all but this share of the region seen on the drawing's crop.
+WHOLE_HOLDS = 0.05
 
 
 def _cut_by_crop(cropped) -> bool:
