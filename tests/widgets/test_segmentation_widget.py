@@ -893,3 +893,35 @@ def test_segmenting_a_result_again_keeps_it(viewer_widget, wait_done, errors, ds
     b = polygon2mask(image.shape, np.asarray(again[0].data[0], float))
     assert bool(again[0].features["converged"][0])
     assert (a & b).sum() / (a | b).sum() > 0.8
+
+
+@pytest.mark.parametrize("when", ["before the run", "during the run"])
+def test_the_3d_view_is_refused_up_front_and_a_switch_to_it_loses_no_result(dock, wait_done, errors, when):
+    """Found by an outside probe (session 64): on a 2D image in the 3D view
+    (a stack shown in 3D beside it), or with the view switched to 3D during
+    the run, napari took no new data on the preview layer: a traceback at
+    each preview, every contour lost ("Could not add the result layers"),
+    and the preview left behind. Now the 3D view is refused at Run as for a
+    stack, and a switch during the run keeps the results in a layer of their own."""
+    viewer, widget = dock(SegmentationWidget)
+    yy, xx = np.mgrid[:128, :128]
+    viewer.add_image(((yy - 64) ** 2 + (xx - 64) ** 2 < 25 ** 2) * 200.0 + 20, name="img")
+    t = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    viewer.add_shapes([np.column_stack([64 + 35 * np.sin(t), 64 + 35 * np.cos(t)])], shape_type="polygon",
+                      name="drawn")
+    widget._on_layers_changed()
+    widget._image.value, widget._shapes.value = viewer.layers["img"], viewer.layers["drawn"]
+    if when == "before the run":
+        viewer.dims.ndisplay = 3
+    widget.run()
+    if when == "during the run":
+        viewer.dims.ndisplay = 3
+    wait_done(widget)
+    names = [layer.name for layer in viewer.layers]
+    assert not any("preview" in name for name in names), names
+    if when == "before the run":
+        assert len(errors) == 1 and "switch to the 2D view" in errors[0]
+    else:
+        assert not errors, errors
+        (result,) = [layer for layer in viewer.layers if "segmented" in layer.name]
+        assert len(result.data) == 1 and np.ptp(result.data[0][:, -1]) > 40  # the disk's 50 px, not a point

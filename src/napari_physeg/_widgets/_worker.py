@@ -175,6 +175,12 @@ class WorkerWidget(Container):
 
         if kind != "shapes" or preview is None or preview not in self.viewer.layers:
             return self.viewer.add_layer(Layer.create(data, meta, kind))
+        if self.viewer.dims.ndisplay != 2:
+            # The user went to the 3D view during the run: napari takes no new
+            # data on a Shapes layer there (the results were lost), but adds a
+            # new layer. (The collection a removal runs is the lesser harm.)
+            self.viewer.layers.remove(preview)
+            return self.viewer.add_layer(Layer.create(data, meta, kind))
         from napari.utils.colormaps.standardize_color import transform_color
 
         shape_type = meta.get("shape_type", "polygon")

@@ -399,8 +399,9 @@ def prepare_segmentation(image_layer, shapes_layer, *, world_point=None, channel
     if ndim < 2:
         raise InputError(f"{image_layer.name!r} is {ndim}D: the segmentation needs a 2D image or a stack of them")
     n_world = len(world_point) if world_point is not None else ndim
-    if ndim > 2:
-        check_plane_view(n_world, ndisplay, dims_order)
+    # (A 2D image in the 3D view too: napari cannot show the run's contours
+    # on a Shapes layer there, and the preview and results were lost.)
+    check_plane_view(n_world, ndisplay, dims_order if ndim > 2 else None)
     data = image_layer.data[0] if image_layer.multiscale else image_layer.data
     shape = tuple(int(s) for s in data.shape[: ndim])
     leading = slice_index(image_layer, world_point if world_point is not None else np.zeros(ndim), shape)
@@ -715,7 +716,8 @@ class SegmentationWidget(WorkerWidget):
             for index, contour in changed.items():
                 if index < len(polys):
                     polys[index] = contours_to_shapes_data([contour], self.job.leading, closed=True)[0]
-            layer.data = polys
+            if self.viewer.dims.ndisplay == 2:  # (napari takes no new data on a Shapes layer in the 3D view)
+                layer.data = polys
         self._advance(value)
 
     def _on_returned(self, outcome: SegmentationOutcome):
