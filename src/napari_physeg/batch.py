@@ -80,20 +80,11 @@ def segment_options_for(contour, options: dict, node_spacing: float | None) -> d
     ``node_spacing`` (px) becomes its node count, as in the widgets
     (:func:`~napari_physeg.core.contour.nodes_for_spacing`), at most
     ``MAX_NODES`` (with a warning): the most :func:`~napari_physeg.core.segment` takes."""
-    from .core.contour import nodes_for_spacing, perimeter
-    from .core.segmentation import MAX_NODES
+    from .core.segmentation import nodes_at_spacing
 
     if node_spacing is None:
         return dict(options)
-    contour = np.asarray(contour, float)
-    n_nodes = nodes_for_spacing(contour, node_spacing)
-    if n_nodes > MAX_NODES:  # a sub-pixel typo (0.01 for 1) ran for hours
-        length = perimeter(contour)
-        warnings.warn(f"a node spacing of {node_spacing:g} px gives a contour {length:.0f} px around {n_nodes} "
-                      f"nodes: it gets {MAX_NODES} ({length / MAX_NODES:.2g} px apart), the most "
-                      "segment takes; 2-5 px is typical", UserWarning, stacklevel=2)
-        n_nodes = MAX_NODES
-    return {**options, "n_nodes": n_nodes}
+    return {**options, "n_nodes": nodes_at_spacing(contour, node_spacing)}
 
 
 # --------------------------------------------------------------------------

@@ -925,3 +925,18 @@ def test_the_3d_view_is_refused_up_front_and_a_switch_to_it_loses_no_result(dock
         assert not errors, errors
         (result,) = [layer for layer in viewer.layers if "segmented" in layer.name]
         assert len(result.data) == 1 and np.ptp(result.data[0][:, -1]) > 40  # the disk's 50 px, not a point
+
+
+def test_a_node_spacing_too_fine_for_a_large_drawing_gives_it_the_most_nodes_with_a_warning():
+    """Found by an outside probe (session 64): the spin box's 0.5 px on an
+    object 840 px across asked segment for 5652 nodes, and the run failed
+    with a message naming an internal function. As the command line does:
+    the most segment takes, with a warning that says so."""
+    from napari_physeg._widgets._inputs import node_count
+    from napari_physeg.core.segmentation import MAX_NODES
+
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    drawn = np.column_stack([512 + 450 * np.sin(t), 512 + 450 * np.cos(t)])
+    with pytest.warns(UserWarning, match=f"it gets {MAX_NODES}"):
+        assert node_count(drawn, node_spacing=0.5) == MAX_NODES
+    assert node_count(drawn, node_spacing=3.0) < MAX_NODES

@@ -405,3 +405,22 @@ def test_many_warnings_of_a_run_are_grouped():
     assert shown[:3] == messages[:3] and len(shown) == 4
     assert shown[3] == "... and 20 more warning(s) like these (object(s) " + ", ".join(map(str, range(3, 23))) + ")"
     assert _grouped(messages[:3]) == messages[:3]
+
+
+@pytest.mark.parametrize("kind", ["empty shapes", "two points"])
+def test_nothing_drawn_is_said_so_not_sent_to_another_frame(dock, errors, kind):
+    """Found by an outside probe (session 64): an empty Shapes layer, or two
+    points on the frame, was told to "go to the frame the contours were drawn
+    on"; the Segmentation widget's words say what is missing."""
+    viewer, widget = dock(TrackingWidget)
+    viewer.add_image(np.random.default_rng(0).random((5, 64, 64)), name="movie")
+    if kind == "empty shapes":
+        viewer.add_shapes(name="drawn", ndim=3)
+    else:
+        viewer.add_points([[0, 20, 20], [0, 30, 40]], name="drawn")
+    viewer.dims.set_point(0, 0)
+    widget.reset_choices()
+    widget._shapes.value = viewer.layers["drawn"]
+    widget.run()
+    expected = "is empty: draw a polygon" if kind == "empty shapes" else "has 2 point(s) on this slice"
+    assert len(errors) == 1 and expected in errors[0], errors

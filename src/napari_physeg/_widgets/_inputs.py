@@ -17,9 +17,8 @@ from magicgui.widgets import ComboBox, FloatSpinBox, SpinBox
 from napari.layers import Image, Points, Shapes, Vectors
 
 from ..core import MATERIALS, Material
-from ..core.contour import nodes_for_spacing
 from ..core.materials import suggested_stiffness
-from ..core.segmentation import DEFAULT_NODE_SPACING, MAX_NODES, MIN_NODE_SPACING, drawing_nodes
+from ..core.segmentation import DEFAULT_NODE_SPACING, MAX_NODES, MIN_NODE_SPACING, drawing_nodes, nodes_at_spacing
 from ._layers import PointsAsPolygon, image_transform_kwargs, shape_in_layer_coords
 
 __all__ = [
@@ -88,6 +87,19 @@ def check_plane_view(n_world: int, ndisplay: int, dims_order=None, what: str = "
     if dims_order is not None and set(tuple(dims_order)[-2:]) != {n_world - 2, n_world - 1}:
         raise InputError("the displayed plane is not the image's last two axes: reset the axis order "
                          "(the 'transpose'/'roll dimensions' buttons) so that rows and columns are displayed")
+
+
+def nothing_drawn(layer, what: str) -> str | None:
+    """Why the initial contours' ``layer`` (a Shapes layer, or a Points layer
+    read as one polygon, see PointsAsPolygon) holds no contour, saying what to
+    draw to ``what``; None when it holds one."""
+    if isinstance(layer, PointsAsPolygon) and not layer.data:
+        return (f"the Points layer {layer.name!r} has {layer.n_points} point(s) on this slice: a contour needs at "
+                "least 3; click them around (or inside) the object, in order")
+    if len(layer.data) == 0:
+        return (f"the Shapes layer {layer.name!r} is empty: draw a polygon, lasso, ellipse or rectangle around (or "
+                f"inside) the object to {what}, then press Run again")
+    return None
 
 
 def off_image(contour, shape, where: str) -> str | None:
@@ -188,7 +200,7 @@ def node_count(contour, node_spacing: float | None = None, n_nodes: int | None =
     if node_spacing is None:
         return None
     try:
-        return nodes_for_spacing(contour, node_spacing)
+        return nodes_at_spacing(contour, node_spacing)
     except ValueError as err:
         raise InputError(str(err)) from None
 

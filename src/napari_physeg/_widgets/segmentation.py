@@ -51,6 +51,7 @@ from ._inputs import (
     core_default,
     image_layer_choices,
     node_count,
+    nothing_drawn,
     off_image,
 )
 from ._layers import (
@@ -333,12 +334,8 @@ def _checked_layers(image_layer, shapes_layer, world_point):
                          "'initial contours'")
     if isinstance(shapes_layer, Points):
         shapes_layer = PointsAsPolygon(shapes_layer, world_point)
-        if not shapes_layer.data:
-            raise InputError(f"the Points layer {shapes_layer.name!r} has {shapes_layer.n_points} point(s) on this "
-                             "slice: a contour needs at least 3; click them around (or inside) the object, in order")
-    if len(shapes_layer.data) == 0:
-        raise InputError(f"the Shapes layer {shapes_layer.name!r} is empty: draw a polygon, lasso, ellipse or "
-                         "rectangle around (or inside) the object to segment, then press Run again")
+    if (why := nothing_drawn(shapes_layer, "segment")) is not None:
+        raise InputError(why)
     return shapes_layer
 
 

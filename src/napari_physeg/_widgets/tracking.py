@@ -31,7 +31,7 @@ from skimage.util import montage
 
 from ..core import LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, segment, track
 from ._inputs import (PHYSICS_TIPS, PREVIEW_COLOR, PREVIEW_KEY, PhysicsControls, check_plane_view,
-                      contour_layer_choices, core_default, image_layer_choices, off_image)
+                      contour_layer_choices, core_default, image_layer_choices, nothing_drawn, off_image)
 from ._layers import PointsAsPolygon, image_transform_kwargs, shapes_to_image_coords, slice_index
 from ._worker import WorkerWidget, relay
 
@@ -288,6 +288,8 @@ class TrackingWidget(WorkerWidget):
                          "track from the current frame")
         if isinstance(shapes, Points):  # its points on this frame, in the order clicked: one contour
             shapes = PointsAsPolygon(shapes, point)
+        if (why := nothing_drawn(shapes, "track")) is not None:  # (not "go to the frame ...": nothing is drawn)
+            raise ValueError(why)
         sliced = shapes_to_image_coords(shapes, image, world_point=point)
         if sliced.refused:  # each drawing is an object: none is left out unsaid
             raise ValueError(sliced.refused[0])

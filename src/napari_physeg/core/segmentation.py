@@ -196,23 +196,29 @@ def _warn_if_figure_eight(drawing: np.ndarray) -> None:
 MAX_REACH_BEYOND = 4.0
 
 
-def _clip_to_image(init: np.ndarray, shape, warn: bool = True) -> np.ndarray:
+def check_on_image(init: np.ndarray, shape, name: str = "init") -> None:
+    """A ValueError, naming ``name``, when the drawing ``init`` lies wholly
+    outside an image of ``shape``, or reaches far beyond it (MAX_REACH_BEYOND)."""
     hi = np.array(shape, dtype=float) - 1.0
-    outside = np.any((init < 0) | (init > hi), axis=1)
-    if outside.all():
-        lo_box, hi_box = init.min(0), init.max(0)
-        if np.any(hi_box < 0) or np.any(lo_box > hi):
-            raise ValueError(
-                f"init lies wholly outside the image (image shape {tuple(shape)}, contour spans rows "
-                f"{lo_box[0]:.1f}..{hi_box[0]:.1f}, cols {lo_box[1]:.1f}..{hi_box[1]:.1f}); "
-                "check that the contour and image use the same coordinates"
-            )
+    lo_box, hi_box = init.min(0), init.max(0)
+    if np.any(hi_box < 0) or np.any(lo_box > hi):
+        raise ValueError(
+            f"{name} lies wholly outside the image (image shape {tuple(shape)}, contour spans rows "
+            f"{lo_box[0]:.1f}..{hi_box[0]:.1f}, cols {lo_box[1]:.1f}..{hi_box[1]:.1f}); "
+            "check that the contour and image use the same coordinates"
+        )
     beyond = float(np.max(np.maximum(-init, init - hi)))
     if beyond > MAX_REACH_BEYOND * max(shape):
         raise ValueError(
-            f"init reaches {beyond:.3g} px beyond the image (image shape {tuple(shape)}): check that the contour "
+            f"{name} reaches {beyond:.3g} px beyond the image (image shape {tuple(shape)}): check that the contour "
             "is in pixels of this image (not in microns or nanometres, or another image's coordinates), "
             "and draw it on or near the image")
+
+
+def _clip_to_image(init: np.ndarray, shape, warn: bool = True) -> np.ndarray:
+    check_on_image(init, shape)
+    hi = np.array(shape, dtype=float) - 1.0
+    outside = np.any((init < 0) | (init > hi), axis=1)
     if outside.any():
         if warn:
             warnings.warn(
@@ -1251,6 +1257,21 @@ def _check_run_options(dt, damping_ratio, max_steps, patience, max_line_length, 
     for name, flag in (("refine", refine), ("magnify", magnify)):
         if not isinstance(flag, (bool, np.bool_)):
             raise ValueError(f"{name} must be True or False, got {flag!r}")
+
+
+def nodes_at_spacing(contour, node_spacing: float) -> int:
+    """The node count that puts nodes ``node_spacing`` px apart on
+    ``contour``, at most MAX_NODES, with a warning (a sub-pixel typo, 0.01
+    for 1, ran for hours; the widgets asked segment for more and failed)."""
+    contour = np.asarray(contour, float)
+    n_nodes = nodes_for_spacing(contour, node_spacing)
+    if n_nodes > MAX_NODES:
+        length = perimeter(contour)
+        warnings.warn(f"a node spacing of {node_spacing:g} px gives a contour {length:.0f} px around {n_nodes} "
+                      f"nodes: it gets {MAX_NODES} ({length / MAX_NODES:.2g} px apart), the most segment takes; "
+                      "2-5 px is typical", UserWarning, stacklevel=3)
+        n_nodes = MAX_NODES
+    return n_nodes
 
 
 def check_segment_options(**options) -> None:

@@ -53,7 +53,7 @@ from .dynamics import DivergenceError
 from .features import _without_missing
 from .matching import _match_pairs, match
 from .region import _fill, hasty_margin
-from .segmentation import FrameFeatures, _segment_from, check_segment_options, segment
+from .segmentation import FrameFeatures, _segment_from, check_on_image, check_segment_options, segment
 
 __all__ = ["track", "iter_track", "TrackingResult", "TrackingProgress", "TRACKED", "LOST", "LEFT"]
 
@@ -358,9 +358,7 @@ def _check_inits(inits, frame_shape):
     if not out:
         raise ValueError("inits is empty: give one (N, 2) contour per object to track")
     for k, c in enumerate(out):
-        if np.all((c < 0) | (c > np.array(frame_shape) - 1)):
-            raise ValueError(f"inits[{k}] lies wholly outside the frames ({frame_shape}); "
-                             "check that contours and frames use the same (row, col) coordinates")
+        check_on_image(c, frame_shape, f"inits[{k}]")
     return out
 
 
@@ -830,7 +828,8 @@ def _warn_not_found(run: _Run, image: np.ndarray) -> list[str]:
                    f"same object, which contours that never overlap cannot share; draw each object once")
         else:
             why = ("no object came to rest under its drawing; check that it is drawn around (or inside) one "
-                   "object, or the segment_options (e.g. max_steps, material and stiffness)")
+                   "object, or the contour's options (steps per frame, material and stiffness: the Tracking "
+                   "widget's; max_steps and segment_options of track())")
         said.append(f"object {k} was not found on the start frame {run.start} and is reported lost: {why}")
         warnings.warn(said[-1], UserWarning, stacklevel=5)
     return said
