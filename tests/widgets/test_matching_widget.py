@@ -450,6 +450,22 @@ def test_saving_where_nothing_can_be_written_is_a_message(viewer_widget, wait_do
     assert len(notes["error"]) == 1 and "Could not save" in notes["error"][0] and "another place" in notes["error"][0]
 
 
+def test_the_suggested_file_name_holds_no_folder(viewer_widget, wait_done, tmp_path, monkeypatch):
+    """Found by an outside probe (session 64): a layer named "A/B: cells"
+    suggested a file in a folder "A" that is not there."""
+    viewer, widget = viewer_widget
+    viewer.open_sample("napari-physeg", "hand_poses")
+    for layer in viewer.layers:
+        layer.name = f"A/B: {layer.name}"
+    widget.reset_choices()
+    widget.run()
+    wait_done(widget)
+    asked = []
+    monkeypatch.setattr(_worker, "ask_save_path", lambda widget, title, name: asked.append(name) or "")
+    widget._export_btn.native.click()
+    assert len(asked) == 1 and asked[0].endswith(" pairs.csv") and not any(c in asked[0] for c in '/\\:')
+
+
 def test_a_points_layer_is_a_contour(viewer_widget, wait_done, notes, poses):
     # Points clicked around an object, in order, are one polygon.
     viewer, widget = viewer_widget

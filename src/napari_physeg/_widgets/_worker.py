@@ -11,6 +11,7 @@ neither leaves a thread running nor touches deleted Qt widgets.
 from __future__ import annotations
 
 import functools
+import re
 import threading
 import time
 from collections import deque
@@ -120,8 +121,10 @@ class WorkerWidget(Container):
 
     def _ask_export(self, *_):
         pair = getattr(self, "pair", None)
-        name = f"{pair.a_label} to {pair.b_label} {self.export_what}.csv" if pair else f"{self.export_what}.csv"
-        path = ask_save_path(self, f"Save the {self.export_what} as CSV", name)
+        name = f"{pair.a_label} to {pair.b_label} {self.export_what}" if pair else self.export_what
+        # Layer names may hold what a file name cannot ("A/B: cells" named a folder that is not there).
+        name = re.sub(r'[\\/:*?"<>|]+', "_", name).strip(" .") or "export"
+        path = ask_save_path(self, f"Save the {self.export_what} as CSV", f"{name}.csv")
         if not path:
             return
         try:
