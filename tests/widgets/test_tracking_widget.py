@@ -380,6 +380,15 @@ def test_the_tidy_table_is_saved_as_csv(movie_in_viewer, wait_done, tmp_path):
     assert list(saved.columns) == list(expected.columns) and len(saved) == len(expected)
     np.testing.assert_allclose(saved["normal_velocity"], expected["normal_velocity"])
     assert set(saved["status"]) == {"tracked"} and saved["frame"].max() == 7
+    # The file name it suggests names the movie (it was "tracks.csv" for every movie, session 63).
+    from napari_physeg._widgets import _worker
+
+    asked = []
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(_worker, "ask_save_path", lambda widget, title, name: asked.append(name) or "")
+        widget._export_btn.native.click()
+    movie = next(layer.name for layer in viewer.layers if layer.ndim == 3 and "tracked" not in layer.name)
+    assert asked == [f"{movie} tracks.csv"]
 
 
 def test_shapes_drawn_on_other_frames_are_said_to_be_left_out(dock, wait_done, errors, warned):

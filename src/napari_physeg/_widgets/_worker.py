@@ -119,11 +119,14 @@ class WorkerWidget(Container):
     #: What the CSV holds, for the file name; a widget that exports sets it and defines export_table().
     export_what = ""
 
-    def _ask_export(self, *_):
+    def export_name(self) -> str:
+        """The suggested file name's stem: what the CSV holds, and of which layers."""
         pair = getattr(self, "pair", None)
-        name = f"{pair.a_label} to {pair.b_label} {self.export_what}" if pair else self.export_what
+        return f"{pair.a_label} to {pair.b_label} {self.export_what}" if pair else self.export_what
+
+    def _ask_export(self, *_):
         # Layer names may hold what a file name cannot ("A/B: cells" named a folder that is not there).
-        name = re.sub(r'[\\/:*?"<>|]+', "_", name).strip(" .") or "export"
+        name = re.sub(r'[\\/:*?"<>|]+', "_", self.export_name()).strip(" .") or "export"
         path = ask_save_path(self, f"Save the {self.export_what} as CSV", f"{name}.csv")
         if not path:
             return

@@ -244,6 +244,7 @@ class TrackingWidget(WorkerWidget):
         self.output_layers: list = []
         self._preview = None
         self._run_info = None
+        self._movie_name = None  # the last run's movie, for the file name the export suggests
         self._image = ComboBox(label="movie (image)", choices=self._image_choices, tooltip=_TIPS["image"])
         self._shapes = ComboBox(label="contours (shapes)", choices=self._shapes_choices, tooltip=_TIPS["shapes"])
         self.physics = PhysicsControls(segment, nodes=False)
@@ -322,6 +323,7 @@ class TrackingWidget(WorkerWidget):
         self._export_btn.enabled = False
         options = {k: v for k, v in self.physics.parameters().items() if k in ("material", "stiffness")}
         material = getattr(options["material"], "name", options["material"])
+        self._movie_name = image.name
         self._run_info = dict(transform=image_transform_kwargs(image), name=f"{image.name} tracked ({material})",
                               frame_shape=tuple(frames.shape[-2:]))
         self._begin(f"Tracking {len(contours)} object(s) from frame {start}…")
@@ -392,6 +394,9 @@ class TrackingWidget(WorkerWidget):
 
     # ------------------------------------------------------------ export
     export_what = "tracks"
+
+    def export_name(self) -> str:
+        return f"{self._movie_name} {self.export_what}" if self._movie_name else self.export_what
 
     def export_table(self) -> dict:
         """The last run's tidy table (:meth:`~napari_physeg.core.TrackingResult.table`) as CSV columns."""
