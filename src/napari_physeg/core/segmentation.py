@@ -161,7 +161,7 @@ def _in_working_range(image: np.ndarray) -> np.ndarray:
     the features, naming an option never passed)."""
     if image.dtype.kind != "f":
         return image
-    largest = float(np.max(np.abs(image)))
+    largest = max(-float(image.min()), float(image.max()))  # (no copy: a tracked frame is read per object)
     if largest == 0.0 or not np.isfinite(largest) or WORKING_RANGE[0] <= largest <= WORKING_RANGE[1]:
         return image  # (infinite pixels are refused where the features read them)
     return image.astype(np.float64) / largest

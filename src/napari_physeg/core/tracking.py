@@ -51,7 +51,7 @@ from .contour import (area_centroid, as_contour, bounding_window, closest_on_pol
 from .background import plane_removed
 from .dynamics import DivergenceError
 from .features import _without_missing
-from .matching import _match_pairs, match
+from .matching import _match_arguments, _match_pairs, _prepare, match
 from .region import _fill, hasty_margin
 from .segmentation import FrameFeatures, _segment_from, check_on_image, check_segment_options, segment
 
@@ -750,11 +750,12 @@ def _checked_match_options(match_options: dict | None) -> dict:
     unknown = sorted(set(options) - set(signature_of(match).parameters))
     if unknown:
         raise ValueError(f"match_options has {unknown}, which are not options of match()")
-    # Matched once on two small outlines: match's own checks, with its words.
+    # match's own checks, with its words, on two small outlines: the job a
+    # matching is made of, not the matching (3 ms, where one took 0.1 s).
     turn = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
     circle = np.column_stack([np.sin(turn), np.cos(turn)]) * 10.0
     try:
-        _match_pairs(circle, circle * [1.2, 0.9], method="order", **options)
+        _prepare(**_match_arguments(circle, circle * [1.2, 0.9], {**options, "method": "order"}, ""))
     except ValueError as err:
         raise ValueError(f"match_options: {err}") from None
     return options
