@@ -375,15 +375,16 @@ def test_a_click_on_the_background_outlines_the_dark_gap_not_a_nucleus(stack):
     assert found.sum() > 500 and not (found & (labels > 0)).any()
 
 
-def test_a_click_at_the_end_of_a_nucleus_its_reach_ends_at_is_converged(stack):
-    """A 3-px click at the left end of a nucleus 38 px long (slice 32,
-    label 2): the farthest reach such a click is given (25 times its size)
-    ends where the nucleus does, and a quarter of the contour's nodes rest
-    on both. The nucleus' edge holds them: not a leak."""
+def test_a_click_at_the_end_of_a_long_nucleus_its_reach_ends_in_is_limited(stack):
+    """A 3-px click at the left end of a nucleus that runs on to the image's
+    side (slice 32, label 2): the farthest reach such a click is given (25
+    times its size) ends in the nucleus, where nearly a quarter of the contour's
+    nodes lie across it. Not a leak, and not converged either (it said so
+    until session 65): the drawing's limit holds it there, not a border."""
     image, labels = stack[0][32], stack[1][32]
     res = segment(image, circle(np.array([134.0, 14.0]), 1.5))
     found = polygon2mask(labels.shape, res.contour)
-    assert res.converged
+    assert res.stop_reason == "limited" and not res.converged
     assert (labels[found] == 2).all() and found.sum() > 0.6 * (labels == 2).sum()
 
 
