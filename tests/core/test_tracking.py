@@ -434,8 +434,8 @@ def test_tracked_backward_two_cells_that_came_together_are_not_said_to_divide():
     says so, and names the frame to draw the two on (it said 'divided ... from
     frame 1 on', of the frames before)."""
     frames = _dividing_cell_movie()[::-1]
-    with pytest.warns(UserWarning, match=r"object 0 held two bodies on frame 2 .* came together .* lost on frame 2 "
-                                         r"and before.*start=2"):
+    with pytest.warns(UserWarning, match=r"object 0 held two bodies on frame 2 .* came together .* lost on frame 2; "
+                                         r"an earlier frame .*start=2"):
         tr = track(frames, _circle((40, 55), 19), start=10)
     assert tr.status[0] == [LOST] * 3 + [TRACKED] * 8
     assert len(tr.warnings) == 1 and "divided" not in tr.warnings[0]

@@ -825,8 +825,10 @@ def _warn_not_found(run: _Run, image: np.ndarray) -> list[str]:
         if blank:
             why = blank
         elif within:
-            why = (f"its drawing and that of object {within[0]} lie one mostly within the other: both mark the "
-                   f"same object, which contours that never overlap cannot share; draw each object once")
+            # (Not "one within the other": two circles about touching rods overlap so.)
+            why = (f"its drawing and that of object {within[0]} overlap by more than half of one of them, so both "
+                   f"were taken to mark the same object, which contours that never overlap cannot share; draw "
+                   f"each object once, and objects that touch each closely (a polygon or a box about each)")
         else:
             why = ("no object came to rest under its drawing; check that it is drawn around (or inside) one "
                    "object, or the contour's options (steps per frame, material and stiffness: the Tracking "
@@ -879,9 +881,14 @@ def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
             continue
         where = " and ".join(f"({c[0]:.0f}, {c[1]:.0f})" for c in (area_centroid(b) for b in bodies))
         neck = np.linalg.norm(bodies[0][-1] - bodies[0][0])  # the nodes it was cut between
-        what = ("it divided, or took in a neighbour, and is reported lost from frame {t} on" if step > 0 else
+        # Lost on t only: it is looked for again on the next MAX_GAP frames from
+        # its last contour, which may find one of the two (it said "lost from t
+        # on", and a daughter was then followed as the object).
+        what = ("it divided, or took in a neighbour, and is reported lost on frame {t}; a later frame that "
+                "shows one body where it was is followed as the object" if step > 0 else
                 "the two came together there (two objects that met, or a neighbour it took in), and it is "
-                "reported lost on frame {t} and before")
+                "reported lost on frame {t}; an earlier frame that shows one body where it was is followed "
+                "as the object")
         said.append(f"object {k} held two bodies on frame {held} (at {where}, joined by a neck "
                     f"{neck:.1f} px wide): {what.format(t=t)}; to follow the two, draw each on frame {t} "
                     f"and track from there (start={t})")
