@@ -899,3 +899,15 @@ def test_match_and_simulate_refuse_an_out_named_as_an_image(tmp_path, capsys, no
                                                     np.c_[20 + 10 * np.sin(t), 20 + 6 * np.cos(t)]])
     assert main([command, str(pair), "--out", str(tmp_path / "out.png")]) == 2
     assert "written as CSV text: name it .csv" in capsys.readouterr().err and not (tmp_path / "out.png").exists()
+
+
+def test_an_empty_path_is_refused_not_read_as_the_current_folder(scene, capsys, no_work, monkeypatch):
+    """``--out ""`` (a shell variable left unset) was Path(""), the current
+    folder: the contours were written there under its name."""
+    obj, image, init, tmp = scene
+    monkeypatch.chdir(tmp)
+    code = main(["segment", str(image), "--init", str(init), "--out", ""])
+    assert code == 2 and "--out: an empty path" in capsys.readouterr().err
+    assert main(["segment", "", "--init", str(init), "--out", str(tmp / "o.csv")]) == 2
+    assert "image: an empty path" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp.iterdir()) == ["image.tif", "init.csv"]

@@ -59,6 +59,14 @@ def _defaults(func) -> dict:
             if p.default is not inspect.Parameter.empty}
 
 
+def _path(text: str) -> Path:
+    """A path argument: Path("") is the current folder, so an empty --out (a
+    shell variable left unset) would have written there."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty path: name the file or folder")
+    return Path(text)
+
+
 def _number(kind, low=None, low_open=False, high=None, why=""):
     """An argparse type: a number of ``kind`` above ``low`` and at most ``high`` (``why``: the reason for them)."""
     def parse(text):
@@ -209,11 +217,11 @@ def _match_options(args) -> dict:
 
 def _add_io(p, *, out_help: str, init: bool = True) -> None:
     if init:
-        p.add_argument("--init", type=Path, required=True, metavar="CONTOURS.csv",
+        p.add_argument("--init", type=_path, required=True, metavar="CONTOURS.csv",
                        help="initial contour(s): napari shapes CSV (polygon, rectangle, path or ellipse; nD "
                        "shapes use their last two axes) or a 'row,col' table (an 'id,row,col' table: one "
                        "contour per id)")
-    p.add_argument("--out", type=Path, required=True, help=out_help)
+    p.add_argument("--out", type=_path, required=True, help=out_help)
     p.add_argument("--overwrite", action="store_true", help="replace existing output (never an input file)")
 
 
@@ -618,21 +626,21 @@ def _add_segment(sub):
                    "Drive each initial contour onto the border of the object it surrounds (the Segmentation "
                    "widget). On a stack, each contour is segmented on the frame it was drawn on (the CSV's "
                    "axis-0) or on every frame of --frames.")
-    p.add_argument("image", type=Path, help="2D image (TIFF, PNG, ... any format scikit-image reads), or a "
+    p.add_argument("image", type=_path, help="2D image (TIFF, PNG, ... any format scikit-image reads), or a "
                    "(frames, rows, cols) TIFF stack or zarr array")
     _add_io(p, out_help="where to write the result: napari shapes CSV, one polygon per contour (and frame, "
             "as axis-0, on a stack)")
     _frames_option(p, "frames of a stack to segment every contour on")
     _channel_option(p)
-    p.add_argument("--mask", type=Path, help="also write a label image: label k+1 for shape k of --init (0 is "
+    p.add_argument("--mask", type=_path, help="also write a label image: label k+1 for shape k of --init (0 is "
                    "the background), on every frame of a stack of labels for a stack")
     _add_segment_options(p)
     p.set_defaults(run=_segment)
 
 
 def _add_pair_arguments(p):
-    p.add_argument("a", type=Path, metavar="A.csv", help="napari shapes CSV holding contour a")
-    p.add_argument("b", type=Path, nargs="?", metavar="B.csv",
+    p.add_argument("a", type=_path, metavar="A.csv", help="napari shapes CSV holding contour a")
+    p.add_argument("b", type=_path, nargs="?", metavar="B.csv",
                    help="napari shapes CSV holding contour b (default: A, its second shape)")
     p.add_argument("--a-shape", type=_number(int, 0), default=0, metavar="I",
                    help="which shape of A is contour a (0 = the first drawn); default 0")
@@ -698,7 +706,7 @@ def _add_track(sub):
                    "(one polygon per object and frame, the frame as axis-0: open it in napari over the stack) and "
                    "OUT/tracks.csv (and tracks.parquet with pyarrow): object, frame, node, row, col, arc, "
                    "normal_velocity, curvature, status.")
-    p.add_argument("stack", type=Path, help="(frames, rows, cols) TIFF stack or zarr array, read a frame at a time")
+    p.add_argument("stack", type=_path, help="(frames, rows, cols) TIFF stack or zarr array, read a frame at a time")
     _add_io(p, out_help="output folder (created): contours.csv and the tidy table")
     _add_track_options(p)
     p.set_defaults(run=_track)
@@ -717,7 +725,7 @@ def _add_batch(sub):
                        if kind == "track" else "") + " or failed, with the error), and each task's contours "
                        "under OUT/results/. Run the same command again to resume: complete results are kept; "
                        "failed tasks, and inputs replaced since, are run again.")
-        q.add_argument("inputs", type=Path, nargs="+", metavar="INPUT",
+        q.add_argument("inputs", type=_path, nargs="+", metavar="INPUT",
                        help="images or stacks (TIFF, zarr, ...); a file that cannot be read is reported as failed")
         _add_io(q, out_help="output folder (created; an earlier run's results there are reused)")
         cluster = q.add_mutually_exclusive_group()
