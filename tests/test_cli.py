@@ -138,6 +138,15 @@ def test_track_writes_contours_per_frame_and_the_tidy_table(movie_files, capsys)
     assert "object 0: 6 tracked" in captured.out and "object-frames" in captured.err
 
 
+def test_track_of_some_frames_numbers_the_progress_bar_as_the_stack(movie_files, capsys):
+    """With --frames the bar names the stack's frames (it opened the stack a
+    second time, before the tracking's own, to learn them)."""
+    movie, stack, init, tmp = movie_files
+    assert main(["track", str(stack), "--init", str(init), "--out", str(tmp / "t"), "--frames", "2:6:2"]) == 0
+    shown = [int(part.split(",")[0]) for part in capsys.readouterr().err.split("] frame ")[1:]]
+    assert sorted(set(shown)) == [2, 4]
+
+
 def test_track_refuses_contours_drawn_on_several_frames(movie_files, capsys):
     movie, stack, _, tmp = movie_files
     init = write_shapes_csv(tmp / "two.csv", [movie.outlines[0][::6], movie.outlines[3][::6]], leading=[(0,), (3,)])

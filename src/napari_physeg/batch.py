@@ -40,7 +40,7 @@ import time
 import traceback
 import uuid
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -242,6 +242,14 @@ def _track_task(task: _Task, tmp: Path) -> list[dict]:
     return rows
 
 
+def _in_stack_frames(callback, chosen):
+    """``callback`` given progress states whose ``frame`` is the stack's
+    number of the tracked movie's frame (``chosen[frame]``); None for None."""
+    if callback is None:
+        return None
+    return lambda progress: callback(replace(progress, frame=chosen[progress.frame]))
+
+
 def track_file(path, inits, folder, *, frames: str | None = None, start: int | None = None,
                channel: int | None = None, node_spacing: float | None = None, max_steps: int | None = None,
                match_options: dict | None = None, callback=None, **segment_options):
@@ -261,7 +269,8 @@ def track_file(path, inits, folder, *, frames: str | None = None, start: int | N
     frames, start, channel, node_spacing, max_steps, match_options, **segment_options
         As for :func:`track_files`.
     callback : callable, optional
-        Passed to :func:`~napari_physeg.core.track`.
+        Called as by :func:`~napari_physeg.core.track`, with each progress
+        state's ``frame`` numbered as in the stack.
 
     Returns
     -------
@@ -286,7 +295,7 @@ def track_file(path, inits, folder, *, frames: str | None = None, start: int | N
         chosen, start = check_track(stack, path, inits, "the contours", frames=frames, start=start)
         movie = stack if chosen == list(range(len(stack))) else stack[chosen]
         options = {"max_steps": max_steps} if max_steps is not None else {}
-        tr = track(movie, inits, start=chosen.index(start), callback=callback,
+        tr = track(movie, inits, start=chosen.index(start), callback=_in_stack_frames(callback, chosen),
                    segment_options=segment_options_for(_mean_contour(inits), segment_options, node_spacing),
                    match_options=dict(match_options or {}), **options)
     shapes, leading = [], []

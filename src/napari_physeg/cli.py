@@ -476,14 +476,13 @@ class _ProgressBar:
     #: Whether a bar is drawn on the current line of stderr (a message must start a new one).
     mid_line = False
 
-    def __init__(self, frames=None, width: int = 30):
-        self.frames, self.width = frames, width  # frames: the stack's number of each frame tracked
+    def __init__(self, width: int = 30):
+        self.width = width
 
     def __call__(self, progress) -> None:
         done = progress.done / progress.total
         bar = "#" * int(round(done * self.width))
-        frame = self.frames[progress.frame] if self.frames else progress.frame
-        print(f"\r[{bar:<{self.width}}] frame {frame}, {progress.done}/{progress.total} object-frames",
+        print(f"\r[{bar:<{self.width}}] frame {progress.frame}, {progress.done}/{progress.total} object-frames",
               end="", file=sys.stderr, flush=True)
         _ProgressBar.mid_line = progress.done < progress.total
         if not _ProgressBar.mid_line:
@@ -527,7 +526,7 @@ def _start_frame(args, leading):
 
 
 def _track(args) -> int:
-    from .batch import TRACK_FILES, check_track, track_file
+    from .batch import TRACK_FILES, track_file
     from .core import LOST
 
     _check_input(args.stack, "stack", image=True)
@@ -535,12 +534,11 @@ def _track(args) -> int:
     _check_output(args.out, args, [args.stack, args.init], folder=True, writes=TRACK_FILES)
     options = _segment_options(args)
     start = _start_frame(args, leading)
-    with open_stack(args.stack, channel=args.channel) as stack:  # the frames and start, before any work
-        chosen, _ = check_track(stack, args.stack, inits, args.init, frames=args.frames, start=start)
+    # (track_file checks the frames and start before any work, and numbers the bar's frames as the stack's.)
     tr, frames, written = track_file(args.stack, inits, args.out, frames=args.frames, start=start,
                                      channel=args.channel, node_spacing=args.node_spacing,
                                      max_steps=args.steps_per_frame, match_options=_match_options(args),
-                                     callback=_ProgressBar(chosen), **options)
+                                     callback=_ProgressBar(), **options)
     for k in range(tr.n_objects):
         counts = {s: tr.status[k].count(s) for s in dict.fromkeys(tr.status[k])}
         print(f"object {k}: " + ", ".join(f"{n} {s}" for s, n in counts.items()))
