@@ -148,7 +148,8 @@ def test_a_balanced_figure_eight_is_matched_to_itself_wherever_its_numbering_sta
     a = np.column_stack([40 * np.sin(2 * s), 60 * np.sin(s) + 10 * np.cos(3 * s)])
     truth = (np.arange(120) + roll) % 120
     for method in ("order", "global"):
-        assert np.mean(match(a, np.roll(a, roll, axis=0), method=method).partner == truth) >= 0.98
+        with pytest.warns(UserWarning, match="[ab] crosses itself"):  # (said since session 65, matched all the same)
+            assert np.mean(match(a, np.roll(a, roll, axis=0), method=method).partner == truth) >= 0.98
 
 
 def test_contours_in_one_frame_of_reference_are_not_checked_for_reflection(recwarn):

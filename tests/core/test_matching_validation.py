@@ -3,6 +3,7 @@ repeated nodes are refused alike everywhere, the tests are centred, and no
 numerical exception of scipy escapes."""
 
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -85,8 +86,47 @@ def test_a_figure_eight_is_no_line():
     assert abs(signed_area(eight)) < 1e-6 * np.ptp(eight) ** 2  # no net area
     assert check_contour(eight).shape == (80, 2)
     assert as_contour(eight).shape == (80, 2)
-    m = match(eight, eight)
+    with pytest.warns(UserWarning, match="[ab] crosses itself .* 50% of what it encloses") as caught:
+        m = match(eight, eight)
+    assert len(caught) == 2 and {w.filename for w in caught} == {__file__}  # at the user's call
     assert m.pairs.shape == (80, 2)
+
+
+@pytest.mark.parametrize("name, contour", [
+    ("star", np.column_stack([np.sin(0.8 * np.pi * np.arange(5)), np.cos(0.8 * np.pi * np.arange(5))]) * 10),
+    ("bow-tie", np.array([[0.0, 0.0], [10.0, 10.0], [0.0, 10.0], [10.0, 0.0]])),
+])
+def test_a_star_or_a_bow_tie_is_warned_of_in_match_and_simulate(name, contour):
+    """A pentagram (its middle enclosed twice, which napari's even-odd fill
+    leaves out) and a 4-click bow-tie were matched and simulated without a
+    word (session 65's outside tester); a lasso that overshoots is not one."""
+    b = data.hand_pair(5, 4)[1] if len(contour) == 4 else HAND
+    with pytest.warns(UserWarning, match="a crosses itself"):
+        m = match(contour, b)
+    with pytest.warns(UserWarning, match="a crosses itself") as caught:
+        simulate(contour, b, m, n_frames=2, max_steps=5)
+    assert caught[0].filename == __file__
+    lasso = np.vstack([HAND, HAND[:3] + [0.0, 1.5]])  # past its start, a small loop
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        match(lasso, B66)
+
+
+def test_text_and_flags_are_refused_as_coordinates():
+    """numpy reads "12" and True as numbers: a table read as text, or a
+    mask passed for a contour, was matched (session 65)."""
+    with pytest.raises(ValueError, match="a holds text, not coordinates"):
+        match(np.array([["1", "2"], ["3", "4"], ["5", "7"]]), B66)
+    with pytest.raises(ValueError, match="init holds True/False values"):
+        segment(data.ellipse().image, np.array([[True, False], [False, True], [True, True]]))
+
+
+@pytest.mark.parametrize("scale", [1e-10, 1e8])
+def test_a_contour_in_other_units_matches_as_in_pixels(scale):
+    """Matching is scale-free: in metres (1e-10 across) the inner-distance
+    context found no shortest path and an IndexError escaped (session 65)."""
+    a, b, _ = data.hand_pair(67, 66)
+    assert np.array_equal(match(a * scale, b * scale).pairs, match(a, b).pairs)
 
 
 def test_far_off_contours_match_and_simulate_as_at_the_origin():

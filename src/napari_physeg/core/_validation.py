@@ -39,6 +39,11 @@ def node_array(points, name: str = "contour", *, min_nodes: int = 3) -> np.ndarr
     one: empty, another shape, NaN or infinite values."""
     if np.iscomplexobj(points):  # numpy would drop the imaginary part with a warning only
         raise ValueError(f"{name} has complex coordinates: pass (row, col) as two real columns")
+    kind = np.asarray(points).dtype.kind if not isinstance(points, np.ndarray) else points.dtype.kind
+    if kind in "bUS":  # numpy reads "12" and True as numbers
+        what = "True/False values" if kind == "b" else "text"
+        raise ValueError(f"{name} holds {what}, not coordinates: pass (row, col) numbers (e.g. read a CSV "
+                         "with napari_physeg.io.read_shapes_csv or np.loadtxt)")
     try:
         arr = np.array(points, dtype=np.float64)
     except (TypeError, ValueError) as err:

@@ -342,6 +342,42 @@ def crosses_itself(contour) -> bool:
     return len(_crossing_pairs(np.asarray(contour, dtype=np.float64))) > 0
 
 
+#: A contour whose loops (see loop_share) hold at least this share of what it
+#: encloses is a figure-8, not one outline; a lasso that overshoots its start
+#: makes a small loop, which is just cut.
+FIGURE_EIGHT_SHARE = 0.1
+
+
+def figure_eight_warning(contour, name: str = "contour") -> str | None:
+    """What to warn of when ``contour`` is a figure-8 (see FIGURE_EIGHT_SHARE):
+    its nodes do not follow one outline; else None."""
+    share = loop_share(contour)
+    if share < FIGURE_EIGHT_SHARE:
+        return None
+    return (f"{name} crosses itself (a figure-8, a star or a bow-tie: loops that hold {share:.0%} of what it "
+            "encloses), so its nodes do not follow one outline")
+
+
+def loop_share(contour) -> float:
+    """The share of what the closed ``contour`` encloses (its pixels, filled
+    as napari fills it) that lies in the loops a simple outline cannot keep:
+    0 for a simple polygon, about half for a figure-8 of two equal lobes, a
+    few hundredths for a lasso that overshoots its start."""
+    contour = np.asarray(contour, dtype=np.float64)
+    if not crosses_itself(contour):
+        return 0.0
+    # On a grid of about 100 px across whatever the contour's units.
+    scale = 100.0 / max(float(np.ptp(contour, axis=0).max()), 1e-300)
+    grid = (contour - contour.min(0)) * scale + 1.0
+    # What it encloses: its pixels as napari fills them (even-odd: a
+    # figure-8's two lobes), or its signed area (a star's middle, which
+    # even-odd leaves out, counts twice), whichever is more.
+    enclosed = max(float(polygon_mask(grid, np.ceil(grid.max(0)) + 2).sum()), abs(signed_area(grid)), 1.0)
+    # (remove_loops needs a few nodes between crossings: a 4-click bow-tie has none)
+    kept = remove_loops(resample(grid, max(len(grid), 64)))
+    return float(np.clip(1.0 - abs(signed_area(kept)) / enclosed, 0.0, 1.0))
+
+
 def closest_on_polyline(points: np.ndarray, curve: np.ndarray, near: np.ndarray, steps=(-1, 0)):
     """The point of the closed polyline ``curve`` closest to each of ``points``,
     and its distance, among the segments that start ``steps`` nodes from the

@@ -153,7 +153,11 @@ def inner_distance_context(nodes, n_samples: int = N_SAMPLES):
         Hellinger distance of the histograms (0 to 2).
     """
     nodes = np.asarray(nodes, dtype=np.float64)
-    samples = resample(nodes - nodes.mean(axis=0), int(n_samples))  # centred: far-off contours keep their digits
+    # Centred (far-off contours keep their digits) and of unit size: the
+    # histograms are of distances over their mean, but the shortest paths'
+    # tests are not (a contour in metres, 1e-10 across, found no path).
+    centred = nodes - nodes.mean(axis=0)
+    samples = resample(centred / max(float(np.sqrt((centred**2).sum(1).mean())), 1e-300), int(n_samples))
     m = len(samples)
     D, first = inner_distances(samples)
     off = ~np.eye(m, dtype=bool)

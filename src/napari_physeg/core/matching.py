@@ -62,7 +62,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from ._drain import drain
-from .contour import resample, rotation_between, rotation_matrix, segment_lengths, signed_area
+from .contour import figure_eight_warning, resample, rotation_between, rotation_matrix, segment_lengths, signed_area
 from .inner_distance import inner_distance_context
 from .materials import Material
 from ._validation import check_contour, check_count, check_number, with_defaults
@@ -1051,6 +1051,7 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
     if callback is not None and not callable(callback):
         raise ValueError(f"callback must be callable or None, got {callback!r}")
     on_progress = None if callback is None else (lambda state: callback(state.fraction))
+    _check_outlines(a, b)
     return drain(_run(_prepare(a, b, **options)), on_progress)
 
 
@@ -1074,7 +1075,19 @@ def iter_match(a, b, **options):
     >>> next(run).phase
     'features'
     """
-    return _run(_prepare(**_match_arguments(a, b, options, "iter_match takes no callback: it yields its progress")))
+    arguments = _match_arguments(a, b, options, "iter_match takes no callback: it yields its progress")
+    _check_outlines(a, b)
+    return _run(_prepare(**arguments))
+
+
+def _check_outlines(a, b) -> None:
+    """Warn if ``a`` or ``b`` crosses itself as a figure-8 does (see
+    contour.figure_eight_warning): a user's input, matched all the same.
+    (A tracked frame's contours, segmentation results, are not checked.)"""
+    for contour, name in ((a, "a"), (b, "b")):
+        if (said := figure_eight_warning(check_contour(contour, name), name)) is not None:
+            warnings.warn(f"{said}: its partners follow its crossings; match outlines that do not cross "
+                          "themselves (a segmentation's result, or a shape drawn again)", UserWarning, stacklevel=3)
 
 
 def _match_pairs(a, b, **options) -> np.ndarray:

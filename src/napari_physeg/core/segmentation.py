@@ -21,9 +21,9 @@ from scipy.spatial.distance import pdist
 
 from .background import background_plane, plane_removed
 from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, crosses_itself,
-                      cut_pinches, densify, depth_inside, nearest_node, nodes_for_spacing, outward_normals,
-                      pair_indices, pairs_within, perimeter, polygon_mask, remove_loops, resample, segment_lengths,
-                      signed_area, window_mask)
+                      cut_pinches, densify, depth_inside, figure_eight_warning, nearest_node,
+                      nodes_for_spacing, outward_normals, pair_indices, pairs_within, perimeter, remove_loops,
+                      resample, segment_lengths, signed_area, window_mask)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
@@ -168,26 +168,14 @@ def _in_working_range(image: np.ndarray) -> np.ndarray:
     return image.astype(np.float64) / largest
 
 
-#: A drawing that crosses itself is a figure-8 when the loops a contour
-#: cannot keep hold at least this share of what it encloses; a lasso that
-#: overshoots its start makes a small loop, which is just cut.
-FIGURE_EIGHT_SHARE = 0.1
 
 
 def _warn_if_figure_eight(drawing: np.ndarray) -> None:
     """Warn when ``drawing`` crosses itself around a large share of what it
     encloses: the contour cannot, and may end on a part of the object."""
-    if not crosses_itself(drawing):
-        return
-    lo = np.floor(drawing.min(0)) - 1
-    enclosed = polygon_mask(drawing - lo, np.ceil(drawing.max(0) - lo) + 2).sum()
-    # (remove_loops needs a few nodes between crossings: a 4-click bow-tie has none)
-    kept = remove_loops(resample(drawing, max(len(drawing), 64)))
-    cut = 1.0 - abs(signed_area(kept)) / max(float(enclosed), 1.0)
-    if cut >= FIGURE_EIGHT_SHARE:
-        warnings.warn(f"init crosses itself (a figure-8): the loops a contour cannot keep hold {cut:.0%} of what "
-                      "it encloses, and the result may hold a part of the object only; draw one outline that does "
-                      "not cross itself, around (or inside) the object", UserWarning, stacklevel=6)
+    if (said := figure_eight_warning(drawing, "init")) is not None:
+        warnings.warn(f"{said}: the result may hold a part of the object only; draw one outline that does not "
+                      "cross itself, around (or inside) the object", UserWarning, stacklevel=6)
 
 
 #: A drawing may reach beyond the image (around an object its side cuts), by

@@ -34,6 +34,7 @@ turned copy of itself then ends on it, its frames turned and moved copies.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -42,7 +43,7 @@ from scipy.sparse.linalg import spsolve
 
 from ._drain import drain
 from ._validation import check_contour, check_count, check_number, with_defaults
-from .contour import rotation_between, rotation_matrix, segment_lengths
+from .contour import figure_eight_warning, rotation_between, rotation_matrix, segment_lengths
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import (
     coefficient_system,
@@ -297,6 +298,10 @@ def _prepare(a, b, matching, *, q, material, n_frames, sigma_factor, damping_rat
     """Check every argument of :func:`simulate` (before any heavy work)."""
     a = check_contour(a, "a")
     b = check_contour(b, "b")
+    for contour, name in ((a, "a"), (b, "b")):
+        if (said := figure_eight_warning(contour, name)) is not None:
+            warnings.warn(f"{said}: its frames follow its crossings; simulate outlines that do not cross "
+                          "themselves", UserWarning, stacklevel=3)
     material = get_material(material)
     options = dict(
         q=check_number(q, "q", inclusive=False), material=material,
