@@ -424,3 +424,44 @@ def test_frames_saved_as_csv(viewer_widgets, wait_done, notes, tmp_path):
     last = [r for r in rows if int(r["frame"]) == len(res.frames) - 1]
     np.testing.assert_allclose([[float(r["row"]), float(r["col"])] for r in last], res.frames[-1])
     assert [int(r["node"]) for r in last] == list(range(res.frames.shape[1]))
+
+
+def test_a_simulation_whose_frame_napari_cannot_fill_is_kept_as_paths(viewer_widgets, wait_done, notes):
+    """Found by an outside tester (session 65): a 400-node circle driven into a
+    hexagon ends with nodes 5e-5 px apart in a frame that crosses itself;
+    napari's triangulation of its face failed, and the simulation that had
+    come to rest was lost ("Could not add the simulation layers")."""
+    viewer, _, widget = viewer_widgets
+    t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+    h = np.linspace(0, 2 * np.pi, 6, endpoint=False)
+    viewer.add_shapes([np.column_stack([100 + 60 * np.sin(t), 100 + 60 * np.cos(t)])],
+                      shape_type="polygon", name="a")
+    viewer.add_shapes([np.column_stack([100 + 40 * np.sin(h), 100 + 40 * np.cos(h)])], shape_type="polygon",
+                      name="b")
+    widget.reset_choices()
+    widget._layer_a.value, widget._layer_b.value = viewer.layers["a"], viewer.layers["b"]
+    widget.run()
+    wait_done(widget)
+    assert notes["error"] == [] and widget.last_outcome.ok and widget._export_btn.enabled
+    (layer,) = sim_layers(viewer)
+    assert len(layer.data) == 6
+
+
+def test_a_simulation_beside_a_movie_plays_on_its_time_slider_at_its_step(viewer_widgets, wait_done, notes):
+    """Found by an outside tester (session 65): beside a movie of 30 frames 5 s
+    apart, the frames (at scale 1) took the movie's time axis to 146 steps,
+    4 empty ones between two of its frames, and the message named a 'frame'
+    slider that was not there."""
+    viewer, _, widget = viewer_widgets
+    a, b, _ = data.hand_pair(67, 66)
+    viewer.add_image(np.zeros((30, 256, 256), np.float32), name="movie", scale=(5, 1, 1),
+                     axis_labels=("t", "y", "x"))
+    viewer.add_shapes([a, b], shape_type="polygon", name="hands")
+    steps = viewer.dims.nsteps
+    widget.reset_choices()
+    widget.run()
+    wait_done(widget)
+    assert notes["error"] == [] and viewer.dims.nsteps == steps
+    assert "Move the 't' slider" in notes["info"][-1]
+    (layer,) = sim_layers(viewer)
+    assert layer.scale[0] == 5

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = [
+    "created_layer",
     "CLOSED_SHAPE_TYPES",
     "PointsAsPolygon",
     "SlicedShapes",
@@ -408,6 +409,22 @@ def contours_to_shapes_data(contours, leading=(), *, closed: bool = False) -> li
             c = np.column_stack([np.broadcast_to(lead, (len(c), lead.size)), c])
         out.append(np.ascontiguousarray(c, dtype=np.float32))
     return out
+
+
+def created_layer(data, meta: dict, kind: str):
+    """``Layer.create(data, meta, kind)``; a Shapes layer of polygons whose
+    faces napari cannot triangulate (a simulated frame that crosses itself
+    about near-coincident nodes raised "Triangulation failed", and the whole
+    result was lost) is made of closed paths instead, which have no face."""
+    from napari.layers import Layer
+
+    try:
+        return Layer.create(data, meta, kind)
+    except RuntimeError:
+        if kind != "shapes" or meta.get("shape_type", "polygon") != "polygon":
+            raise
+        paths = [np.vstack([p, p[:1]]) for p in data]
+        return Layer.create(paths, {**meta, "shape_type": "path"}, kind)
 
 
 def _label_dtype(n: int):

@@ -24,7 +24,7 @@ from napari.utils.notifications import show_error, show_warning
 from threadpoolctl import threadpool_limits
 
 from ..core._drain import drain
-from ._layers import write_csv
+from ._layers import created_layer, write_csv
 
 __all__ = ["WorkerWidget", "ask_save_path", "relay", "run_to_completion"]
 
@@ -177,20 +177,22 @@ class WorkerWidget(Container):
         preview is not removed and replaced: it becomes the result, with its
         data, style, features, metadata and name.
         """
-        from napari.layers import Layer
-
         if kind != "shapes" or preview is None or preview not in self.viewer.layers:
-            return self.viewer.add_layer(Layer.create(data, meta, kind))
+            return self.viewer.add_layer(created_layer(data, meta, kind))
         if self.viewer.dims.ndisplay != 2:
             # The user went to the 3D view during the run: napari takes no new
             # data on a Shapes layer there (the results were lost), but adds a
             # new layer. (The collection a removal runs is the lesser harm.)
             self.viewer.layers.remove(preview)
-            return self.viewer.add_layer(Layer.create(data, meta, kind))
+            return self.viewer.add_layer(created_layer(data, meta, kind))
         from napari.utils.colormaps.standardize_color import transform_color
 
         shape_type = meta.get("shape_type", "polygon")
-        preview.data = (data, [shape_type] * len(data) if isinstance(shape_type, str) else shape_type)
+        try:
+            preview.data = (data, [shape_type] * len(data) if isinstance(shape_type, str) else shape_type)
+        except RuntimeError:  # a face napari cannot triangulate: see created_layer
+            self.viewer.layers.remove(preview)
+            return self.viewer.add_layer(created_layer(data, meta, kind))
         for key in ("edge_color", "face_color"):
             if key in meta:  # one colour, or one per shape; shapes drawn next get the first
                 colours = transform_color(meta[key])

@@ -32,7 +32,6 @@ from dataclasses import dataclass
 import napari
 import numpy as np
 from magicgui.widgets import CheckBox, ComboBox, FloatSpinBox, Label, PushButton, SpinBox
-from napari.layers import Layer
 from napari.utils.notifications import show_info, show_warning
 
 from ..core import MATERIALS, DivergenceError, iter_match, iter_simulate, match, simulate
@@ -49,7 +48,7 @@ from ._inputs import (
     pick_default_b,
     read_contour_pair,
 )
-from ._layers import contours_to_shapes_data, prepend_axes_transform
+from ._layers import contours_to_shapes_data, created_layer, prepend_axes_transform
 from ._worker import WorkerWidget, relay, run_to_completion
 
 __all__ = [
@@ -507,13 +506,19 @@ class SimulationWidget(WorkerWidget):
         if self._tracks.value and len(pair.leading) > 1:
             show_warning("no Tracks layer: napari's tracks have at most 3 spatial axes and the contours have "
                          f"{len(pair.leading) + 2}")
+        slider = "'frame'"
         try:
             for data, meta, kind in simulation_layer_data(outcome, pair, tracks=self._tracks.value,
                                                           material=self._material.value):
-                if self.viewer.dims.ndim > len(pair.leading) + 2:
-                    # The frames play on an axis the viewer has (a movie's time): it keeps its name.
+                axis = self.viewer.dims.ndim - len(pair.leading) - 3  # the world axis the frames play on
+                if axis >= 0:
+                    # An axis the viewer has (a movie's time): it keeps its name, and
+                    # the frames its step (at scale 1 against a movie's 5 s a frame,
+                    # the slider went from 30 steps to 146, and the frames between two).
                     meta.pop("axis_labels", None)
-                self.output_layers.append(self.viewer.add_layer(Layer.create(data, meta, kind)))
+                    meta["scale"] = np.r_[self.viewer.dims.range[axis].step, np.asarray(meta["scale"])[1:]]
+                    slider = f"'{self.viewer.dims.axis_labels[axis]}'"
+                self.output_layers.append(self.viewer.add_layer(created_layer(data, meta, kind)))
         except Exception as err:  # never leave the user with a silent failure
             self._fail(f"Could not add the simulation layers: {type(err).__name__}: {err}")
             return
@@ -524,7 +529,7 @@ class SimulationWidget(WorkerWidget):
         self._export_btn.enabled = True
         self._status.value = (f"{len(res.frames)} frames, {res.steps} steps, {how}; last frame {gap:.2f} px from "
                               f"the targets on b ({via}, {outcome.seconds:.2f} s)")
-        show_info(f"Simulation {pair.a_label!r} → {pair.b_label!r}: {self._status.value}. Move the 'frame' "
+        show_info(f"Simulation {pair.a_label!r} → {pair.b_label!r}: {self._status.value}. Move the {slider} "
                   "slider to play it")
         if not res.converged:
             show_warning(f"the simulation did not come to rest within max steps ({res.steps}); raise 'max steps'")
