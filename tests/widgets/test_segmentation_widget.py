@@ -765,6 +765,36 @@ def test_advice_fits_why_a_contour_did_not_reach_a_border():
     assert "[9]" in messages[3] and "max steps" not in messages[3] and "around the object" in messages[3]
 
 
+def test_a_stalled_contour_at_a_far_too_high_stiffness_is_told_to_lower_it():
+    """Found by an outside tester (session 65): rubber at r = 1e8 stalled after
+    18 steps (IoU 0.64; 0.997 at its suggested 2000), and the advice was to
+    raise r, which changes nothing; lowering it works."""
+    from types import SimpleNamespace
+
+    from napari_physeg.core import SegmentationResult
+
+    stalled = SegmentationResult(contour=np.zeros((3, 2)), steps=18, converged=False, stop_reason="stalled",
+                                 history=(), polarity=1)
+    outcome, job = seg.SegmentationOutcome([stalled]), SimpleNamespace(shape_indices=[0])
+    (message,) = seg.not_converged_messages(outcome, job, r_ratio=1e8 / 2000)
+    assert "lower the stiffness r (5e+04 times the material's suggested r" in message and "raise" not in message
+    (message,) = seg.not_converged_messages(outcome, job)
+    assert "raise the stiffness r" in message
+
+
+@pytest.mark.parametrize("count", [1, 2])
+def test_a_node_count_of_1_or_2_is_refused_at_run_by_the_control_s_name(viewer_widget, errors, hand, count):
+    """Found by an outside tester (session 65): the spin box took 1 or 2, and
+    the run failed with the core's "n_nodes must be an integer >= 3"."""
+    viewer, widget = viewer_widget
+    viewer.add_image(hand.image, name="hand")
+    viewer.add_shapes([hand.init_far], shape_type="polygon", name="drawn")
+    widget.reset_choices()
+    widget.physics._count.value = count
+    assert widget.run() is None
+    assert errors == [f"node count must be 0 (the nodes spaced by 'node spacing') or at least 3, got {count}"]
+
+
 def test_a_points_layer_is_a_contour(viewer_widget, wait_done, errors, hand):
     """Points clicked around the object, in order, are one initial contour."""
     viewer, widget = viewer_widget

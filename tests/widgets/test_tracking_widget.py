@@ -10,6 +10,7 @@ from napari.layers import Image, Points, Shapes, Tracks  # noqa: E402
 
 from napari_physeg import data  # noqa: E402
 from napari_physeg._sample_data import deforming_cell  # noqa: E402
+from napari_physeg._widgets._inputs import contour_layer_choices  # noqa: E402
 from napari_physeg._widgets.tracking import TrackingWidget, node_trajectories  # noqa: E402
 from napari_physeg.core import track  # noqa: E402
 from napari_physeg.core.contour import polygon_mask  # noqa: E402
@@ -58,6 +59,8 @@ def test_round_trip_adds_contours_tracks_and_maps(movie_in_viewer, wait_done):
     assert "object" not in viewer.dims.axis_labels  # the movie's time axis keeps its name
     numbers = [layer for layer in widget.output_layers if isinstance(layer, Points)]
     assert len(numbers) == 1 and list(numbers[0].features["object"]) == [0]
+    # The numbers are no contour to draw from (session 65: offered to every widget as one).
+    assert numbers[0] not in [layer for _, layer in contour_layer_choices(viewer)]
     # The centroid track, then the node trajectories, each over the 8 frames.
     assert len(np.unique(tracks[0].data[:, 0])) == 13 and tracks[0].data[:, 1].max() == 7
     assert "tracking preview" not in [layer.name for layer in viewer.layers]
@@ -277,6 +280,24 @@ def test_a_registered_movie_with_an_empty_margin_is_tracked(dock, wait_done, err
     assert errors == [] and widget.last_result.status[0] == ["tracked"] * 5
     assert len([layer for layer in widget.output_layers if isinstance(layer, Shapes)][0].data) == 5
     assert sum("in 4 of 5 frames" in m for m in warned) == 1
+
+
+def test_an_object_lost_on_a_blank_frame_only_is_said_to_be_lost_there(dock, wait_done, errors, warned):
+    """Found by an outside tester (session 65): after one blank frame the
+    warning said the object's "later frames have no contour", while it was
+    tracked again on every one of them."""
+    viewer, widget = dock(TrackingWidget)
+    movie = _disk_movie(n_frames=7)
+    movie[3] = 0.2  # a blank frame
+    viewer.add_image(movie, name="movie")
+    viewer.add_shapes([_circle_on_frame((40, 40), 20)], shape_type="polygon", name="drawn")
+    widget.reset_choices()
+    viewer.dims.set_point(0, 0)
+    widget.run()
+    wait_done(widget)
+    assert errors == [] and widget.last_result.status[0] == ["tracked"] * 3 + ["lost"] + ["tracked"] * 3
+    assert [m for m in warned if "lost on the way" in m] == [
+        "object(s) lost on the way, with no contour there: 0 on frame 3"]
 
 
 def test_a_movie_with_a_time_scale_keeps_its_slider_and_extent(dock, wait_done, errors):

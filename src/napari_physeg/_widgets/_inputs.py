@@ -50,6 +50,9 @@ PREVIEW_COLOR = "magenta"
 MATCHING_KEY = "matching"
 #: Key in a layer's metadata that marks a simulation output (not a contour input).
 SIMULATION_KEY = "simulation"
+#: Key in a layer's metadata that marks the numbers of a tracking's membrane
+#: maps (a Points layer, not a contour: read as one, its tile corners were a polygon).
+MAP_NUMBERS_KEY = "map numbers"
 #: The material choice that shows Young's modulus, Poisson's ratio and density.
 CUSTOM = "custom"
 
@@ -124,8 +127,9 @@ def image_layer_choices(viewer, min_ndim: int = 2) -> list:
 
 def contour_layer_choices(viewer) -> list:
     """(name, layer) of the layers that can hold contours: Shapes, and Points
-    (read as one polygon); not the widgets' previews, matchings or simulations."""
-    skip = {PREVIEW_KEY, MATCHING_KEY, SIMULATION_KEY}
+    (read as one polygon); not the widgets' previews, matchings, simulations
+    or map numbers."""
+    skip = {PREVIEW_KEY, MATCHING_KEY, SIMULATION_KEY, MAP_NUMBERS_KEY}
     return [(layer.name, layer) for layer in viewer.layers
             if isinstance(layer, (Shapes, Points)) and not (set(layer.metadata) & skip)]
 
@@ -188,6 +192,8 @@ class PhysicsControls:
         """``material`` and ``stiffness`` of the core, and the node ``node_spacing``
         (px) or ``n_nodes`` (None for the other), see :func:`node_count`."""
         count = int(self._count.value)
+        if 0 < count < 3:  # (the spin box cannot leave out 1 and 2; the core said "n_nodes ... got 1")
+            raise InputError(f"node count must be 0 (the nodes spaced by 'node spacing') or at least 3, got {count}")
         return {"material": self.material(), "stiffness": float(self._stiffness.value),
                 "node_spacing": None if count else float(self._spacing.value), "n_nodes": count or None}
 

@@ -30,7 +30,7 @@ from napari.utils.notifications import show_info, show_warning
 from skimage.util import montage
 
 from ..core import LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, segment, track
-from ._inputs import (PHYSICS_TIPS, PREVIEW_COLOR, PREVIEW_KEY, PhysicsControls, check_plane_view,
+from ._inputs import (MAP_NUMBERS_KEY, PHYSICS_TIPS, PREVIEW_COLOR, PREVIEW_KEY, PhysicsControls, check_plane_view,
                       contour_layer_choices, core_default, image_layer_choices, nothing_drawn, off_image)
 from ._layers import PointsAsPolygon, image_transform_kwargs, shapes_to_image_coords, slice_index
 from ._worker import WorkerWidget, relay
@@ -156,6 +156,7 @@ def _map_numbers(n_maps: int, tile_shape, grid, placement: dict, name: str) -> t
     step = np.asarray(tile_shape, float) + MAP_PADDING
     corners = np.array([divmod(k, grid[1]) for k in range(n_maps)], float) * step + MAP_PADDING
     return (corners, dict(name=f"{name} maps: object numbers", features={"object": np.arange(n_maps)},
+                          metadata={MAP_NUMBERS_KEY: True},
                           text={"string": "{object}", "color": "white", "anchor": "upper_left", "size": 10},
                           size=0.1, face_color="transparent", border_width=0, visible=False, **placement),
             "points")
@@ -230,6 +231,18 @@ _TIPS = {
               "node, row, col (the movie's pixels), arc position, normal velocity (px/frame, protrusion > 0), "
               "curvature and status; as napari-physeg track writes it.",
 }
+
+
+def _frames_named(row, status: str) -> str:
+    """The frames of ``row`` (one object's statuses) that are ``status``, as
+    runs: "frame 5", "frames 5-9, 20"."""
+    frames = [t for t, s in enumerate(row) if s == status]
+    runs, start = [], frames[0]
+    for before, t in zip(frames, frames[1:] + [None]):
+        if t != before + 1:
+            runs.append(f"{start}" if start == before else f"{start}-{before}")
+            start = t
+    return ("frame " if len(frames) == 1 else "frames ") + ", ".join(runs)
 
 
 class TrackingWidget(WorkerWidget):
@@ -388,9 +401,11 @@ class TrackingWidget(WorkerWidget):
                               f"{counts[LOST]} lost ({done}, {result.timings['total']:.1f} s)")
         show_info(f"Tracking: {self._status.value}. The membrane maps (frame x arc, one tile per object) are "
                   "hidden image layers")
-        lost = [k for k in range(result.n_objects) if LOST in result.status[k] and TRACKED in result.status[k]]
+        lost = [f"{k} on {_frames_named(row, LOST)}" for k, row in enumerate(result.status)
+                if LOST in row and TRACKED in row]
         if lost:
-            show_warning(f"object(s) {lost} were lost on the way: their later frames have no contour")
+            # (Not "their later frames": an object lost on a blank frame is tracked again after it.)
+            show_warning(f"object(s) lost on the way, with no contour there: {'; '.join(lost)}")
 
     # ------------------------------------------------------------ export
     export_what = "tracks"
