@@ -265,18 +265,25 @@ def test_an_error_of_the_core_is_one_message_not_a_traceback(dock, qtbot, wait_d
     assert len(errors) == 1 and "infinite" in errors[0]
 
 
-def test_a_registered_movie_with_an_empty_margin_is_tracked(dock, wait_done, errors, warned):
-    """The margin a registration leaves (NaN) was refused with an error;
-    it is no data, kept out of the contours, and said once."""
+def _tracked_from_a_circle(dock, wait_done, movie):
+    """The Tracking widget, docked, once it tracked ``movie`` (of _disk_movie)
+    from a circle about its disk on frame 0."""
     viewer, widget = dock(TrackingWidget)
-    movie = _disk_movie()
-    movie[1:, :, :6] = np.nan  # the empty margin of a registered movie
     viewer.add_image(movie, name="movie")
     viewer.add_shapes([_circle_on_frame((40, 40), 20)], shape_type="polygon", name="drawn")
     widget.reset_choices()
     viewer.dims.set_point(0, 0)
     widget.run()
     wait_done(widget)
+    return widget
+
+
+def test_a_registered_movie_with_an_empty_margin_is_tracked(dock, wait_done, errors, warned):
+    """The margin a registration leaves (NaN) was refused with an error;
+    it is no data, kept out of the contours, and said once."""
+    movie = _disk_movie()
+    movie[1:, :, :6] = np.nan  # the empty margin of a registered movie
+    widget = _tracked_from_a_circle(dock, wait_done, movie)
     assert errors == [] and widget.last_result.status[0] == ["tracked"] * 5
     assert len([layer for layer in widget.output_layers if isinstance(layer, Shapes)][0].data) == 5
     assert sum("in 4 of 5 frames" in m for m in warned) == 1
@@ -286,15 +293,9 @@ def test_an_object_lost_on_a_blank_frame_only_is_said_to_be_lost_there(dock, wai
     """Found by an outside tester (session 65): after one blank frame the
     warning said the object's "later frames have no contour", while it was
     tracked again on every one of them."""
-    viewer, widget = dock(TrackingWidget)
     movie = _disk_movie(n_frames=7)
     movie[3] = 0.2  # a blank frame
-    viewer.add_image(movie, name="movie")
-    viewer.add_shapes([_circle_on_frame((40, 40), 20)], shape_type="polygon", name="drawn")
-    widget.reset_choices()
-    viewer.dims.set_point(0, 0)
-    widget.run()
-    wait_done(widget)
+    widget = _tracked_from_a_circle(dock, wait_done, movie)
     assert errors == [] and widget.last_result.status[0] == ["tracked"] * 3 + ["lost"] + ["tracked"] * 3
     assert [m for m in warned if "lost on the way" in m] == [
         "object(s) lost on the way, with no contour there: 0 on frame 3"]
