@@ -463,7 +463,7 @@ _NOT_CONVERGED_ADVICE = {
     "limited": "came to rest against their drawing where the object runs on beyond it (the drawing is the "
                "object's limit): draw them around all of the object, or keep them as the part you drew around",
     "stalled": "came to rest away from any border (nothing in reach pulled them further): draw them closer "
-               "to the object's border, or raise the stiffness r{r_advice}",
+               "to the object's border, or {r_change} the stiffness r{r_advice}",
     "leaked": "spread far beyond the drawing, over the image (nothing told the object from its surroundings, "
               "or there was no object in the drawing): draw them around the object, closer to its border, or set "
               "'object is' to bright or dark",
@@ -486,15 +486,11 @@ def not_converged_messages(outcome: SegmentationOutcome, job: SegmentationJob, r
     for i, r in zip(outcome.indices, outcome.results):
         if not r.converged:
             by_reason.setdefault(r.stop_reason, []).append((job.shape_indices[i], r.steps))
-    messages = []
-    for reason, advice in _NOT_CONVERGED_ADVICE.items():
-        if runs := by_reason.get(reason):
-            if r_ratio >= R_TOO_HIGH:
-                advice = advice.replace("raise the stiffness r{r_advice}", "lower the stiffness r{r_advice}")
-            r_advice = (f" ({r_ratio:.3g} times the material's suggested r: forces that strong overshoot, and the "
-                        "steps are held back)") if r_ratio >= R_TOO_HIGH else ""
-            messages.append(f"shape(s) {[k for k, _ in runs]} " + advice.format(steps=runs[0][1], r_advice=r_advice))
-    return messages
+    too_high = r_ratio >= R_TOO_HIGH
+    r_change, r_advice = ("lower", f" ({r_ratio:.3g} times the material's suggested r: forces that strong "
+                                   "overshoot, and the steps are held back)") if too_high else ("raise", "")
+    return [f"shape(s) {[k for k, _ in runs]} " + advice.format(steps=runs[0][1], r_change=r_change, r_advice=r_advice)
+            for reason, advice in _NOT_CONVERGED_ADVICE.items() if (runs := by_reason.get(reason))]
 
 
 def result_layer_data(outcome: SegmentationOutcome, job: SegmentationJob, *, labels: bool = False,

@@ -506,18 +506,17 @@ class SimulationWidget(WorkerWidget):
         if self._tracks.value and len(pair.leading) > 1:
             show_warning("no Tracks layer: napari's tracks have at most 3 spatial axes and the contours have "
                          f"{len(pair.leading) + 2}")
-        slider = "'frame'"
+        axis = self.viewer.dims.ndim - len(pair.leading) - 3  # the world axis the frames play on
+        slider = f"'{self.viewer.dims.axis_labels[axis]}'" if axis >= 0 else "'frame'"
         try:
             for data, meta, kind in simulation_layer_data(outcome, pair, tracks=self._tracks.value,
                                                           material=self._material.value):
-                axis = self.viewer.dims.ndim - len(pair.leading) - 3  # the world axis the frames play on
                 if axis >= 0:
                     # An axis the viewer has (a movie's time): it keeps its name, and
                     # the frames its step (at scale 1 against a movie's 5 s a frame,
                     # the slider went from 30 steps to 146, and the frames between two).
                     meta.pop("axis_labels", None)
                     meta["scale"] = np.r_[self.viewer.dims.range[axis].step, np.asarray(meta["scale"])[1:]]
-                    slider = f"'{self.viewer.dims.axis_labels[axis]}'"
                 self.output_layers.append(self.viewer.add_layer(created_layer(data, meta, kind)))
         except Exception as err:  # never leave the user with a silent failure
             self._fail(f"Could not add the simulation layers: {type(err).__name__}: {err}")
