@@ -119,6 +119,9 @@ def test_text_and_flags_are_refused_as_coordinates():
         match(np.array([["1", "2"], ["3", "4"], ["5", "7"]]), B66)
     with pytest.raises(ValueError, match="init holds True/False values"):
         segment(data.ellipse().image, np.array([[True, False], [False, True], [True, True]]))
+    # A ragged list: numpy's own "inhomogeneous shape" escaped (the complex test read it first).
+    with pytest.raises(ValueError, match=r"a must be an \(N, 2\) array of \(row, col\) nodes"):
+        match([[0, 0], [1, 2, 3], [4, 5]], B66)
 
 
 @pytest.mark.parametrize("scale", [1e-10, 1e8])

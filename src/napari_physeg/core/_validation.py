@@ -37,17 +37,18 @@ _COLLINEAR = 1e-6
 def node_array(points, name: str = "contour", *, min_nodes: int = 3) -> np.ndarray:
     """``points`` as a float64 ``(N, 2)`` copy; ValueError if it cannot be
     one: empty, another shape, NaN or infinite values."""
-    if np.iscomplexobj(points):  # numpy would drop the imaginary part with a warning only
-        raise ValueError(f"{name} has complex coordinates: pass (row, col) as two real columns")
-    kind = np.asarray(points).dtype.kind if not isinstance(points, np.ndarray) else points.dtype.kind
-    if kind in "bUS":  # numpy reads "12" and True as numbers
-        what = "True/False values" if kind == "b" else "text"
-        raise ValueError(f"{name} holds {what}, not coordinates: pass (row, col) numbers (e.g. read a CSV "
-                         "with napari_physeg.io.read_shapes_csv or np.loadtxt)")
     try:
-        arr = np.array(points, dtype=np.float64)
-    except (TypeError, ValueError) as err:
+        raw = np.asarray(points)
+        kind = raw.dtype.kind
+        # numpy drops an imaginary part with a warning only, and reads "12" and True as numbers.
+        arr = None if kind in "cbUS" else np.array(raw, dtype=np.float64)
+    except (TypeError, ValueError) as err:  # ragged, or objects that are no numbers
         raise ValueError(f"{name} must be an (N, 2) array of (row, col) nodes: {err}") from None
+    if kind == "c":
+        raise ValueError(f"{name} has complex coordinates: pass (row, col) as two real columns")
+    if arr is None:
+        raise ValueError(f"{name} holds {'True/False values' if kind == 'b' else 'text'}, not coordinates: pass "
+                         "(row, col) numbers (e.g. read a CSV with napari_physeg.io.read_shapes_csv or np.loadtxt)")
     if arr.size == 0:
         raise ValueError(f"{name} is empty: draw a contour with at least {min_nodes} nodes")
     if arr.ndim != 2 or arr.shape[1] != 2:
