@@ -7,6 +7,7 @@ first, which is not repeated.
 
 from __future__ import annotations
 
+import warnings
 from functools import lru_cache
 
 import cv2
@@ -348,14 +349,16 @@ def crosses_itself(contour) -> bool:
 FIGURE_EIGHT_SHARE = 0.1
 
 
-def figure_eight_warning(contour, name: str = "contour") -> str | None:
-    """What to warn of when ``contour`` is a figure-8 (see FIGURE_EIGHT_SHARE):
-    its nodes do not follow one outline; else None."""
+def warn_if_figure_eight(contour, name: str, then: str, stacklevel: int) -> None:
+    """Warn, naming ``name``, when ``contour`` is a figure-8 (see
+    FIGURE_EIGHT_SHARE): its nodes do not follow one outline, and ``then``
+    says what follows for the caller's result. ``stacklevel`` counts from
+    this function (segment, match and simulate each point at their caller)."""
     share = loop_share(contour)
-    if share < FIGURE_EIGHT_SHARE:
-        return None
-    return (f"{name} crosses itself (a figure-8, a star or a bow-tie: loops that hold {share:.0%} of what it "
-            "encloses), so its nodes do not follow one outline")
+    if share >= FIGURE_EIGHT_SHARE:
+        warnings.warn(f"{name} crosses itself (a figure-8, a star or a bow-tie: loops that hold {share:.0%} of what "
+                      f"it encloses), so its nodes do not follow one outline: {then}", UserWarning,
+                      stacklevel=stacklevel)
 
 
 def loop_share(contour) -> float:

@@ -62,7 +62,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from ._drain import drain
-from .contour import figure_eight_warning, resample, rotation_between, rotation_matrix, segment_lengths, signed_area
+from .contour import resample, rotation_between, rotation_matrix, segment_lengths, signed_area, warn_if_figure_eight
 from .inner_distance import inner_distance_context
 from .materials import Material
 from ._validation import check_contour, check_count, check_number, with_defaults
@@ -1082,12 +1082,12 @@ def iter_match(a, b, **options):
 
 def _check_outlines(a, b) -> None:
     """Warn if ``a`` or ``b`` crosses itself as a figure-8 does (see
-    contour.figure_eight_warning): a user's input, matched all the same.
+    contour.warn_if_figure_eight): a user's input, matched all the same.
     (A tracked frame's contours, segmentation results, are not checked.)"""
     for contour, name in ((a, "a"), (b, "b")):
-        if (said := figure_eight_warning(check_contour(contour, name), name)) is not None:
-            warnings.warn(f"{said}: its partners follow its crossings; match outlines that do not cross "
-                          "themselves (a segmentation's result, or a shape drawn again)", UserWarning, stacklevel=3)
+        warn_if_figure_eight(check_contour(contour, name), name, "its partners follow its crossings; match outlines "
+                             "that do not cross themselves (a segmentation's result, or a shape drawn again)",
+                             stacklevel=4)  # (this, _check_outlines, match, its caller)
 
 
 def _match_pairs(a, b, **options) -> np.ndarray:

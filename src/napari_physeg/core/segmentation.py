@@ -21,9 +21,9 @@ from scipy.spatial.distance import pdist
 
 from .background import background_plane, plane_removed
 from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, crosses_itself,
-                      cut_pinches, densify, depth_inside, figure_eight_warning, nearest_node,
+                      cut_pinches, densify, depth_inside, nearest_node,
                       nodes_for_spacing, outward_normals, pair_indices, pairs_within, perimeter, remove_loops,
-                      resample, segment_lengths, signed_area, window_mask)
+                      resample, segment_lengths, signed_area, warn_if_figure_eight, window_mask)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
@@ -166,16 +166,6 @@ def _in_working_range(image: np.ndarray) -> np.ndarray:
     if largest == 0.0 or not np.isfinite(largest) or WORKING_RANGE[0] <= largest <= WORKING_RANGE[1]:
         return image  # (infinite pixels are refused where the features read them)
     return image.astype(np.float64) / largest
-
-
-
-
-def _warn_if_figure_eight(drawing: np.ndarray) -> None:
-    """Warn when ``drawing`` crosses itself around a large share of what it
-    encloses: the contour cannot, and may end on a part of the object."""
-    if (said := figure_eight_warning(drawing, "init")) is not None:
-        warnings.warn(f"{said}: the result may hold a part of the object only; draw one outline that does not "
-                      "cross itself, around (or inside) the object", UserWarning, stacklevel=6)
 
 
 #: A drawing may reach beyond the image (around an object its side cuts), by
@@ -655,6 +645,7 @@ def _cut_off_near(cut: np.ndarray | None) -> np.ndarray | None:
         return None
     thick = cv2.morphologyEx(cut.view(np.uint8), cv2.MORPH_OPEN, _disk(CUT_OFF_DEPTH))
     return cv2.dilate(thick, _disk(CUT_OFF_REACH)) if thick.any() else None
+
 
 #: A drawing fewer pixels across than this is a click: if it collapses, the
 #: error says to draw larger.
@@ -1460,7 +1451,9 @@ def _set_up(options: dict) -> _Setup:
     # the object from its background; the clipped one starts the contour.
     drawing, start, warn = init, o["start"], o["warn"]
     if warn:
-        _warn_if_figure_eight(drawing)
+        # (stacklevel: this, _set_up, _evolve, drain, segment, its caller)
+        warn_if_figure_eight(drawing, "init", "the result may hold a part of the object only; draw one outline that "
+                             "does not cross itself, around (or inside) the object", stacklevel=6)
     init = _clip_to_image(init, image.shape, warn)
     first = init if start is None else _clip_to_image(check_contour(start, "start"), image.shape, warn)
     nodes, spacing, sigma = _initial_nodes(first, o["n_nodes"], o["sigma"], o["sigma_factor"])

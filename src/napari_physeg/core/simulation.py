@@ -34,7 +34,6 @@ turned copy of itself then ends on it, its frames turned and moved copies.
 from __future__ import annotations
 
 import time
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -43,7 +42,7 @@ from scipy.sparse.linalg import spsolve
 
 from ._drain import drain
 from ._validation import check_contour, check_count, check_number, with_defaults
-from .contour import figure_eight_warning, rotation_between, rotation_matrix, segment_lengths
+from .contour import rotation_between, rotation_matrix, segment_lengths, warn_if_figure_eight
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import (
     coefficient_system,
@@ -299,9 +298,8 @@ def _prepare(a, b, matching, *, q, material, n_frames, sigma_factor, damping_rat
     a = check_contour(a, "a")
     b = check_contour(b, "b")
     for contour, name in ((a, "a"), (b, "b")):
-        if (said := figure_eight_warning(contour, name)) is not None:
-            warnings.warn(f"{said}: its frames follow its crossings; simulate outlines that do not cross "
-                          "themselves", UserWarning, stacklevel=3)
+        warn_if_figure_eight(contour, name, "its frames follow its crossings; simulate outlines that do not cross "
+                             "themselves", stacklevel=4)  # (this, _prepare, simulate, its caller)
     material = get_material(material)
     options = dict(
         q=check_number(q, "q", inclusive=False), material=material,
