@@ -124,6 +124,69 @@ def test_origins_of_a_shifted_contour_are_its_nodes_shifted_back():
     assert np.abs(origin - contour).max() < 0.1
 
 
+def _disk_frames(radii, centre=32.0, size=64, noise=5.0, seed=0):
+    """Noisy frames of a bright disk of each of ``radii``."""
+    rows, cols = np.mgrid[:size, :size]
+    rng = np.random.default_rng(seed)
+    disks = [np.hypot(rows - centre, cols - centre) <= r for r in radii]
+    return np.stack([10.0 + 190.0 * d + rng.normal(0, noise, d.shape) for d in disks]).astype(np.float32)
+
+
+def test_a_growing_disk_moves_out_at_its_growth_on_every_frame():
+    """A disk fits its previous outline at every angle: the turn between
+    frames must be the least that fits, not one that the nodes' noise
+    chooses (up to 125 degrees, which put every origin far along the
+    membrane and gave normal velocities of 18 px/frame)."""
+    radii = 8.0 + np.arange(10)
+    tr = track(_disk_frames(radii), _circle((32, 32), 12))
+    assert tr.status == [[TRACKED] * 10]
+    for t in range(1, 10):
+        velocity = tr.normal_velocity[0][t]
+        assert abs(np.median(velocity) - 1.0) < 0.3 and np.abs(velocity - 1.0).max() < 1.0, t
+
+
+@pytest.mark.parametrize("radius, depth, turn, seed", [(10, 0.12, 0.0141, 436), (12, 0.2, 0.0051, 37),
+                                                       (8, 0.08, 0.0353, 741)])
+def test_a_slowly_turning_oval_keeps_its_origins_in_place(radius, depth, turn, seed):
+    """A two-fold symmetric shape's modes may take opposite signs on
+    consecutive frames; the matching's best pairs then lie half a turn away
+    and must not outweigh where the nodes are (36 of 150 such movies had
+    normal velocities of 16-27 px/frame for a turn of 0.2-1.6 px)."""
+    rows, cols = np.mgrid[:64, :64] - 32.0
+    rng = np.random.default_rng(seed)
+    angle, distance = np.arctan2(rows, cols), np.hypot(rows, cols)
+    frames = np.stack([10.0 + 190.0 * (distance <= radius * (1 + depth * np.cos(2 * (angle - turn * t))))
+                       + rng.normal(0, 3.0, rows.shape) for t in range(10)]).astype(np.float32)
+    tr = track(frames, _circle((32, 32), 1.4 * radius))
+    assert tr.status == [[TRACKED] * 10]
+    for t in range(1, 10):
+        assert np.abs(tr.normal_velocity[0][t]).max() < 1.5, t
+        assert np.median(np.hypot(*(tr.contours[0][t] - tr.origin[0][t]).T)) < 1.0, t
+
+
+def test_origins_of_a_still_circle_whose_nodes_moved_along_lie_on_it():
+    """Origins lie on the smooth curve through the previous nodes: on its
+    edges, inside a convex contour by their sagitta, every normal velocity
+    of a still circle came out 0.09 px/frame outward."""
+    angles = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    before = np.column_stack([50 + 10 * np.sin(angles), 50 + 10 * np.cos(angles)])
+    moved_along = np.column_stack([50 + 10 * np.sin(angles + np.pi / 24), 50 + 10 * np.cos(angles + np.pi / 24)])
+    origin = node_origins(moved_along, before)
+    assert np.abs(np.hypot(*(origin - 50).T) - 10).max() < 0.005
+    assert np.abs(((moved_along - origin) * outward_normals(moved_along)).sum(1)).max() < 0.005
+
+
+def test_curvature_of_a_pixelated_disk_is_convex_everywhere():
+    """The outline of a binary disk steps from pixel to pixel; over one
+    node's turn its curvature ranged from -0.11 to 0.29 for 0.1."""
+    from skimage import measure
+
+    rows, cols = np.mgrid[:60, :60]
+    disk = (rows - 30.3) ** 2 + (cols - 29.6) ** 2 <= 10**2
+    outline = resample(measure.find_contours(disk.astype(float), 0.5)[0], spacing=2.7)
+    assert curvature(outline).min() > 0.02 and np.abs(curvature(outline) - 0.1).max() < 0.07
+
+
 def test_starting_in_the_middle_tracks_both_ways(movie):
     middle = data.deforming_cell(n_frames=12)
     init = middle.outlines[6][::6] + 3.0 * _outward(middle.outlines[6][::6])

@@ -12,6 +12,7 @@ from functools import lru_cache
 
 import cv2
 import numpy as np
+from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist, pdist
 
@@ -152,6 +153,21 @@ def densify(contour: np.ndarray, spacing: float, longest: float) -> np.ndarray:
     # Position of each new node along its edge: 0, 1/p, ..., (p-1)/p.
     offset = np.arange(pieces.sum()) - np.repeat(np.cumsum(pieces) - pieces, pieces)
     return contour[start] + (offset / pieces[start])[:, None] * edge[start]
+
+
+def through_nodes(contour: np.ndarray, per_edge: int) -> np.ndarray:
+    """Points of the smooth closed curve through the nodes of ``contour``
+    (a periodic cubic spline of the arc length along its edges),
+    ``per_edge`` of them along each edge: node ``i`` is point
+    ``i * per_edge``. Its edges, unlike the contour's own, lie on the curve
+    to within a tiny fraction of a pixel (a chord stays inside a convex curve
+    by its sagitta, ``length**2 / (8 * radius)``: 0.25 px for edges of 2.7 px
+    about a radius of 3.6 px)."""
+    contour = np.asarray(contour, dtype=np.float64)
+    s = np.concatenate([[0.0], np.cumsum(np.maximum(segment_lengths(contour), 1e-9))])
+    curve = CubicSpline(s, np.vstack([contour, contour[:1]]), bc_type="periodic")
+    fractions = np.arange(per_edge) / per_edge
+    return curve((s[:-1, None] + fractions * np.diff(s)[:, None]).ravel())
 
 
 def outward_normals(contour: np.ndarray) -> np.ndarray:

@@ -123,6 +123,15 @@ _CONTEXT_SAMPLES = 100
 _GLOBAL_NEIGHBOURHOOD = 0.25
 #: Offsets the neighbourhood average samples.
 _NEIGHBOURHOOD_TERMS = 9
+#: The displacement term's unit is C's typical best pairs, or, when C
+#: between the nearest nodes is more than this many times that, C between
+#: them over this: the modes of a symmetric shape (an ellipse, a disk) may
+#: take opposite signs on two consecutive frames, and C's best pairs then lie
+#: half a turn away at almost no cost, where a term in their units vanished
+#: (a slowly turning ellipse tracked: every origin half a turn off, normal
+#: velocities of 20 px/frame). On the time-lapse nuclei matched in place C
+#: between nearest nodes is at most 6 times C's best pairs.
+_FLIPPED_MODES = 10.0
 #: Anisotropy (minor / major second moment) above which the frame of b is searched.
 _ISOTROPIC = 0.8
 #: Mixings of a near-degenerate pair of modes tried (see _pair_mixings): a
@@ -1328,12 +1337,16 @@ def _mode_hypotheses(job: _Job, fa: np.ndarray, fb: np.ndarray, basis_a: ModalBa
 
 def _with_displacement(job: _Job, C: np.ndarray, A: np.ndarray, B: np.ndarray, scale: float | None = None):
     """``C`` plus the displacement term (two contours in one frame of
-    reference) in units of ``scale``, by default ``C``'s typical best pairs."""
+    reference) in units of ``scale``, by default ``C``'s typical best pairs
+    (see _FLIPPED_MODES)."""
     if job.displacement_weight == 0:
         return C
-    scale = float(np.median(C.min(axis=1))) if scale is None else scale
+    D = _pairwise_sq(A, B)
+    if scale is None:
+        nearest = C[np.arange(len(A)), D.argmin(axis=1)]
+        scale = max(float(np.median(C.min(axis=1))), float(np.median(nearest)) / _FLIPPED_MODES)
     spacing = float(segment_lengths(A).mean())
-    return C + job.displacement_weight * scale * _pairwise_sq(A, B) / spacing**2
+    return C + job.displacement_weight * scale * D / spacing**2
 
 
 def _shape_cost(job: _Job, A: np.ndarray, B: np.ndarray, t_a: np.ndarray, t_b: np.ndarray):
