@@ -95,11 +95,26 @@ def test_a_frame_that_cannot_be_used_stops_the_run_and_keeps_the_frames_done(mov
     assert "stopped at a frame that could not be used" in widget._status.value
 
 
-def test_contours_off_the_current_frame_are_refused(movie_in_viewer, errors):
+def test_contours_all_drawn_on_another_frame_are_tracked_from_it(movie_in_viewer, wait_done):
+    """napari opens a movie on its middle frame: the sample's contour, on
+    frame 0, was refused with "go to the frame..." on pressing Run."""
     viewer, widget = movie_in_viewer
     viewer.dims.set_point(0, 5)
+    assert widget.run() is not None
+    assert viewer.dims.point[0] == 0  # shown where tracking starts
+    wait_done(widget)
+    assert widget.last_result.start == 0 and widget.last_result.status == [["tracked"] * 8]
+
+
+def test_contours_on_several_frames_none_on_this_one_are_refused(movie_in_viewer, errors):
+    viewer, widget = movie_in_viewer
+    shapes = viewer.layers["contour on frame 0"]
+    later = np.asarray(shapes.data[0]).copy()
+    later[:, 0] = 3
+    shapes.add_polygons([later])
+    viewer.dims.set_point(0, 5)
     assert widget.run() is None
-    assert errors and "current frame" in errors[-1]
+    assert errors and "several frames" in errors[-1] and "current frame" in errors[-1]
 
 
 def test_node_trajectories_follow_the_membrane():

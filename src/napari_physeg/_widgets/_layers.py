@@ -330,6 +330,18 @@ def shapes_to_image_coords(shapes_layer, image_layer, world_point=None) -> Slice
     return SlicedShapes(contours=contours, indices=indices, off_slice=off, refused=refused)
 
 
+def slices_drawn_on(shapes_layer) -> list[tuple]:
+    """The world positions, along the Shapes layer's leading (non-spatial)
+    axes, of the slices its shapes lie on, sorted: one tuple per slice
+    (empty for a 2D layer)."""
+    ds = int(shapes_layer.ndim)
+    if ds <= 2:
+        return []
+    to_world = affine_matrix(shapes_layer.data_to_world, ds)
+    firsts = [np.asarray(verts, dtype=np.float64)[0] for verts in shapes_layer.data]
+    return sorted({tuple(np.round(apply_affine(to_world, first[None])[0, : ds - 2], 6)) for first in firsts})
+
+
 def shape_in_layer_coords(shapes_layer, index: int, reference_layer=None, world_point=None):
     """One shape of a Shapes layer as a closed contour in another layer's data coordinates.
 

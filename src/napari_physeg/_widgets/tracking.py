@@ -32,7 +32,7 @@ from skimage.util import montage
 from ..core import LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, segment, track
 from ._inputs import (MAP_NUMBERS_KEY, PHYSICS_TIPS, PREVIEW_COLOR, PREVIEW_KEY, PhysicsControls, check_plane_view,
                       contour_layer_choices, core_default, image_layer_choices, nothing_drawn, off_image)
-from ._layers import PointsAsPolygon, image_transform_kwargs, shapes_to_image_coords, slice_index
+from ._layers import PointsAsPolygon, image_transform_kwargs, shapes_to_image_coords, slice_index, slices_drawn_on
 from ._worker import WorkerWidget, relay
 
 __all__ = ["TrackingWidget", "tracking_layer_data", "node_trajectories"]
@@ -305,11 +305,17 @@ class TrackingWidget(WorkerWidget):
         if (why := nothing_drawn(shapes, "track")) is not None:  # (not "go to the frame ...": nothing is drawn)
             raise ValueError(why)
         sliced = shapes_to_image_coords(shapes, image, world_point=point)
+        if not sliced.contours and isinstance(shapes, Shapes) and len(drawn_on := slices_drawn_on(shapes)) == 1:
+            # Drawn on one frame, not the one shown (napari opens a movie at its
+            # middle frame): track from that frame, and show it.
+            point = point[: len(point) - shapes.ndim] + drawn_on[0] + point[len(point) - 2:]
+            self.viewer.dims.point = point
+            sliced = shapes_to_image_coords(shapes, image, world_point=point)
         if sliced.refused:  # each drawing is an object: none is left out unsaid
             raise ValueError(sliced.refused[0])
         if not sliced.contours:
-            raise ValueError(f"no contour of {shapes.name!r} lies on the current frame: go to the frame the "
-                             "contours were drawn on")
+            raise ValueError(f"no contour of {shapes.name!r} lies on the current frame, and they lie on several "
+                             "frames: go to the frame where every object is drawn")
         if sliced.off_slice:  # each drawing is an object: none is left out unsaid
             show_warning(f"{sliced.off_slice} shape(s) of {shapes.name!r} lie on other frames and are not tracked: "
                          "tracking starts from the frame you stand on, where every object must be drawn")
