@@ -656,8 +656,10 @@ def test_a_frame_without_data_is_a_gap_the_objects_are_followed_across():
     As the start frame it is bad input."""
     frames = _disk_movie([[(48, 44 + 2 * t)] for t in range(6)])
     frames[3] = np.nan
-    with pytest.warns(UserWarning, match="in 1 of 6 frames"):
+    # Not "an object that goes into them has left the field of view" (an outside tester, session 66).
+    with pytest.warns(UserWarning, match=r"1 frame\(s\) hold NaN pixels only.*frame 3\): every object is lost there"):
         tr = track(frames, _circle((48, 44), 16))
+    assert not any("left the field of view" in w for w in tr.warnings)
     assert tr.stop_reason == "completed" and tr.contours[0][3] is None
     # Lost there, not "left the field of view" (it did, session 63: an
     # outside probe found it; the object sits mid-field).
@@ -738,10 +740,30 @@ def test_generator_and_lazy_frames(movie):
     (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"match_options": {"method": "local"}}, "cannot set"),
     (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"match_options": {"n_mode": 3}}, "not options of match"),
     (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"match_options": {"n_modes": -3}}, "match_options: n_modes"),
+    # Found by an outside tester (session 66): Python's own TypeErrors, or an option cut without a word.
+    (None, _circle((16, 16), 5), {}, "frames must be a .* movie.*got NoneType"),
+    (np.zeros((3, 32, 32)), None, {}, "inits must be one .* contour or a list"),
+    (np.zeros((3, 32, 32)), 5, {}, "inits must be one .* contour or a list"),
+    (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"max_steps": 2.5}, "max_steps must be an integer"),
+    (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"max_steps": "x"}, "max_steps must be an integer"),
+    (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"segment_options": [1, 2]}, "segment_options must be a dict"),
+    (np.zeros((3, 32, 32)), _circle((16, 16), 5), {"match_options": 5}, "match_options must be a dict"),
 ])
 def test_bad_input_gets_a_clear_error(frames, inits, kwargs, message):
     with pytest.raises(ValueError, match=message):
         track(frames, inits, **kwargs)
+
+
+def test_one_contour_as_nested_lists_is_one_object():
+    """A contour as nested lists read as a list of 2-coordinate 'contours'."""
+    frames = _disk_movie([[(48, 48)]] * 2)
+    tr = track(frames, _circle((48, 48), 16).tolist())
+    assert tr.n_objects == 1 and tr.status == [[TRACKED, TRACKED]]
+
+
+def test_a_callback_that_cannot_be_called_is_refused_before_any_work():
+    with pytest.raises(TypeError, match="callback must be a function"):
+        track(np.zeros((3, 32, 32)), _circle((16, 16), 5), callback=5)
 
 
 def test_displacement_weight_breaks_the_symmetry_of_round_shapes():

@@ -31,6 +31,7 @@ MorphoDynamics (:meth:`TrackingResult.membrane_map`).
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 import warnings
 from dataclasses import dataclass, field, replace
 from functools import partial
@@ -44,7 +45,7 @@ from skimage.filters import threshold_otsu
 from skimage.segmentation import watershed
 
 from ._drain import drain
-from ._validation import check_contour, signature_of
+from ._validation import check_contour, check_count, signature_of
 from .contour import (area_centroid, as_contour, bounding_window, closest_on_polyline, depth_inside, nearest_node,
                       outward_normals, perimeter, positively_oriented, remove_loops, resample, rotation_matrix,
                       signed_area, through_nodes, window_mask)
@@ -201,7 +202,8 @@ class TrackingResult:
         where it is lost or gone (never a garbage contour).
     status : list of list of str
         :data:`TRACKED`, :data:`LOST` or :data:`LEFT` (``"left the field of
-        view"``).
+        view"``); ``"not processed"`` for the frames a cancelled run or a
+        frame that could not be used left undone (see ``stop_reason``).
     origin : list of list of (N, 2) ndarray or None
         Where each node of frame ``t`` came from on frame ``t - 1``'s contour
         (NaN at the first frame and after a gap).
@@ -279,8 +281,9 @@ class TrackingResult:
         values = {"normal_velocity": self.normal_velocity, "curvature": self.curvature}
         if quantity not in values:
             raise ValueError(f"quantity must be 'normal_velocity' or 'curvature', got {quantity!r}")
-        grid = np.arange(int(n_arc)) / int(n_arc)
-        out = np.full((self.n_frames, int(n_arc)), np.nan)
+        n_arc = check_count(n_arc, "n_arc", 1)
+        grid = np.arange(n_arc) / n_arc
+        out = np.full((self.n_frames, n_arc), np.nan)
         for t, (v, s) in enumerate(zip(values[quantity][k], self.arc[k])):
             if v is not None and np.isfinite(v).any():
                 order = np.argsort(s)
@@ -316,6 +319,9 @@ class TrackingResult:
 
 def _check_frames(frames):
     shape = getattr(frames, "shape", None)
+    if shape is None and not isinstance(frames, (list, tuple)):
+        raise ValueError(f"frames must be a (T, H, W) movie (a numpy, dask or zarr array, or a list of 2D frames), "
+                         f"got {type(frames).__name__}")
     if shape is None:  # a list of frames
         shapes = [np.shape(frame) for frame in frames]
         if len(set(shapes)) > 1:
@@ -349,9 +355,10 @@ def _frames_advice(shape: tuple) -> str:
 
 
 def _check_inits(inits, frame_shape):
-    arr = inits if isinstance(inits, np.ndarray) else None
-    if arr is not None and arr.ndim == 2:
-        inits = [arr]
+    if not isinstance(inits, (np.ndarray, list, tuple)):
+        raise ValueError(f"inits must be one (N, 2) contour or a list of them, got {type(inits).__name__}")
+    if _one_contour(inits):
+        inits = [inits]
     # As segment() checks its drawing (its error, before any frame is read,
     # rather than the object reported lost on the start frame).
     out = [check_contour(as_contour(c, name=f"inits[{k}]"), f"inits[{k}]") for k, c in enumerate(inits)]
@@ -360,6 +367,15 @@ def _check_inits(inits, frame_shape):
     for k, c in enumerate(out):
         check_on_image(c, frame_shape, f"inits[{k}]")
     return out
+
+
+def _one_contour(inits) -> bool:
+    """Whether ``inits`` is a single (N, 2) contour (an array or nested
+    lists of numbers), rather than a sequence of contours."""
+    try:
+        return np.asarray(inits, dtype=float).ndim == 2
+    except (TypeError, ValueError):  # ragged: contours of different node counts
+        return False
 
 
 def _grown(contour: np.ndarray, by: float) -> np.ndarray:
@@ -667,7 +683,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                contours=[[None] * n_frames for _ in range(n_obj)], status=[[None] * n_frames for _ in range(n_obj)],
                seen=[_Seen(polarity, abs(signed_area(c))) for c in inits])
     total, done, stop_reason, said = n_obj * n_frames, 0, "completed", []
-    with_missing = []  # the frames with NaN pixels
+    with_missing, empty = [], []  # the frames with NaN pixels, and those with nothing else
     # Forward from the start frame, then backward from it.
     start_looks = None
     for frame_order in (range(start, n_frames), range(start - 1, -1, -1)):
@@ -687,7 +703,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                 break
             image, shared, looks = _frame_features(image, t, t == start, options.get("isef_b", 0.7))
             if shared.missing is not None:
-                with_missing.append(t)
+                (empty if shared.missing.all() else with_missing).append(t)
             run.stage = np.zeros(2) if before is None else _stage_shift(run, before, looks, t, step)
             run.before, run.looks = before, looks
             before = looks
@@ -709,6 +725,10 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                     f"{min(with_missing)}): the contours keep out of them, and an object that goes into them has left "
                     "the field of view")
         warnings.warn(said[-1], UserWarning, stacklevel=2)
+    if empty:
+        said.append(f"{len(empty)} frame(s) hold NaN pixels only, no data (first: frame {min(empty)}): every object "
+                    "is lost there, and followed again after")
+        warnings.warn(said[-1], UserWarning, stacklevel=2)
     t_segmented = time.perf_counter()
     analysis = _correspondences(run.contours, start, match_options or {})
     t_end = time.perf_counter()
@@ -729,12 +749,25 @@ def _checked_start(start, n_frames: int) -> int:
 def _checked_segment_options(segment_options: dict | None, max_steps: int) -> dict:
     """:func:`track`'s ``segment_options`` with its ``max_steps``, checked once
     here: a bad option must not pass, frame after frame, for a lost object."""
-    options = dict(segment_options or {})
-    options.setdefault("max_steps", int(max_steps))
+    options = dict(_mapping(segment_options, "segment_options"))
+    options.setdefault("max_steps", check_count(max_steps, "max_steps", 1))
     taken = sorted({"features", "avoid", "callback"} & set(options))
     if taken:
         raise ValueError(f"segment_options cannot set {taken}: track() sets them for each object and frame")
-    check_segment_options(**options)
+    try:
+        check_segment_options(**options)
+    except TypeError as err:  # an option segment() does not have
+        raise TypeError(f"segment_options: {err}") from None
+    return options
+
+
+def _mapping(options, name: str) -> dict:
+    """``options`` (a dict of keyword arguments, or None) as a dict, or a
+    ValueError naming ``name``."""
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise ValueError(f"{name} must be a dict of options, e.g. {{'material': 'copper'}}, got {options!r}")
     return options
 
 
@@ -742,7 +775,7 @@ def _checked_match_options(match_options: dict | None) -> dict:
     """:func:`track`'s ``match_options``, checked before any frame is read (a
     bad one failed only once the frames were segmented, from inside the
     matching): options of :func:`match` but those track() sets."""
-    options = dict(match_options or {})
+    options = dict(_mapping(match_options, "match_options"))
     taken = sorted({"method", "callback"} & set(options))
     if taken:
         raise ValueError(f"match_options cannot set {taken}: track() matches consecutive contours with the "
