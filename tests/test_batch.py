@@ -315,6 +315,46 @@ def test_a_track_task_stopped_by_an_unreadable_frame_fails_and_keeps_the_frames_
     assert row["tracked"] == 2 and row["last_status"] == "not processed"  # what succeeded is kept
 
 
+def test_a_failed_track_task_is_tried_again_by_the_next_run(tmp_path, movie):
+    """Found by an outside tester (session 66): a movie whose frame could not
+    be read on the first run (a file still being copied) kept its failed rows
+    on every rerun, which took them for a result."""
+    frames = movie.frames.astype(np.float32)
+    path = tmp_path / "movie.tif"
+    tifffile.imwrite(path, np.where(np.arange(4)[:, None, None] == 2, np.inf, frames), photometric="minisblack")
+    task = _track_task(path, tmp_path / "out", [movie.outlines[0][::6]])
+    assert batch._execute(task)[0]["status"] == "failed"
+    os.utime(path, ns=(path.stat().st_atime_ns, path.stat().st_mtime_ns))  # the same stamp
+    done, todo = batch._pending([task])
+    assert done == [] and todo == [task]
+    tifffile.imwrite(path, frames, photometric="minisblack")  # readable now
+    assert batch._execute(_track_task(path, tmp_path / "out", [movie.outlines[0][::6]]))[0]["status"] == "ok"
+
+
+def test_a_zarr_store_rewritten_in_place_is_run_again(tmp_path, movie):
+    """A version 3 store rewrites its chunks (under c/), not its zarr.json:
+    its results were taken as made from the pixels it holds now."""
+    zarr = pytest.importorskip("zarr")
+    path = tmp_path / "movie.zarr"
+    store = zarr.open_array(path, mode="w", shape=movie.frames.shape, chunks=(1, 96, 96), dtype="f4", zarr_format=3)
+    store[:] = movie.frames
+    before = batch._stamp(path)
+    time.sleep(0.01)
+    store[1] = movie.frames[2]
+    assert batch._stamp(path) != before
+
+
+def test_a_run_on_other_inputs_into_the_same_out_keeps_the_earlier_rows(client, movies):
+    """Found by an outside tester (session 66): the summary listed only the
+    last run's inputs, while out/results kept the earlier ones'."""
+    paths, init, tmp = movies
+    out = tmp / "out"
+    batch.track_files(paths[:2], init, out, client=client, progress=False)
+    table = batch.track_files(paths[2:], init, out, client=client, progress=False)
+    assert sorted(table["input"]) == sorted(map(str, paths)) and (table["status"] == "ok").all()
+    assert len(pd.read_csv(out / "summary.csv")) == 3
+
+
 def test_the_summary_line_counts_lost_objects_and_the_exit_status_as_track_does(capsys):
     from napari_physeg.cli import _batch_report
 

@@ -159,20 +159,33 @@ def _annotated(rows: list[dict], task: _Task, caught: list) -> list[dict]:
 
 
 def _stamp(path) -> list:
-    """Size and modification time (ns) of an input (of a zarr store: also of its metadata, rewritten
-    with the array), to tell the file a result was made from from one put in its place."""
+    """Size and modification time (ns) of an input, to tell the file a result was made from from one
+    put in its place. Of a zarr store: its files' count, total size and newest modification time (a
+    version 3 store rewritten in place changes only its chunks, under ``c/``)."""
     path = Path(path)
-    files = [path] + ([path / n for n in ("zarr.json", ".zarray") if (path / n).exists()] if path.is_dir() else [])
-    return [[f.stat().st_size, f.stat().st_mtime_ns] for f in files]
+    if not path.is_dir():
+        return [[path.stat().st_size, path.stat().st_mtime_ns]]
+    sizes, times = [], []
+    for folder, _, names in os.walk(path):
+        for name in names:
+            info = os.stat(os.path.join(folder, name))
+            sizes.append(info.st_size)
+            times.append(info.st_mtime_ns)
+    return [[len(sizes), sum(sizes), max(times, default=0)]]
 
 
 def _is_done(folder: Path, task: _Task) -> bool:
     """Whether ``folder`` holds the task's complete result, made from the input as it is now."""
-    if not (folder / "rows.json").exists():
+    if not (folder / "rows.json").exists() or _failed(folder):  # a failed task is tried again
         return False
     if task.stamp is None or not (folder / _SOURCE).exists():  # no stamp to compare (older results)
         return True
     return json.loads((folder / _SOURCE).read_text()) == task.stamp
+
+
+def _failed(folder: Path) -> bool:
+    """Whether the result in ``folder`` says its task failed (a frame that could not be read)."""
+    return any(row.get("status") == FAILED for row in _read_rows(folder))
 
 
 def _one_line(err: BaseException) -> str:
@@ -809,8 +822,9 @@ def _pending(tasks) -> tuple[list[dict], list]:
             rows.extend(_read_rows(done))
             continue
         if (done / "rows.json").exists():
+            if not _failed(done):
+                changed[task.path] = task.kind
             shutil.rmtree(done)
-            changed[task.path] = task.kind
         todo.append(task)
     for path, kind in changed.items():
         warnings.warn(f"{path} has changed since its results were made: {kind}ing it again", stacklevel=4)
@@ -835,8 +849,15 @@ def _finish(out: Path, rows: list[dict], keys: list[str]):
 
     for tmp in (out / _RESULTS).rglob(".*.tmp-*"):  # left by tasks whose worker died
         shutil.rmtree(tmp, ignore_errors=True)
+    table = pd.DataFrame(rows)
+    # The rows of inputs an earlier run into ``out`` (with the same settings) did and this one did
+    # not: their results stay in out/results, and the summary keeps saying so.
+    earlier = out / f"{_SUMMARY}.csv"
+    if earlier.exists() and len(table):
+        before = pd.read_csv(earlier)
+        table = pd.concat([before[~before["input"].isin(set(table["input"]))], table], ignore_index=True)
     # Nullable dtypes: a failed row's missing counts leave the others' integers whole.
-    table = pd.DataFrame(rows).convert_dtypes()
+    table = table.convert_dtypes()
     table = table.sort_values(keys, kind="stable").reset_index(drop=True)
     lead, last = [*keys, "status", "error"], ["host", "pid", "warnings"]  # the outcome first, then who ran it
     table = table[lead + [c for c in table.columns if c not in lead + last] + [c for c in last if c in table]]
