@@ -471,10 +471,16 @@ def test_a_frame_that_cannot_be_read_mid_run_is_named_on_a_line_of_its_own_and_t
     assert [f[0] for f in leading] == [0, 1]
 
 
-def test_a_tiff_cut_short_is_refused_before_any_work(movie_files, capsys, no_work):
+@pytest.mark.parametrize("compression", [None, "zlib"])
+def test_a_tiff_cut_short_is_refused_before_any_work(movie_files, capsys, no_work, compression):
+    """A compressed TIFF cut short was read as the one image of its first
+    page (an outside tester, session 66): "is a single 2-D image"."""
+    tifffile = pytest.importorskip("tifffile")
     movie, stack, init, tmp = movie_files
+    whole = tmp / "whole.tif"
+    tifffile.imwrite(whole, tifffile.imread(stack), compression=compression)
     cut = tmp / "cut.tif"
-    cut.write_bytes(stack.read_bytes()[:stack.stat().st_size // 2])  # an interrupted copy
+    cut.write_bytes(whole.read_bytes()[:whole.stat().st_size * 6 // 10])  # an interrupted copy
     assert main(["track", str(cut), "--init", str(init), "--out", str(tmp / "tracked")]) == 2
     err = capsys.readouterr().err
     assert f"{cut} is cut short" in err and "copy it again" in err and not (tmp / "tracked").exists()
@@ -717,10 +723,13 @@ def test_channel_of_an_rgb_image_is_still_read(tmp_path):
         assert stack.shape == (1, 20, 30) and int(stack.max()) == 9
 
 
-def test_a_tiff_of_pages_written_one_by_one_is_read_whole_and_one_of_mixed_shapes_refused(tmp_path):
+def test_a_tiff_of_pages_written_one_by_one_is_read_a_frame_at_a_time_and_one_of_mixed_shapes_refused(
+        tmp_path, monkeypatch):
     """Found by an outside probe (session 64): a TIFF whose pages are each a
     series of their own (written a page at a time) gave its first page only,
-    and the other frames were dropped without a word."""
+    and the other frames were dropped without a word. Then it was read whole
+    on opening (session 66, an outside tester: 1.5 GB to track 3 frames of a
+    0.5 GB movie)."""
     tifffile = pytest.importorskip("tifffile")
     from napari_physeg.io import open_stack
 
@@ -728,7 +737,11 @@ def test_a_tiff_of_pages_written_one_by_one_is_read_whole_and_one_of_mixed_shape
     with tifffile.TiffWriter(tmp_path / "pages.tif") as tif:
         for frame in frames:
             tif.write(frame, contiguous=False)
+    read, imread = [], tifffile.imread
+    monkeypatch.setattr(tifffile, "imread", lambda *a, **k: read.append(k.get("key")) or imread(*a, **k))
     with open_stack(tmp_path / "pages.tif") as stack:
+        np.testing.assert_array_equal(np.asarray(stack[3]), frames[3])
+        assert read == [3]
         np.testing.assert_array_equal(np.asarray(stack), frames)
     with tifffile.TiffWriter(tmp_path / "mixed.tif") as tif:
         tif.write(frames[0], contiguous=False)

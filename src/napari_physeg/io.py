@@ -317,7 +317,7 @@ def open_stack(path, *, channel: int | None = None):
 
                 with tifffile.TiffFile(path) as tif:
                     axes = tif.series[0].axes
-                    cut = _cut_short(tif.series[0], path)
+                    cut = _cut_short(tif.series[0], path) or _pages_missing(tif, path)
                     pages = _pages_as_frames(tif, path)
                 if cut:
                     raise _Refused(cut)
@@ -325,8 +325,8 @@ def open_stack(path, *, channel: int | None = None):
                     import zarr
                 except ImportError:
                     zarr = None
-                if pages is not None:  # one series a page: read whole, a frame a page
-                    axes, stack = None, da.from_array(pages, chunks=(1, *pages.shape[1:]))
+                if pages is not None:  # one series a page: a frame a page
+                    axes, stack = None, pages
                 elif zarr is None:  # a memory map if the file allows, else read whole
                     stack = da.from_array(_tiff_without_zarr(path))
                 else:
@@ -414,6 +414,20 @@ def _cut_short(series, path) -> str | None:
             f"holds {size} (an interrupted copy, a full disk?): copy it again")
 
 
+def _pages_missing(tif, path) -> str | None:
+    """Why a TIFF whose header names more frames than it holds is cut short (a compressed file cut:
+    tifffile reads the pages up to the cut, and took it for one image), or None."""
+    if tif.is_shaped and tif.shaped_metadata:
+        named = tuple(int(n) for n in tif.shaped_metadata[0].get("shape", ()))
+        if named and int(np.prod(named)) > tif.series[0].size:
+            return (f"{path} is cut short: its header names {' x '.join(map(str, named))} pixels, the file holds "
+                    f"{len(tif.pages)} page(s) (an interrupted copy, a full disk?): copy it again")
+    if tif.is_imagej and int((tif.imagej_metadata or {}).get("images", 1)) > len(tif.pages):
+        return (f"{path} is cut short: its header names {tif.imagej_metadata['images']} images, the file holds "
+                f"{len(tif.pages)} page(s) (an interrupted copy, a full disk?): copy it again")
+    return None
+
+
 def _need(module: str, path) -> None:
     try:
         __import__(module)
@@ -424,7 +438,7 @@ def _need(module: str, path) -> None:
 
 def _pages_as_frames(tif, path):
     """A TIFF whose pages are each a series of their own (written one at a
-    time, or by a program that names no stack) as a ``(pages, H, W)`` array;
+    time, or by a program that names no stack) as a lazy ``(pages, H, W)`` array;
     None for a TIFF of one series. Only the first series would be read
     otherwise, and the other frames dropped without a word. Series of other
     shapes (an OME file's positions, a page of another size) are refused."""
@@ -438,7 +452,24 @@ def _pages_as_frames(tif, path):
         raise _Refused(f"{path} holds {len(series)} images of shapes {shown}, not one stack: save the movie's "
                        "frames as one stack of one shape (e.g. tifffile.imwrite(path, np.stack(frames))), or "
                        "each image to a file of its own")
-    return np.stack([s.asarray() for s in series])
+    return _lazy_pages(path, len(series), shapes[0], series[0].dtype)
+
+
+def _lazy_pages(path, n_pages: int, shape, dtype):
+    """A TIFF's pages as a lazy ``(pages, H, W)`` dask array, each page read when its frame is
+    (a movie saved a frame at a time can be larger than memory)."""
+    import dask
+    import dask.array as da
+    import tifffile
+
+    def page(i: int) -> np.ndarray:
+        try:
+            return tifffile.imread(path, key=i)
+        except Exception as err:  # noqa: BLE001 - a decoder's error: one plain sentence naming the frame
+            raise ValueError(f"could not read frame {i} of {path}: {type(err).__name__}: "
+                             f"{' '.join(str(err).split())}") from None
+
+    return da.stack([da.from_delayed(dask.delayed(page)(i), shape, dtype) for i in range(n_pages)])
 
 
 def _tiff_without_zarr(path):
