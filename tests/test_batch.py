@@ -315,6 +315,21 @@ def test_a_track_task_stopped_by_an_unreadable_frame_fails_and_keeps_the_frames_
     assert row["tracked"] == 2 and row["last_status"] == "not processed"  # what succeeded is kept
 
 
+def test_track_messages_number_the_frames_as_the_stack_does(tmp_path, movie):
+    """Found by an outside tester (session 66): with --frames 2:4 a bad
+    stack frame 3 was "frame 1", and tracks.csv said 3."""
+    frames = movie.frames.astype(np.float32)
+    frames[3, 0, 0] = np.inf
+    path = tmp_path / "inf.tif"
+    tifffile.imwrite(path, frames, photometric="minisblack")
+    with pytest.warns(UserWarning, match=r"^frame 3 has infinite pixels"):
+        tr, chosen, _ = batch.track_file(path, [movie.outlines[0][::6]], tmp_path / "t", frames="2:4", start=2)
+    assert chosen == [2, 3] and tr.warnings[0].startswith("frame 3 has infinite pixels")
+    assert batch._in_stack_numbers("object 0 held two bodies on frame 1 ... (start=1); could not read frame 1 of "
+                                   "m.zarr", [5, 6]) == \
+        "object 0 held two bodies on frame 6 ... (start=6); could not read frame 1 of m.zarr"
+
+
 def test_a_failed_track_task_is_tried_again_by_the_next_run(tmp_path, movie):
     """Found by an outside tester (session 66): a movie whose frame could not
     be read on the first run (a file still being copied) kept its failed rows

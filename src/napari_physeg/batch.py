@@ -32,6 +32,7 @@ import hashlib
 import json
 import logging
 import os
+import re
 import shutil
 import signal
 import socket
@@ -263,6 +264,34 @@ def _in_stack_frames(callback, chosen):
     return lambda progress: callback(replace(progress, frame=chosen[progress.frame]))
 
 
+#: A frame number in a message of track(): "frame 4", "start frame 4", "(start=4)"; not the
+#: stack's own number in a read error it passes on ("could not read frame 6 of movie.zarr").
+_FRAME_NUMBER = re.compile(r"(?<!read )(\bframe |start=)(\d+)")
+
+
+def _in_stack_numbers(text: str, chosen) -> str:
+    """A message of track() on the frames ``chosen`` of a stack, with the stack's frame numbers."""
+    def renumbered(match):
+        t = int(match.group(2))
+        return match.group(1) + str(chosen[t]) if t < len(chosen) else match.group(0)
+
+    return _FRAME_NUMBER.sub(renumbered, text)
+
+
+@contextlib.contextmanager
+def _messages_in_stack_frames(chosen):
+    """track()'s warnings and errors on the frames ``chosen`` of a stack, passed on with the
+    stack's frame numbers (they numbered the frames tracked: "frame 4" of --frames 12:20 was 16)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            yield
+        except ValueError as err:
+            raise ValueError(_in_stack_numbers(str(err), chosen)) from None
+    for w in caught:
+        warnings.warn_explicit(_in_stack_numbers(str(w.message), chosen), w.category, w.filename, w.lineno)
+
+
 def track_file(path, inits, folder, *, frames: str | None = None, start: int | None = None,
                channel: int | None = None, node_spacing: float | None = None, max_steps: int | None = None,
                match_options: dict | None = None, callback=None, **segment_options):
@@ -308,9 +337,11 @@ def track_file(path, inits, folder, *, frames: str | None = None, start: int | N
         chosen, start = check_track(stack, path, inits, "the contours", frames=frames, start=start)
         movie = stack if chosen == list(range(len(stack))) else stack[chosen]
         options = {"max_steps": max_steps} if max_steps is not None else {}
-        tr = track(movie, inits, start=chosen.index(start), callback=_in_stack_frames(callback, chosen),
-                   segment_options=segment_options_for(_mean_contour(inits), segment_options, node_spacing),
-                   match_options=dict(match_options or {}), **options)
+        with _messages_in_stack_frames(chosen):
+            tr = track(movie, inits, start=chosen.index(start), callback=_in_stack_frames(callback, chosen),
+                       segment_options=segment_options_for(_mean_contour(inits), segment_options, node_spacing),
+                       match_options=dict(match_options or {}), **options)
+        tr = replace(tr, warnings=tuple(_in_stack_numbers(text, chosen) for text in tr.warnings))
     shapes, leading = [], []
     for k in range(tr.n_objects):
         for t, c in enumerate(tr.contours[k]):
