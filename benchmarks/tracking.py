@@ -19,6 +19,11 @@ Two movies:
 * **Through z** - the confocal nuclei stack of the real-image benchmark, its 60 slices taken as
   60 frames, tracked from a middle slice both ways and scored against its 3D labels: nuclei that
   grow, shrink and fade out of focus, with full masks as truth.
+* **Round and symmetric objects** - noisy synthetic movies whose outline fits itself turned
+  (since session 66): a disk growing by 1 px a frame, ellipses turning by 0.12 and 0.3 rad a
+  frame, and 60 two-fold ovals turning by 0.005-0.05 rad a frame (random radius, depth, turn and
+  noise seed); the largest normal velocity against the most the motion can give, and the
+  curvature's error on the ellipses against their analytic curvature.
 * **Synthetic** - ``napari_physeg.data.deforming_cell()`` (30 frames, known material
   points): the median and 90th percentile of the normal-velocity error (px/frame) and
   the drift of points followed through the correspondences over the 30 frames, in node
@@ -484,6 +489,63 @@ def through_z(out, starts=(28, 35, 42)):
             f"| {beyond} | {1e3 * elapsed / (len(ids) * len(stack)):.1f} |")
 
 
+def _shape_movie(radius, depth, turn, grow=0.0, n_frames=10, size=64, noise=3.0, seed=0, fold=2):
+    """A bright shape r = (radius + grow t) (1 + depth cos(fold (angle - turn t))) on a noisy ground."""
+    rows, cols = np.mgrid[:size, :size] - size / 2
+    angle, distance = np.arctan2(rows, cols), np.hypot(rows, cols)
+    rng = np.random.default_rng(seed)
+    return np.stack([10.0 + 190.0 * (distance <= (radius + grow * t) * (1 + depth * np.cos(fold * (angle - turn * t))))
+                     + rng.normal(0, noise, distance.shape) for t in range(n_frames)]).astype(np.float32)
+
+
+def _ellipse_curvature(contour, centre, a, b, theta):
+    """The analytic curvature of the ellipse (semi-axes a, b, turned by theta) at each node's angle."""
+    d = contour - centre
+    u = d[:, 0] * np.cos(theta) + d[:, 1] * np.sin(theta)
+    v = -d[:, 0] * np.sin(theta) + d[:, 1] * np.cos(theta)
+    phi = np.arctan2(v / b, u / a)
+    return a * b / (a * a * np.sin(phi) ** 2 + b * b * np.cos(phi) ** 2) ** 1.5
+
+
+def round_and_symmetric(out, n_ovals: int = 60) -> None:
+    """Normal velocity and curvature of objects whose outline fits itself turned (see the module's docstring)."""
+    def worst_velocity(tr):
+        return max(np.abs(tr.normal_velocity[0][t]).max() for t in range(1, tr.n_frames)
+                   if tr.contours[0][t] is not None and tr.contours[0][t - 1] is not None)
+
+    circle = _circle_about(np.array([32.0, 32.0]), 13.0)
+    grown = track(_shape_movie(8.0, 0.0, 0.0, grow=1.0), circle)
+    out(f"- a disk growing by 1 px a frame: largest normal velocity {worst_velocity(grown):.2f} px/frame")
+    for turn in (0.12, 0.3):
+        rows, cols = np.mgrid[:96, :96] - 48.0
+        rng = np.random.default_rng(0)
+        frames = []
+        for t in range(10):
+            th = 0.3 + turn * t
+            u, v = rows * np.cos(th) + cols * np.sin(th), -rows * np.sin(th) + cols * np.cos(th)
+            frames.append(10.0 + 190.0 * ((u / 18) ** 2 + (v / 8) ** 2 <= 1) + rng.normal(0, 3.0, u.shape))
+        tr = track(np.array(frames, np.float32), _circle_about(np.array([48.0, 48.0]), 22.0))
+        errors = np.concatenate([tr.curvature[0][t] - _ellipse_curvature(tr.contours[0][t], 48.0, 18, 8, 0.3 + turn * t)
+                                 for t in range(10)])
+        out(f"- an 18 x 8 px ellipse turning by {turn} rad a frame (its tips move {18 * turn:.1f} px): largest normal "
+            f"velocity {worst_velocity(tr):.2f} px/frame; curvature error {np.sqrt(np.mean(errors ** 2)):.3f} 1/px "
+            f"(rms; the ellipse's curvature is 0.025-0.28)")
+    rng = np.random.default_rng(5)
+    flipped = 0
+    for _ in range(n_ovals):
+        radius, depth = float(rng.choice([8, 10, 12])), float(rng.choice([0.08, 0.12, 0.2]))
+        turn, seed = float(rng.uniform(0.005, 0.05)), int(rng.integers(1000))
+        tr = track(_shape_movie(radius, depth, turn, seed=seed), _circle_about(np.array([32.0, 32.0]), 1.4 * radius))
+        flipped += worst_velocity(tr) > 3.0  # the motion gives at most ~1 px/frame
+    out(f"- {n_ovals} two-fold ovals turning by 0.005-0.05 rad a frame: {flipped} with a normal velocity above "
+        "3 px/frame (origins half a turn off)")
+
+
+def _circle_about(centre, radius, n=48):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.column_stack([centre[0] + radius * np.sin(t), centre[1] + radius * np.cos(t)])
+
+
 def kymograph_figure(tr, path):
     import matplotlib
 
@@ -557,6 +619,10 @@ def main(argv=None):
         f"segmentation {tr.timings['segmentation']:.1f} s, correspondences {tr.timings['correspondence']:.1f} s")
     out(drift_bound(movie, len(syn.contours[0][0])))
     drift_over_seeds(out)
+    out()
+    out("Round and symmetric objects (since session 66):")
+    out()
+    round_and_symmetric(out)
     out()
     other_drawings(frames, truth, ids, inits, out)
     out()
