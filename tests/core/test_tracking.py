@@ -669,6 +669,16 @@ def test_a_frame_without_data_is_a_gap_the_objects_are_followed_across():
         track(frames, _circle((48, 50), 16), start=3)
 
 
+def test_an_object_that_shows_a_sliver_of_itself_on_the_start_frame_is_followed_in():
+    """A disk 2 px into the view on the start frame: its contour rests a
+    tenth of a pixel from the side, and it was taken as seen whole, then
+    lost when it showed eight times more of itself (an outside tester,
+    session 66; it was followed when another object was drawn too)."""
+    frames = _disk_movie([[(75, -8 + 3 * t)] for t in range(6)], shape=(96, 128), radius=10)
+    tr = track(frames, _circle((75, -8), 14))
+    assert tr.status == [[TRACKED] * 6]
+
+
 @pytest.mark.parametrize("side", ["left", "right", "top", "bottom"])
 def test_an_object_that_moves_in_fast_through_a_side_is_followed(side):
     """A disk that shows a sixth of itself, then half of itself, then the
