@@ -31,8 +31,8 @@ MorphoDynamics (:meth:`TrackingResult.membrane_map`).
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from functools import partial
 
