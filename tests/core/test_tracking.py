@@ -771,6 +771,20 @@ def test_one_contour_as_nested_lists_is_one_object():
     assert tr.n_objects == 1 and tr.status == [[TRACKED, TRACKED]]
 
 
+def test_one_drawing_around_two_bodies_apart_is_warned_of_when_they_part():
+    """A circle around two disks 6 px apart: the start frame's contour holds
+    both, joined by a bar (a person's drawing bridges bodies apart), and the
+    object is lost on the next frame; in noise the bar was too wide for a
+    division, and nothing said why (an outside tester, session 66)."""
+    rows, cols = np.mgrid[:80, :96]
+    disks = ((rows - 40) ** 2 + (cols - 30) ** 2 <= 64) | ((rows - 40) ** 2 + (cols - 52) ** 2 <= 64)
+    rng = np.random.default_rng(0)
+    frames = np.stack([10.0 + 190.0 * disks + rng.normal(0, 3.0, disks.shape) for _ in range(3)])
+    with pytest.warns(UserWarning, match="object 0 held two bodies on frame 0"):
+        tr = track(frames, _circle((40, 41), 26))
+    assert tr.status[0][1] == LOST
+
+
 def test_a_callback_that_cannot_be_called_is_refused_before_any_work():
     with pytest.raises(TypeError, match="callback must be a function"):
         track(np.zeros((3, 32, 32)), _circle((16, 16), 5), callback=5)

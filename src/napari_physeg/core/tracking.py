@@ -900,6 +900,12 @@ def _blank(image: np.ndarray) -> str | None:
 #: notch or a cell's waist leaves a neck of half its width or more.
 DIVISION_SHARE = 0.25
 DIVISION_NECK = 0.25
+#: On the start frame, a person's drawing around bodies apart has them joined
+#: by a bar about a quarter to a third of a body's width (docs/physics.md):
+#: a neck narrower than BRIDGED_NECK times the smaller body's diameter there
+#: holds two bodies. (A drawing around two disks 6 px apart, in noise, was
+#: lost on the next frame without a word at DIVISION_NECK.)
+BRIDGED_NECK = 0.4
 
 
 def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
@@ -916,7 +922,8 @@ def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
         # else the one it parted on this frame: two bodies a pixel or two
         # apart hold the contour between them no longer.
         before, held = run.contours[k][t - step], t - step
-        bodies = None if before is None else pinched_bodies(before)
+        pinch = BRIDGED_NECK if held == run.start else DIVISION_NECK
+        bodies = None if before is None else pinched_bodies(before, pinch)
         if bodies is None and t in run.seen[k].parted and run.status[k][t - step] == TRACKED:
             bodies, held = run.seen[k].parted[t], t
         if bodies is None:
@@ -938,13 +945,13 @@ def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
     return said
 
 
-def pinched_bodies(contour: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+def pinched_bodies(contour: np.ndarray, neck: float = DIVISION_NECK) -> tuple[np.ndarray, np.ndarray] | None:
     """The two bodies of a contour pinched by a narrow neck, or None.
 
     The contour is cut between the two nodes that are closest in space among
     the pairs that split it into parts of at least :data:`DIVISION_SHARE` of
-    its area each; the parts are two bodies when that gap is below
-    :data:`DIVISION_NECK` times the smaller part's equivalent diameter.
+    its area each; the parts are two bodies when that gap is below ``neck``
+    times the smaller part's equivalent diameter.
     """
     c = np.asarray(contour, dtype=np.float64)
     n = len(c)
@@ -963,7 +970,7 @@ def pinched_bodies(contour: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     gap = np.linalg.norm(c[i] - c[j], axis=1)
     best = int(np.argmin(gap))
     diameter = 2.0 * np.sqrt(min(part[best], whole - part[best]) / np.pi)
-    if gap[best] >= DIVISION_NECK * diameter:
+    if gap[best] >= neck * diameter:
         return None
     a, b = int(i[best]), int(j[best])
     return c[a: b + 1], np.vstack([c[b:], c[: a + 1]])
