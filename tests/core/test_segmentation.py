@@ -842,6 +842,22 @@ def test_a_contour_along_the_image_s_sides_leaked_only_if_the_drawing_did_not_re
     assert not _took_the_whole_image(np.array([[-0.5, -0.5], [-0.5, 89.5], [40, 89.5], [40, -0.5]]), click, (80, 90))
 
 
+def test_a_circle_wholly_beyond_the_image_that_stays_on_its_frame_is_not_converged():
+    """A circle 1.4 times the horse, wholly beyond the image, is clipped to
+    its four sides; in noise the contour stayed there, the horse and its
+    ground both inside, and said converged (an outside tester, session 66)."""
+    from skimage import data as skdata
+
+    horse = ~skdata.horse()
+    t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+    init = np.column_stack([131.75 + 287.4 * np.sin(t), 173.5 + 287.4 * np.cos(t)])
+    image = ndi.gaussian_filter(horse.astype(float), 2) + np.random.default_rng(0).normal(0, 0.2, horse.shape)
+    with pytest.warns(UserWarning, match="outside the image"):
+        res = segment(image, init)
+    on_sides = (res.contour <= 1).any(1) | (res.contour >= np.array(horse.shape) - 2).any(1)
+    assert on_sides.mean() > 0.9 and res.stop_reason == "stalled" and not res.converged
+
+
 @pytest.mark.parametrize("radius", [59.0, 60.0])
 @pytest.mark.parametrize("drawing", ["circle", "box"])
 def test_a_round_object_filling_the_view_drawn_around_beyond_it_leaves_the_dark_corners(drawing, radius):

@@ -99,7 +99,8 @@ class SegmentationResult:
         part of the object at least 5 px thick, or 70 % only counting those:
         the object runs on beyond the drawing, which is its limit; the
         contour is the part drawn around), ``"stalled"`` (at rest
-        elsewhere: nothing in reach pulls it), ``"leaked"`` (along all four sides of the
+        elsewhere: nothing in reach pulls it; or on the image's frame, along
+        all four sides with 90 % of its nodes), ``"leaked"`` (along all four sides of the
         image, which the drawing did not reach, or, from a drawing read as
         lying inside the object, along the farthest it may reach, 25 times the
         drawing's size, with a tenth of its nodes: nothing told the object
@@ -529,6 +530,21 @@ def _took_the_whole_image(contour: np.ndarray, drawing: np.ndarray, shape) -> bo
     ``drawing`` (clipped to the image) did not: it spread over the whole
     image, the image's sides holding it where no border of the object did."""
     return _sides_met(contour, shape) == 4 and _sides_met(drawing, shape) < 4
+
+
+#: A contour with at least this share of its nodes on the image's sides, along
+#: all four, rests on the image's frame: where the image ends, not on a
+#: border of an object (a circle drawn wholly beyond a 328 x 400 image,
+#: clipped to its sides, stayed there and said converged, the horse and the
+#: ground it stood on both inside).
+ON_FRAME_SHARE = 0.9
+
+
+def _on_the_image_frame(contour: np.ndarray, shape) -> bool:
+    """Whether ``contour`` runs along all four of the image's sides with
+    ON_FRAME_SHARE of its nodes on them."""
+    low, high = _near_sides(contour, shape)
+    return _sides_met(contour, shape) == 4 and float((low | high).any(axis=1).mean()) >= ON_FRAME_SHARE
 
 
 def _around_others(contour: np.ndarray, avoid: np.ndarray | None) -> bool:
@@ -1574,6 +1590,8 @@ def _final_nodes(body: _ElasticBody, setup: _Setup, stop_reason: str, settled, s
             _spread_beyond_the_object(nodes, setup.init, setup.drawing, features, features.fields[0], setup.shape)
             or _around_others(nodes, features.avoid)):
         stop_reason = "leaked"
+    elif stop_reason in ("converged", "limited") and _on_the_image_frame(nodes, setup.shape):
+        stop_reason = "stalled"
     return nodes, stop_reason
 
 
