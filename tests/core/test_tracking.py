@@ -785,9 +785,16 @@ def test_one_drawing_around_two_bodies_apart_is_warned_of_when_they_part():
     assert tr.status[0][1] == LOST
 
 
-def test_a_callback_that_cannot_be_called_is_refused_before_any_work():
-    with pytest.raises(TypeError, match="callback must be a function"):
-        track(np.zeros((3, 32, 32)), _circle((16, 16), 5), callback=5)
+@pytest.mark.parametrize("call", ["track", "segment"])
+def test_a_callback_that_cannot_be_called_is_refused_before_any_work(call):
+    """As match and simulate refuse it: segment's failed at its first step, track's after the first object."""
+    from napari_physeg.core import segment
+
+    with pytest.raises(ValueError, match="^callback must be callable"):
+        if call == "track":
+            track(np.zeros((3, 32, 32)), _circle((16, 16), 5), callback=5)
+        else:
+            segment(_disk_movie([[(48, 48)]])[0], _circle((48, 48), 16), callback=5)
 
 
 def test_displacement_weight_breaks_the_symmetry_of_round_shapes():

@@ -12,8 +12,6 @@ def drain(run, on_progress=None):
     returns ``False`` the generator is sent ``True`` (stop) and its result,
     which then says ``stop_reason="cancelled"``, is returned.
     """
-    if on_progress is not None and not callable(on_progress):  # (not after minutes of work)
-        raise TypeError(f"callback must be a function of the progress, or None; got {on_progress!r}")
     stop = False
     try:
         while True:

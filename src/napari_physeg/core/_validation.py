@@ -161,6 +161,13 @@ def check_number(value, name: str, *, minimum: float = 0.0, inclusive: bool = Tr
     return number
 
 
+def check_callback(callback) -> None:
+    """ValueError unless ``callback`` is None or callable: refused before any
+    work, not at the first progress (after the first object of a movie)."""
+    if callback is not None and not callable(callback):
+        raise ValueError(f"callback must be callable or None, got {callback!r}")
+
+
 def check_count(value, name: str, minimum: int, *, allow_none: bool = False) -> int | None:
     """``value`` as an int, or a ValueError naming ``name``: an integer
     (numpy's too; not a flag, nor a float that would be cut) of at least

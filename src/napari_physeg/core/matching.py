@@ -65,7 +65,7 @@ from ._drain import drain
 from .contour import resample, rotation_between, rotation_matrix, segment_lengths, signed_area, warn_if_figure_eight
 from .inner_distance import inner_distance_context
 from .materials import Material
-from ._validation import check_contour, check_count, check_number, with_defaults
+from ._validation import check_callback, check_contour, check_count, check_number, with_defaults
 from .modes import DEGENERACY_TOLERANCE, MAX_AUTO_MODES, ModalBasis, _modal_raw, select_modes, truncate
 
 __all__ = [
@@ -1060,8 +1060,7 @@ def match(a, b, *, method: str = "order", n_modes: int | None = None, model_node
     (67, 2)
     """
     options = {name: value for name, value in locals().items() if name not in ("a", "b", "callback")}
-    if callback is not None and not callable(callback):
-        raise ValueError(f"callback must be callable or None, got {callback!r}")
+    check_callback(callback)
     on_progress = None if callback is None else (lambda state: callback(state.fraction))
     _check_outlines(a, b)
     return drain(_run(_prepare(a, b, **options)), on_progress)

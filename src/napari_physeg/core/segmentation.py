@@ -21,9 +21,9 @@ from scipy.spatial.distance import pdist
 
 from .background import background_plane, plane_removed
 from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, crosses_itself,
-                      cut_pinches, densify, depth_inside, nearest_node,
-                      nodes_for_spacing, outward_normals, pair_indices, pairs_within, perimeter, remove_loops,
-                      resample, segment_lengths, signed_area, warn_if_figure_eight, window_mask)
+                      cut_pinches, densify, depth_inside, nearest_node, nodes_for_spacing, outward_normals,
+                      pair_indices, pairs_within, perimeter, remove_loops, resample, segment_lengths, signed_area,
+                      warn_if_figure_eight, window_mask)
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
@@ -35,7 +35,7 @@ from .materials import Material, get_material, suggested_stiffness
 from .region import (_INSIDE_LIMIT, RegionModel, _box_of, _disk, _fill, _least_contrast, _scaled, drawing_levels,
                      drawing_limit, level_beyond_object, object_region, objectness)
 from .subpixel import level_along, polish
-from ._validation import check_count, check_number, signature_of, with_defaults
+from ._validation import check_callback, check_count, check_number, signature_of, with_defaults
 
 __all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "FrameFeatures", "region_features"]
 
@@ -1948,6 +1948,7 @@ def segment(
     True
     """
     options = {name: value for name, value in locals().items() if name not in ("image", "init", "callback")}
+    check_callback(callback)
     on_progress = None if callback is None else (lambda state: callback(state.step, state.contour))
     return drain(_evolve(image, init, **options), on_progress)
 

@@ -41,7 +41,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
 from ._drain import drain
-from ._validation import check_contour, check_count, check_number, with_defaults
+from ._validation import check_callback, check_contour, check_count, check_number, with_defaults
 from .contour import rotation_between, rotation_matrix, segment_lengths, warn_if_figure_eight
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import (
@@ -256,8 +256,7 @@ def simulate(
     (6, 67, 2)
     """
     options = {name: value for name, value in locals().items() if name not in ("a", "b", "matching", "callback")}
-    if callback is not None and not callable(callback):
-        raise ValueError(f"callback must be callable or None, got {callback!r}")
+    check_callback(callback)
 
     def on_progress(state):
         # The matching computed when none is given reports as MatchingProgress: not a step.

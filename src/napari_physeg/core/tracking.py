@@ -45,7 +45,7 @@ from skimage.filters import threshold_otsu
 from skimage.segmentation import watershed
 
 from ._drain import drain
-from ._validation import check_contour, check_count, signature_of
+from ._validation import check_callback, check_contour, check_count, signature_of
 from .contour import (area_centroid, as_contour, bounding_window, closest_on_polyline, depth_inside, nearest_node,
                       outward_normals, perimeter, positively_oriented, remove_loops, resample, rotation_matrix,
                       signed_area, through_nodes, window_mask)
@@ -1969,6 +1969,7 @@ def track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_option
     >>> tr.status[0]
     ['tracked', 'tracked', 'tracked', 'tracked', 'tracked']
     """
+    check_callback(callback)
     run = iter_track(frames, inits, start=start, max_steps=max_steps, segment_options=segment_options,
                      match_options=match_options)
     return drain(run, callback)
