@@ -737,8 +737,9 @@ def test_a_tiff_of_pages_written_one_by_one_is_read_a_frame_at_a_time_and_one_of
     with tifffile.TiffWriter(tmp_path / "pages.tif") as tif:
         for frame in frames:
             tif.write(frame, contiguous=False)
-    read, imread = [], tifffile.imread
-    monkeypatch.setattr(tifffile, "imread", lambda *a, **k: read.append(k.get("key")) or imread(*a, **k))
+    read, asarray = [], tifffile.TiffPageSeries.asarray  # the pages read, by index
+    monkeypatch.setattr(tifffile.TiffPageSeries, "asarray",
+                        lambda self, *a, **k: read.append(self.keyframe.index) or asarray(self, *a, **k))
     with open_stack(tmp_path / "pages.tif") as stack:
         np.testing.assert_array_equal(np.asarray(stack[3]), frames[3])
         assert read == [3]
