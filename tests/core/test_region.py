@@ -740,3 +740,27 @@ def test_a_click_on_a_small_dim_disk_beside_a_less_saturated_one_does_not_take_i
     found = polygon_mask(res.contour, image.shape)
     assert (found & bright).sum() < 0.1 * found.sum()
     assert (found & dim).sum() > 0.6 * dim.sum()
+
+
+def test_a_ring_the_view_shows_a_corner_of_is_not_read_as_the_surround():
+    """A wide circle about a bright disc on a grey ground, read on a window
+    whose corners only reach the black beyond the ground (a circle 1.8
+    times a retina's optic disc, on the context window of a 1411-px
+    fundus): the outermost near ring shows in the corners alone, in 1 % of
+    its area. Read as what surrounds the drawing, its black made the
+    circle a drawing inside a bright object, and the contour ran out over
+    the whole ground to max_steps (IoU 0.02, 8 s; now 0.88)."""
+    from napari_physeg.core.region import _OUTER_RINGS, _outside_level
+
+    shape, centre, radius = (500, 500), (250, 250), 150
+    distance = np.hypot(*(np.mgrid[: shape[0], : shape[1]] - np.reshape(centre, (2, 1, 1))))
+    lo, hi = _OUTER_RINGS[-1]
+    image = np.where(distance <= 80, 0.85, np.where(distance < lo * radius + 5, 0.5, 0.0))
+    image = image + 0.02 * np.random.default_rng(0).standard_normal(shape)
+    drawing = circle(centre, radius, n=256)
+    corner = (distance >= lo * radius) & (distance < hi * radius)
+    assert 0 < corner.sum() < 0.02 * np.pi * (hi**2 - lo**2) * radius**2  # the case: a corner of the ring
+    line = image[np.abs(distance - radius) < 1.5]
+    outside = _outside_level(image, drawing, centre=0.85, on_line=float(np.median(line)), along=line,
+                             within=image[distance < radius], floor=0.005)
+    assert outside == pytest.approx(0.5, abs=0.05)

@@ -42,7 +42,7 @@ from scipy import ndimage as ndi
 from scipy.spatial import cKDTree
 from skimage import measure, segmentation
 
-from .contour import bounding_window, outward_normals, positively_oriented, resample
+from .contour import bounding_window, outward_normals, positively_oriented, resample, signed_area
 from .features import _noise_sigma
 
 __all__ = ["RegionModel", "drawing_levels", "level_beyond_object", "object_region", "objectness"]
@@ -125,6 +125,13 @@ _APART_RIM_SHARE = 0.5
 #: drawing's centre when their levels differ by at most this many robust
 #: standard deviations of the line's (the ring's) pixels (see drawing_levels).
 _TEXTURE_SPREADS = 2.0
+
+#: A ring about a drawing is read only where the view shows at least this
+#: share of it: what a large drawing's context window shows of its outer
+#: rings may be a corner, which says nothing of what surrounds the drawing
+#: (a circle 1.8 times a retina's optic disc read the black beyond the
+#: fundus in 0.3 % of a ring and took itself as drawn inside the fundus).
+_RING_SEEN_SHARE = 0.05
 
 #: At most about this many of the drawing's pixels are split in two classes.
 _MAX_SAMPLES = 20000
@@ -641,7 +648,7 @@ def _ring_mask(drawing, shape, lo: float, hi: float) -> np.ndarray:
 def _outside_level(intensity, drawing, centre, on_line, along, within, floor) -> float:
     """The background's level for a drawing made inside the object: that of
     the ring outside it that differs most from the drawing's centre (NaN if
-    no ring lies in the image).
+    no ring lies in the view, or only a sliver of one: _RING_SEEN_SHARE).
 
     ``centre`` and ``on_line`` are the levels at the drawing's centre and on
     its line (``along``, the line's pixels; ``within``, the drawing's),
@@ -657,6 +664,7 @@ def _outside_level(intensity, drawing, centre, on_line, along, within, floor) ->
     :func:`_step_beyond_even_rings` and :func:`_level_off_the_ramp`).
     """
     textured = abs(on_line - centre) <= max(floor, _TEXTURE_SPREADS * _scatter(along))
+    drawn_area = abs(signed_area(drawing))
     outside, best, best_ring, through = np.nan, -1.0, None, False
     rings_within, best_k = [], -1
     for k, (lo, hi) in enumerate(_OUTER_RINGS + _FAR_RINGS):
@@ -673,6 +681,8 @@ def _outside_level(intensity, drawing, centre, on_line, along, within, floor) ->
         # Far out the background may be a small part of a ring that still
         # lies mostly on the object: the ring's class furthest from the centre.
         level = _surrounding_class(intensity, drawing, ring, centre, floor) if far else _median(ring)
+        if ring.size < _RING_SEEN_SHARE * (hi ** 2 - lo ** 2) * drawn_area:
+            level = np.nan  # a corner of the ring, not a ring around the drawing
         # The first far ring that differs, beyond even rings, straddles the
         # border too: its class furthest from the centre may be a further
         # level (a small click in the phantom's large ellipse took the black
