@@ -95,6 +95,8 @@ def test_segment_files_one_row_per_input_frame_and_object(client, movies, movie)
     for _, row in ok.iterrows():  # the failing object did not lose the other one
         shapes = read_shapes_csv(tmp / "seg" / row["contours"])
         assert _iou(shapes[row["shape"]], movie.masks[row["frame"]]) > 0.95
+        vertices = pd.read_csv(tmp / "seg" / row["contours"])
+        assert set(vertices.loc[vertices["index"] == row["shape"], "object"]) == {row["object"]}
 
 
 def test_cli_batch_runs_on_an_existing_scheduler(client, movies, movie, capsys):

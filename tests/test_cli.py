@@ -177,6 +177,49 @@ def test_segment_keeps_the_contours_that_converged_when_others_fail(tmp_path, ca
     assert lead == (0.0,) and np.hypot(*(contour - 35).T).mean() == pytest.approx(12, abs=1.5)
 
 
+
+def _object_column(path) -> list:
+    """The ``object`` of each shape of a shapes CSV (its first vertex's row)."""
+    import csv
+
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    return [int(r["object"]) for r in rows if r["vertex-index"] == "0"]
+
+
+def test_contours_csv_names_the_drawing_each_contour_is_of_when_one_failed(tmp_path, capsys):
+    """A shape that fails leaves no row, so the shapes' index no longer says
+    which drawing a contour is of: the object column does, and napari still
+    opens the file as a Shapes layer (it reads only the index, type and axes)."""
+    from napari_builtins.io._read import csv_to_layer_data
+
+    rng = np.random.default_rng(1)
+    yy, xx = np.mgrid[:96, :96]
+    image = ((yy - 35) ** 2 + (xx - 35) ** 2 < 12 ** 2) * 150 + 30 + rng.normal(0, 3, yy.shape)
+    pytest.importorskip("tifffile").imwrite(tmp_path / "image.tif", image.clip(0, 255).astype(np.uint8))
+    a = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    # Shape 0 is drawn on the background (it collapses), shape 1 around the disk.
+    init = write_shapes_csv(tmp_path / "init.csv", [np.c_[72 + 8 * np.sin(a), 72 + 8 * np.cos(a)],
+                                                     np.c_[35 + 18 * np.sin(a), 35 + 18 * np.cos(a)]])
+    out = tmp_path / "out.csv"
+    assert main(["segment", str(tmp_path / "image.tif"), "--init", str(init), "--out", str(out),
+                 "--polarity", "bright"]) == 1
+    assert "shape 0 failed" in capsys.readouterr().err
+    assert _object_column(out) == [1]
+    data, meta, kind = csv_to_layer_data(str(out), require_type="shapes")
+    assert kind == "shapes" and len(data) == 1 and data[0].shape[1] == 2
+
+
+def test_track_contours_csv_names_the_object_of_each_contour(movie_files, capsys):
+    """Lost object-frames leave no shape: each shape says its object."""
+    movie, stack, _, tmp = movie_files
+    a = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    on_the_ground = np.c_[12 + 6 * np.sin(a), 12 + 6 * np.cos(a)]
+    init = write_shapes_csv(tmp / "two.csv", [on_the_ground, movie.outlines[0][::6]], leading=[(0,), (0,)])
+    out = tmp / "tracked"
+    assert main(["track", str(stack), "--init", str(init), "--out", str(out)]) == 1  # object 0 is lost
+    assert _object_column(out / "contours.csv") == [1] * 6
+
 # --------------------------------------------------------------------------
 # napari's shapes CSV: every shape type
 # --------------------------------------------------------------------------

@@ -225,7 +225,8 @@ def _segment_task(task: _Task, tmp: Path) -> list[dict]:
                      "seconds": time.perf_counter() - t0, "contours": "contours.csv", "shape": len(shapes)})
         shapes.append(c)
     if shapes:
-        write_shapes_csv(tmp / "contours.csv", shapes)
+        write_shapes_csv(tmp / "contours.csv", shapes, columns={"object": [row["object"] for row in rows
+                                                                           if row["status"] == OK]})
     return rows
 
 
@@ -342,16 +343,18 @@ def track_file(path, inits, folder, *, frames: str | None = None, start: int | N
                        segment_options=segment_options_for(_mean_contour(inits), segment_options, node_spacing),
                        match_options=dict(match_options or {}), **options)
         tr = replace(tr, warnings=tuple(_in_stack_numbers(text, chosen) for text in tr.warnings))
-    shapes, leading = [], []
+    shapes, leading, objects = [], [], []
     for k in range(tr.n_objects):
         for t, c in enumerate(tr.contours[k]):
             if c is not None:
                 shapes.append(c)
                 leading.append((chosen[t],))
+                objects.append(k)
     folder.mkdir(parents=True, exist_ok=True)
     written = [folder / TRACK_FILES[0]]
     if shapes:
-        write_shapes_csv(written[0], shapes, leading=leading)
+        # Lost frames have no shape: the object column ties each shape to its object (and its rows of the table).
+        write_shapes_csv(written[0], shapes, leading=leading, columns={"object": objects})
     table = tr.table()
     table["frame"] = np.asarray(chosen)[table["frame"].to_numpy()]
     written += write_table(table, folder / "tracks")

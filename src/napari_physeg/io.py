@@ -196,22 +196,29 @@ def _napari_shapes(header, body, path) -> list[np.ndarray]:
     return out
 
 
-def write_shapes_csv(path, shapes, shape_type: str = "polygon", leading=None) -> Path:
+def write_shapes_csv(path, shapes, shape_type: str = "polygon", leading=None, columns=None) -> Path:
     """Write contours as napari's shapes CSV (polygons), readable by napari.
 
     ``leading``, one tuple per shape (e.g. ``(frame,)``), puts each shape on
-    a slice of an nD layer: its values become the first axes. The file is
-    written under a temporary name and renamed, so it is whole or absent.
+    a slice of an nD layer: its values become the first axes. ``columns``,
+    a dict of name -> one value per shape (e.g. ``{"object": [...]}``), adds
+    columns after the axes, repeated on each vertex's row: napari reads
+    only the index, shape type and axes, so the file still opens as a
+    Shapes layer, and a table reader can tell which object each shape is.
+    The file is written under a temporary name and renamed, so it is whole
+    or absent.
     """
     path = Path(path)
     n_lead = len(leading[0]) if leading else 0
+    columns = dict(columns or {})
     with atomic_path(path) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["index", "shape-type", "vertex-index"] + [f"axis-{a}" for a in range(n_lead + 2)])
+        w.writerow(["index", "shape-type", "vertex-index"] + [f"axis-{a}" for a in range(n_lead + 2)] + list(columns))
         for i, shape in enumerate(shapes):
             lead = [repr(float(v)) for v in leading[i]] if leading else []
+            extra = [values[i] for values in columns.values()]
             for k, (r, c) in enumerate(np.asarray(shape, dtype=np.float64)):
-                w.writerow([i, shape_type, k, *lead, repr(float(r)), repr(float(c))])
+                w.writerow([i, shape_type, k, *lead, repr(float(r)), repr(float(c)), *extra])
     return path
 
 
