@@ -799,8 +799,38 @@ def test_a_contour_that_spreads_over_the_whole_image_has_leaked(centre, radius):
     t = np.linspace(0, 2 * np.pi, 32, endpoint=False)
     res = segment(image, np.column_stack([centre[0] + radius * np.sin(t), centre[1] + radius * np.cos(t)]))
     assert res.stop_reason == "leaked" and not res.converged
-    assert np.allclose(res.contour.min(axis=0), -0.5) and np.allclose(res.contour.max(axis=0), [79.5, 89.5])
+    # Stopped once it held more than half the image along two sides (see the next test), or on all four.
+    assert abs(signed_area(res.contour)) > 0.5 * image.size
 
+
+@pytest.mark.parametrize("radius", [4, 6, 9])
+def test_a_contour_that_takes_most_of_the_image_from_a_small_drawing_has_leaked(radius):
+    """A small circle on a bright ground that darker bands close off on two
+    sides only: the contour takes the ground, 70 % of the image, along two
+    of its sides, and said converged (phase-contrast cells drawn around with
+    a lasso, read as drawn inside the ground, took 84 % of their image). More
+    than half the image along two of its sides from a drawing a twentieth of
+    it is a leak: said so, and the contour is still returned. (A disk of half
+    the image, clicked on at its edge, converges: see above.)"""
+    rr, cc = np.mgrid[:120, :120]
+    image = np.where((cc > 100) | (rr > 100), 0.2, 0.6) + 0.03 * np.random.default_rng(0).standard_normal(rr.shape)
+    t = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    res = segment(image, np.column_stack([60 + radius * np.sin(t), 50 + radius * np.cos(t)]))
+    assert res.stop_reason == "leaked" and not res.converged
+    assert abs(signed_area(res.contour)) > 0.5 * image.size
+
+
+def test_a_sliver_encloses_nothing_a_small_disk_does():
+    """What a magnified view's contour must hold to be taken (see
+    segmentation._magnified): a 3-px click on a phase-contrast cell came back
+    as a 2.4 x 0.5 px sliver, 'limited', IoU 0; a disk of 1 px radius is kept."""
+    from napari_physeg.core.segmentation import _encloses_nothing
+
+    sliver = np.array([[134.9, 180.9], [135.5, 180.4], [134.3, 180.2], [133.4, 180.3], [133.1, 180.6],
+                       [133.6, 180.8], [134.4, 180.9]])
+    t = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    assert _encloses_nothing(sliver)
+    assert not _encloses_nothing(np.column_stack([np.sin(t), np.cos(t)]))
 
 #: A jagged star (37 vertices) drawn across the bottom of skimage's clock:
 #: over its lit rim, the dark band under it and the grey wall below.
