@@ -299,6 +299,45 @@ def test_an_object_that_jumps_beyond_where_it_is_looked_for_is_linked_again():
         assert np.hypot(*(tr.centroids(0)[t] - centres[t][0])) < 1.0
 
 
+def test_the_progress_reports_what_the_result_holds_after_the_second_looks():
+    """The object that jumped is lost on the first look at frame 2 and found
+    by the second (see the test above): the progress (the widget's preview
+    and counts) said 'lost' and no contour, while the result said tracked."""
+    centres = [[(48, 30), (20, 100)]] * 2 + [[(48, 52), (20, 100)]] * 2
+    frames = _disk_movie(centres, radius=11, shape=(96, 128))
+    reported = []
+    tr = track(frames, [_circle((48, 30), 15), _circle((20, 100), 15)], callback=reported.append)
+    assert len(reported) == 8 and [p.done for p in reported] == list(range(1, 9))
+    for p in reported:
+        assert p.status == tr.status[p.object][p.frame]
+        assert p.contour is tr.contours[p.object][p.frame]
+
+def test_a_segmentation_that_spreads_beyond_any_area_kept_stops_there(monkeypatch):
+    """A disk whose ground turns as bright as itself over most of the frame:
+    its contour spreads over it and the object is lost, as before; but the
+    segmentation stops once it holds more than the tracker could keep
+    (tracking.LEAK_AREA_FACTOR times its area), not after crawling on (it converged on the
+    plateau after ~50 steps, 100-140 nodes; a phase-contrast cell ran 300
+    steps five times on one frame)."""
+    from napari_physeg.core import tracking
+
+    rr, cc = np.mgrid[:128, :128]
+    rng = np.random.default_rng(0)
+    frames = []
+    for t in range(3):
+        image = np.full((128, 128), 0.2)
+        image[(rr - 64) ** 2 + (cc - 64) ** 2 <= 8**2] = 0.8
+        if t >= 1:
+            image[10:118, 10:118] = 0.8
+        frames.append(image + 0.03 * rng.standard_normal(image.shape))
+    runs = []
+    segment_from = tracking._segment_from
+    monkeypatch.setattr(tracking, "_segment_from", lambda *a, **k: runs.append(segment_from(*a, **k)) or runs[-1])
+    tr = track(np.stack(frames), _circle((64, 64), 11))
+    assert tr.status == [[TRACKED, LOST, LOST]]
+    assert runs[0].converged and len(runs) > 1
+    assert all(r.stop_reason == "leaked" and r.steps <= 30 for r in runs[1:])
+
 def test_a_vanished_object_is_not_linked_to_an_untracked_neighbour_that_was_there_before():
     """The unclaimed blob a lost object may be linked to is one that was not
     there, unclaimed, on the frame before: a cell that vanishes 2.5 radii

@@ -169,12 +169,14 @@ CARRIED_MEDIAN = 2.0
 
 @dataclass(frozen=True)
 class TrackingProgress:
-    """What :func:`iter_track` yields after each object of each frame.
+    """What :func:`iter_track` yields for each object of each frame, once
+    every object of that frame is done: its contour and status are then
+    those of the result.
 
     Attributes
     ----------
     frame, object : int
-        The frame and the object just done.
+        The frame and the object.
     contour : ndarray or None
         Its contour there (None when lost or gone).
     status : str
@@ -978,9 +980,11 @@ def pinched_bodies(contour: np.ndarray, neck: float = DIVISION_NECK) -> tuple[np
 
 def _segment_frame(run: _Run, image, shared, t: int, step: int):
     """Segment every object on frame ``t``, one after the other (see
-    _segmenting_order), each counting the others' pixels as background; a
-    generator of each object as it is done. The second looks (see
-    _give_back) are taken after the last one is yielded."""
+    _segmenting_order), each counting the others' pixels as background,
+    then take the second looks (see _give_back, _link_lost); a generator of
+    the objects once the frame is done. (Yielded as each was first done, an
+    object reported lost could be found by the second looks: the progress
+    said 'lost', the result 'tracked'.)"""
     # Which object each pixel belongs to, as far as known: the others'
     # contours on this frame once done, else on the frame before.
     owner = np.full(image.shape, -1, dtype=np.int32)
@@ -999,16 +1003,15 @@ def _segment_frame(run: _Run, image, shared, t: int, step: int):
             _settle(run, image, shared, owner, t, k, step)
         if run.status[k][t] != TRACKED and t != run.start:
             _give_back(run, image, shared, owner, t, k, step, order[:n])
-        yield k
-    if t == run.start:
-        return
-    # An object lost before the one that took its place was done; one found
-    # where another that fits worse than lost took its pixels.
-    astray = _astray(run, t, step, order)
-    for n, k in enumerate(order):
-        others = order[n + 1:] if run.status[k][t] != TRACKED else [i for i in astray if i != k]
-        _give_back(run, image, shared, owner, t, k, step, others)
-    _link_lost(run, image, shared, owner, t, step)
+    if t != run.start:
+        # An object lost before the one that took its place was done; one found
+        # where another that fits worse than lost took its pixels.
+        astray = _astray(run, t, step, order)
+        for n, k in enumerate(order):
+            others = order[n + 1:] if run.status[k][t] != TRACKED else [i for i in astray if i != k]
+            _give_back(run, image, shared, owner, t, k, step, others)
+        _link_lost(run, image, shared, owner, t, step)
+    yield from order
 
 
 #: An object just lost is looked for once more when every object of the
@@ -1632,7 +1635,8 @@ def _found(image, shared, avoid, t, drawing: _Drawing, predicted, previous, seen
     start frame, where ``seen`` is filled in; ``by_looks``: see _redrawn);
     its contour (or None) and status."""
     segment_here = partial(_segment_from, image, features=shared, avoid=avoid if avoid.any() else None,
-                           polarity=seen.polarity, **options)
+                           polarity=seen.polarity, max_area=_largest_kept(previous, seen, image.shape, shared.missing),
+                           **options)
     try:
         with warnings.catch_warnings():
             # A drawing (or a predicted contour) partly beyond the image is
@@ -1683,6 +1687,30 @@ def _found(image, shared, avoid, t, drawing: _Drawing, predicted, previous, seen
     if verdict == TRACKED and not _touches_side(contour, image.shape, shared.missing):
         seen.whole_area, seen.seen_whole = area, True
     return (contour if verdict == TRACKED else None), verdict
+
+
+#: A tracked frame's segmentation stops (``leaked``) once its contour
+#: encloses this many times the object's last area (its whole area, where
+#: the image's side cuts it): it spread over the ground, and would crawl on
+#: to max_steps (a phase-contrast cell 5 px across, through five
+#: segmentations of a frame, 300 steps each: 2.4 s). Not sooner: a contour
+#: that spread up to 8 times (HeLa nuclei read every 3rd frame, 2451 and
+#: 3498 px² from 422) and rested against its drawing came back to the
+#: nucleus when drawn around again (see _redrawn); stopped at 6 times, one
+#: was found worse elsewhere and one lost.
+LEAK_AREA_FACTOR = 25.0
+
+
+def _largest_kept(previous, seen: _Seen, shape, missing) -> float | None:
+    """The area beyond which a tracked frame's segmentation of an object last
+    seen as ``previous`` has leaked (see LEAK_AREA_FACTOR); None on the start
+    frame, or where the image's side hid an object never seen whole."""
+    if previous is None:
+        return None
+    area = abs(signed_area(previous))
+    if not _touches_side(previous, shape, missing):
+        return LEAK_AREA_FACTOR * area
+    return LEAK_AREA_FACTOR * max(seen.whole_area, area) if seen.seen_whole else None
 
 
 def _last_seen(status: list, t: int, step: int) -> int | None:
