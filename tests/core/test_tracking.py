@@ -338,6 +338,40 @@ def test_a_segmentation_that_spreads_beyond_any_area_kept_stops_there(monkeypatc
     assert runs[0].converged and len(runs) > 1
     assert all(r.stop_reason == "leaked" and r.steps <= 30 for r in runs[1:])
 
+def _dimming_disks(factors, fading=()):
+    """Four disks on a ground of 0.2, their contrast times ``factors[t]`` (the
+    whole frame: bleaching), and the disks of ``fading`` alone dimming so."""
+    centres = [(30, 30), (30, 90), (90, 30), (90, 90)]
+    rr, cc = np.mgrid[:120, :120]
+    rng = np.random.default_rng(0)
+    frames = []
+    for t, factor in enumerate(factors):
+        image = np.full((120, 120), 0.2)
+        for k, (r, c) in enumerate(centres):
+            dim = factor if (not fading or k in fading) else 1.0
+            image[(rr - r) ** 2 + (cc - c) ** 2 <= 10**2] += 0.6 * dim
+        frames.append(image + 0.005 * rng.standard_normal(image.shape))
+    return np.stack(frames), [_circle(c, 14) for c in centres]
+
+
+def test_objects_lost_as_the_whole_movie_dims_fast_are_named_with_what_to_do():
+    """Bleached to a tenth within six frames, every disk fades below a fifth of
+    its contrast and is lost, though still in view: a warning names them and
+    says to even out the frames, which then keeps every track. One disk that
+    fades alone (it left the focal plane) is lost without that warning."""
+    factors = np.geomspace(1.0, 0.1, 6)
+    frames, inits = _dimming_disks(factors)
+    tr = track(frames, inits)
+    assert all(LOST in row for row in tr.status)
+    dimmed = [w for w in tr.warnings if "faded out" in w]
+    assert len(dimmed) >= 1 and "even out its frames" in dimmed[0]
+    median = np.median(frames, axis=(1, 2), keepdims=True)
+    even = (frames - median) / (np.percentile(frames, 99, axis=(1, 2), keepdims=True) - median)
+    assert track(even, inits).status == [[TRACKED] * 6] * 4
+    alone = track(*_dimming_disks(factors, fading=(0,)))
+    assert LOST in alone.status[0] and alone.status[1:] == [[TRACKED] * 6] * 3
+    assert not any("faded out" in w for w in alone.warnings)
+
 def test_a_vanished_object_is_not_linked_to_an_untracked_neighbour_that_was_there_before():
     """The unclaimed blob a lost object may be linked to is one that was not
     there, unclaimed, on the frame before: a cell that vanishes 2.5 radii

@@ -694,6 +694,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                contours=[[None] * n_frames for _ in range(n_obj)], status=[[None] * n_frames for _ in range(n_obj)],
                seen=[_Seen(polarity, abs(signed_area(c))) for c in inits])
     total, done, stop_reason, said = n_obj * n_frames, 0, "completed", []
+    brightness, dimmed = {}, []  # frame -> its brightness (see _brightness); see _faded_as_the_frame_dimmed
     with_missing, empty = [], []  # the frames with NaN pixels, and those with nothing else
     # Forward from the start frame, then backward from it.
     start_looks = None
@@ -713,6 +714,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                 stop_reason = "frame error"
                 break
             image, shared, looks = _frame_features(image, t, t == start, options.get("isef_b", 0.7))
+            brightness[t] = _brightness(looks)
             if shared.missing is not None:
                 (empty if shared.missing.all() else with_missing).append(t)
             run.stage = np.zeros(2) if before is None else _stage_shift(run, before, looks, t, step)
@@ -729,8 +731,11 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
             if stop_reason == "cancelled":
                 break
             said += _warn_not_found(run, image) if t == start else _warn_divided(run, t, step)
+            if t != start:
+                dimmed += _faded_as_the_frame_dimmed(run, t, brightness)
         if stop_reason == "cancelled":
             break
+    said += _warn_dimmed(dimmed)
     if with_missing:
         said.append(f"NaN pixels, read as no data, in {len(with_missing)} of {n_frames} frames (first: frame "
                     f"{min(with_missing)}): the contours keep out of them, and an object that goes into them has left "
@@ -947,6 +952,52 @@ def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
     return said
 
 
+#: Objects lost as faded on one frame (at least DIMMED_OBJECTS of them)
+#: while the whole frame dimmed below DIMMED_BRIGHTNESS of its brightest
+#: within FADE_WINDOW frames are named in a warning: a movie that bleaches
+#: or flickers fast loses objects still in view (see FADED_CONTRAST).
+DIMMED_OBJECTS = 2
+DIMMED_BRIGHTNESS = 0.5
+
+#: The percentiles of a frame whose difference is its brightness (see _brightness).
+BRIGHTNESS_PERCENTILES = (0.5, 99.5)
+
+
+def _brightness(looks: np.ndarray) -> float:
+    """The spread of frame ``looks`` (its illumination taken out) between
+    BRIGHTNESS_PERCENTILES: photobleaching and a lamp's flicker dim it with
+    every object of the frame."""
+    low, high = np.percentile(looks, BRIGHTNESS_PERCENTILES)
+    return float(high - low)
+
+
+def _faded_as_the_frame_dimmed(run: _Run, t: int, brightness: dict) -> list[tuple]:
+    """``[(t, objects, share)]`` when DIMMED_OBJECTS objects or more were lost
+    as faded on frame ``t`` while the frame itself dimmed to ``share`` of its
+    brightest within FADE_WINDOW frames (below DIMMED_BRIGHTNESS); else ``[]``."""
+    faded = [k for k, seen in enumerate(run.seen) if t in seen.fades and run.status[k][t] == LOST]
+    brightest = max(b for frame, b in brightness.items() if abs(frame - t) <= FADE_WINDOW)
+    share = brightness[t] / brightest if brightest > 0 else 1.0
+    return [(t, faded, share)] if len(faded) >= DIMMED_OBJECTS and share < DIMMED_BRIGHTNESS else []
+
+
+def _warn_dimmed(dimmed: list[tuple]) -> list[str]:
+    """One warning for the frames where objects faded out as the whole frame
+    dimmed (see _faded_as_the_frame_dimmed): the fade is judged in each
+    object's own contrast, so a movie that bleaches fast ends the tracks of
+    objects still in view. Returns the message, if any."""
+    if not dimmed:
+        return []
+    objects = sorted({k for _, faded, _ in dimmed for k in faded})
+    frames = ", ".join(f"{t} ({share:.2f})" for t, _, share in dimmed[:6]) + (", ..." if len(dimmed) > 6 else "")
+    said = [f"{len(objects)} object(s) faded out, and are reported lost, on frames where the whole frame dimmed "
+            f"(in brackets, its contrast against the brightest within {FADE_WINDOW} frames): {frames}. If the movie "
+            "photobleaches or flickers, even out its frames before tracking (each frame minus its median, over its "
+            "99th percentile less its median); if the objects left the focal plane, this is what it shows"]
+    warnings.warn(said[-1], UserWarning, stacklevel=5)
+    return said
+
+
 def pinched_bodies(contour: np.ndarray, neck: float = DIVISION_NECK) -> tuple[np.ndarray, np.ndarray] | None:
     """The two bodies of a contour pinched by a narrow neck, or None.
 
@@ -1132,11 +1183,13 @@ class _Seen:
     seen_whole: bool = False  # whether whole_area is of a contour the image's side did not cut
     contrasts: dict = field(default_factory=dict)  # frame -> contrast where tracked
     signal: float = np.nan  # contrast times area on its last tracked frame (see MAX_AREA_CHANGE)
-    parted: dict = field(default_factory=dict)  # frame -> the two bodies of a contour pinched on its way to being lost there
+    # frame -> the two bodies of a contour pinched on its way to being lost there
+    parted: dict = field(default_factory=dict)
+    fades: set = field(default_factory=set)  # the frames where it was lost as faded (see faded)
     drawing: _Drawing | None = None  # the drawing its last tracked frame was segmented in (see _carried)
 
     def copy(self) -> _Seen:
-        return replace(self, contrasts=dict(self.contrasts), parted=dict(self.parted))
+        return replace(self, contrasts=dict(self.contrasts), parted=dict(self.parted), fades=set(self.fades))
 
     def faded(self, contrast: float, t: int) -> bool:
         """Whether ``contrast`` on frame ``t`` is below FADED_CONTRAST times
@@ -1678,10 +1731,11 @@ def _found(image, shared, avoid, t, drawing: _Drawing, predicted, previous, seen
             seen.parted[t] = parted
     # Faded: what is left is the out-of-focus glow of an object that left
     # the focal plane, or the halo of a neighbour.
-    if verdict == TRACKED:
-        verdict = LOST if seen.faded(contrast, t) else TRACKED
-        if verdict == TRACKED and np.isfinite(contrast):
-            seen.contrasts[t], seen.signal = contrast, contrast * area
+    if verdict == TRACKED and seen.faded(contrast, t):
+        verdict = LOST
+        seen.fades.add(t)
+    if verdict == TRACKED and np.isfinite(contrast):
+        seen.contrasts[t], seen.signal = contrast, contrast * area
     if verdict == TRACKED:
         seen.drawing = drawing
     if verdict == TRACKED and not _touches_side(contour, image.shape, shared.missing):
