@@ -764,6 +764,20 @@ def test_channel_of_an_rgb_image_is_still_read(tmp_path):
     io.imsave(tmp_path / "rgb.png", rgb, check_contrast=False)
     with open_stack(tmp_path / "rgb.png", channel=1) as stack:
         assert stack.shape == (1, 20, 30) and int(stack.max()) == 9
+    with pytest.raises(ValueError, match="channel must be an integer"):  # was a TypeError from a comparison
+        with open_stack(tmp_path / "rgb.png", channel="1"):
+            pass
+
+
+@pytest.mark.parametrize("rows", ["1,1\n5,5\n", "1,1\n5,5\n9,9\n"])
+def test_a_table_of_points_on_one_line_is_no_contour(tmp_path, rows):
+    """read_shapes_csv's promise (an outside fuzzer, session 67): a shape that
+    encloses nothing is refused when read, not later by segment()."""
+    from napari_physeg.io import read_shapes_csv
+
+    (tmp_path / "line.csv").write_text("row,col\n" + rows)
+    with pytest.raises(ValueError, match="shape 0 of .* encloses nothing"):
+        read_shapes_csv(tmp_path / "line.csv")
 
 
 def test_a_tiff_of_pages_written_one_by_one_is_read_a_frame_at_a_time_and_one_of_mixed_shapes_refused(

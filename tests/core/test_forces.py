@@ -89,6 +89,21 @@ def test_normalize_weights_validates():
         normalize_weights(FORCE_NAMES, {"edges": 0, "intensity": 0, "distance": 0})
 
 
+@pytest.mark.parametrize("forces, weights, message", [
+    (None, None, "forces must be a non-empty subset.*got None"),
+    (FORCE_NAMES, [0.4, 0.3, 0.3], "weights must be a dict"),
+    (FORCE_NAMES, {"edges": 1e39}, "from 0 to 1e\\+06"),
+    (FORCE_NAMES, {"edges": "1"}, "must be a number"),
+    (FORCE_NAMES, {"edges": True}, "must be a number"),
+])
+def test_forces_and_weights_of_the_wrong_kind_are_told_not_raised_from_inside(forces, weights, message):
+    """An outside fuzzer's findings (session 67): forces=None and a list of
+    weights raised Python's own TypeErrors from inside; a weight of 1e39
+    overflowed the float32 force images to NaN (six RuntimeWarnings)."""
+    with pytest.raises(ValueError, match=message):
+        normalize_weights(forces, weights)
+
+
 def test_beyond_the_image_the_border_is_a_wall_and_the_distance_its_mirror():
     rng = np.random.default_rng(3)
     field = ForceField.from_features(rng.random((30, 40)), rng.random((30, 40)) * 9, rng.uniform(-1, 1, (30, 40)),

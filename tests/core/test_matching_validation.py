@@ -163,6 +163,10 @@ def test_nearly_repeated_nodes_raise_a_clear_error_or_simulate(node, log_gap, of
     except ValueError as err:
         assert "coincide" in str(err)
         return
+    if scale < 1:  # a thousandth of the hands' size: within 100 tol of a point (simulate's rest test is in px)
+        with pytest.raises(ValueError, match="the contours span .* less than 100 times tol"):
+            simulate(a, b, m, n_frames=3)
+        return
     sim = simulate(a, b, m, n_frames=3)
     assert sim.frames.shape == (3, 68, 2) and np.all(np.isfinite(sim.frames))
 
@@ -201,3 +205,22 @@ def test_a_figure_eight_whose_nodes_meet_where_it_crosses_is_told_to_be_redrawn(
     nodes = np.vstack([np.linspace(p, q, 10, endpoint=False) for p, q in zip(corners, np.roll(corners, -1, 0))])
     with pytest.raises(ValueError, match="draw a contour that does not cross or touch itself"):
         match(nodes, HAND)
+
+
+def test_matching_too_many_nodes_or_a_bad_material_is_refused_before_any_work():
+    """An outside fuzzer (session 67): two 10,000-node ellipses took 55 s,
+    model_nodes=10000 ran on past 20 s, and material=None raised a TypeError
+    (in track(), only once every frame was segmented)."""
+    from napari_physeg.core import track
+    from napari_physeg.core.matching import MAX_MATCH_NODES, MAX_MODEL_NODES
+
+    t = np.linspace(0, 2 * np.pi, MAX_MATCH_NODES + 1, endpoint=False)
+    big = np.column_stack([500 + 300 * np.sin(t), 500 + 200 * np.cos(t)])
+    with pytest.raises(ValueError, match=f"more than the {MAX_MATCH_NODES} match\\(\\) takes"):
+        match(big, HAND)
+    with pytest.raises(ValueError, match=f"model_nodes must be at most {MAX_MODEL_NODES}"):
+        match(HAND, B66, model_nodes=MAX_MODEL_NODES + 1)
+    with pytest.raises(ValueError, match="material must be a preset name"):
+        match(HAND, B66, material=None)
+    with pytest.raises(ValueError, match="^match_options: material must be"):
+        track(np.zeros((2, 40, 40)), HAND * 5 + 20, match_options={"material": None})

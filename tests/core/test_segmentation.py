@@ -297,15 +297,21 @@ def test_contour_partly_outside_is_clipped_with_a_warning():
 def test_a_figure_8_drawing_is_warned_of_and_an_overshooting_lasso_is_not():
     """Found by probing (session 29): a bow-tie drawn around a disk ended on
     part of it (IoU 0.77), silently. A lasso that overshoots its start makes
-    a small loop, which is just cut."""
+    a small loop, which is just cut. A bow-tie whose two loops cancel
+    encloses nothing, as a mask's pixels listed in raster order do: refused,
+    before the seconds that reading such a drawing took (np.argwhere of a
+    nucleus: 50 s)."""
     import warnings
 
     obj = data.ellipse((96, 96))
     (r0, c0), (r1, c1) = np.argwhere(obj.mask).min(0) - 8, np.argwhere(obj.mask).max(0) + 8
-    bowtie = np.array([[r0, c0], [r1, c1], [r1, c0], [r0, c1]], float)
-    with pytest.warns(UserWarning, match=r"init crosses itself \(a figure-8.* 50% of what it encloses") as caught:
+    bowtie = np.array([[r0, c0], [r1, c1], [r1, c0 + 0.3 * (c1 - c0)], [r0, c1]], float)  # loops of 1 : 2.3
+    with pytest.warns(UserWarning, match=r"init crosses itself \(a figure-8") as caught:
         segment(obj.image, bowtie)
     assert caught[0].filename == __file__
+    for balanced in (np.array([[r0, c0], [r1, c1], [r1, c0], [r0, c1]], float), np.argwhere(obj.mask)):
+        with pytest.raises(ValueError, match="goes back and forth.*find_contours"):
+            segment(obj.image, balanced)
     t = np.linspace(0, 2 * np.pi * 1.08, 90)
     centre, radius = obj.mask.nonzero()[0].mean(), 0.5 * (r1 - r0)
     lasso = np.column_stack([centre + radius * np.sin(t), obj.mask.nonzero()[1].mean() + radius * np.cos(t)])
@@ -1384,3 +1390,19 @@ def test_a_dim_object_among_bright_ones_stands_out_of_the_noise(contrast, radius
     res = segment(image, _circle((132, 132), radius))
     assert res.polarity == 1 and res.converged
     assert iou(res.contour, dim) > 0.9
+
+
+def test_an_avoid_mask_of_the_wrong_kind_or_over_the_object_is_told():
+    """An outside fuzzer (session 67): a float image passed as avoid was read
+    as avoiding everything, and an avoid that held the object itself (a labels
+    layer with its own label), and the contour collapsed with advice to draw
+    closer to the object."""
+    obj = data.ellipse((96, 96))
+    t = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    centre = np.argwhere(obj.mask).mean(0)
+    init = np.column_stack([centre[0] + 30 * np.sin(t), centre[1] + 30 * np.cos(t)])
+    with pytest.raises(ValueError, match="avoid must be a boolean mask"):
+        segment(obj.image, init, avoid=obj.image)
+    with pytest.raises(ValueError, match="avoid covers .* of what init encloses"):
+        segment(obj.image, init, avoid=obj.mask)
+    assert segment(obj.image, init, avoid=np.zeros(obj.mask.shape, int)).converged

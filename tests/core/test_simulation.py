@@ -270,3 +270,17 @@ def test_iter_simulate_checks_its_options_at_the_call():
         iter_simulate(a, b, n_frame=3)
     with pytest.raises(ValueError, match="^q must be"):
         iter_simulate(a, b, q=-1.0)
+
+
+def test_contours_smaller_than_the_rest_tolerance_are_refused():
+    """tol is in pixels: the hands in units of their size (1e-3 of it) came
+    to rest after 6 steps, up to 8.8 hand-pixels from b, and said converged
+    (an outside fuzzer, session 67)."""
+    from napari_physeg import data
+    from napari_physeg.core import simulate
+
+    a, b, _ = data.hand_pair(67, 66)
+    scale = 1e-3 / np.ptp(a, axis=0).max()
+    with pytest.raises(ValueError, match="less than 100 times tol"):
+        simulate(a * scale, b * scale)
+    assert simulate(a * scale, b * scale, tol=1e-8, n_frames=3).frames.shape == (3, 67, 2)

@@ -27,6 +27,7 @@ the edge it must reach while a node on the border looks only at its border.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from collections.abc import Mapping
 from functools import cached_property
 
 import cv2
@@ -41,23 +42,36 @@ FORCE_NAMES = ("edges", "intensity", "distance")
 DEFAULT_WEIGHTS = {"edges": 0.4, "intensity": 0.3, "distance": 0.3}
 
 
+#: The largest weight of a force: the weights scale the forces, which the
+#: feature images hold as float32 (a weight of 1e39 overflowed them to NaN).
+MAX_WEIGHT = 1e6
+
+
 def normalize_weights(forces=FORCE_NAMES, weights=None) -> dict[str, float]:
     """Validate the chosen forces and their weights; unnamed weights default."""
-    if isinstance(forces, str):
-        forces = (forces,)
-    forces = tuple(forces)
-    unknown = [f for f in forces if f not in FORCE_NAMES]
-    if unknown or not forces:
-        raise ValueError(f"forces must be a non-empty subset of {FORCE_NAMES}, got {forces!r}")
+    given = forces
+    try:
+        forces = (forces,) if isinstance(forces, str) else tuple(forces)
+    except TypeError:  # None, a number
+        forces = ()
+    if not forces or any(f not in FORCE_NAMES for f in forces):
+        raise ValueError(f"forces must be a non-empty subset of {FORCE_NAMES}, got {given!r}")
+    if weights is not None and not isinstance(weights, Mapping):
+        raise ValueError(f"weights must be a dict of force name -> weight, e.g. {DEFAULT_WEIGHTS}, got {weights!r}")
     weights = dict(weights or {})
     bad = [k for k in weights if k not in FORCE_NAMES]
     if bad:
         raise ValueError(f"weights has unknown force name(s) {bad}; use {FORCE_NAMES}")
     out = {}
     for name in forces:
-        w = float(weights.get(name, DEFAULT_WEIGHTS[name]))
-        if not (np.isfinite(w) and w >= 0):
-            raise ValueError(f"weight of {name!r} must be a non-negative number, got {w!r}")
+        given = weights.get(name, DEFAULT_WEIGHTS[name])
+        try:  # a number (numpy's too), not a flag or a text
+            w = np.nan if isinstance(given, (bool, np.bool_, str, bytes)) else float(given)
+        except (TypeError, ValueError):
+            w = np.nan
+        if not (np.isfinite(w) and 0 <= w <= MAX_WEIGHT):
+            raise ValueError(f"weight of {name!r} must be a number from 0 to {MAX_WEIGHT:g} (only the weights' "
+                             f"ratios and stiffness matter), got {given!r}")
         out[name] = w
     if sum(out.values()) <= 0:
         raise ValueError("at least one force weight must be positive")

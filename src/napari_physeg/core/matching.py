@@ -64,7 +64,7 @@ from scipy.spatial import cKDTree
 from ._drain import drain
 from .contour import resample, rotation_between, rotation_matrix, segment_lengths, signed_area, warn_if_figure_eight
 from .inner_distance import inner_distance_context
-from .materials import Material
+from .materials import Material, get_material
 from ._validation import check_callback, check_contour, check_count, check_number, with_defaults
 from .modes import DEGENERACY_TOLERANCE, MAX_AUTO_MODES, ModalBasis, _modal_raw, select_modes, truncate
 
@@ -1205,14 +1205,37 @@ def _checked_neighbourhood(value, method: str) -> float:
     return value
 
 
+#: The most nodes of a contour that match() takes (as segment() makes at
+#: most): its cost matrix holds the two node counts' product (two of 10,000
+#: took 55 s), and an outline this long resolves nothing more.
+MAX_MATCH_NODES = 5000
+#: The most nodes of the element a shape's modes are computed on.
+MAX_MODEL_NODES = 1000
+
+
+def _check_size(contour: np.ndarray, name: str) -> np.ndarray:
+    """``contour``, or a ValueError if it has more than MAX_MATCH_NODES nodes."""
+    if len(contour) > MAX_MATCH_NODES:
+        raise ValueError(f"{name} has {len(contour)} nodes, more than the {MAX_MATCH_NODES} match() takes (its cost "
+                         f"grows with the product of the two counts); resample it, e.g. "
+                         f"napari_physeg.core.contour.resample({name}, 500)")
+    return contour
+
+
 def _prepare(a, b, *, method, n_modes, model_nodes, sigma_factor, material, curvature_weight, arclength_weight,
              refine, sign_correction, order_penalty, n_starts, gap_cost, detail, displacement_weight,
              context_weight, modal_weight, neighbourhood) -> _Job:
     """Check every argument of :func:`match` (cheap: before any heavy work)."""
     method = _check_method(method)
-    a = check_contour(a, "a")
-    b = check_contour(b, "b")
+    a = _check_size(check_contour(a, "a"), "a")
+    b = _check_size(check_contour(b, "b"), "b")
     check_number(sigma_factor, "sigma_factor", inclusive=False)
+    material = get_material(material)
+    model_nodes = check_count(model_nodes, "model_nodes", 8, allow_none=True)
+    if model_nodes is not None and model_nodes > MAX_MODEL_NODES:
+        raise ValueError(f"model_nodes must be at most {MAX_MODEL_NODES}, got {model_nodes!r}: the element's "
+                         "eigenproblem grows with its cube, and the low modes of a model of hundreds of nodes crowd "
+                         "into a flat spectrum (64, the default, is typical)")
     if detail is not None and not isinstance(detail, (bool, np.bool_)):
         raise ValueError(f"detail must be True, False or None, got {detail!r}")
     if detail and method != "order":
@@ -1231,7 +1254,7 @@ def _prepare(a, b, *, method, n_modes, model_nodes, sigma_factor, material, curv
     return _Job(
         A=a[pa] - centre_a, B=b[pb] - centre_b, pa=pa, pb=pb, method=method,
         n_modes=check_count(n_modes, "n_modes", 1, allow_none=True),
-        model_nodes=check_count(model_nodes, "model_nodes", 8, allow_none=True),
+        model_nodes=model_nodes,
         sigma_factor=float(sigma_factor), material=material,
         curvature_weight=check_number(curvature_weight, "curvature_weight"),
         arclength_weight=check_number(arclength_weight, "arclength_weight"),

@@ -131,7 +131,7 @@ def get_material(material: str | Material) -> Material:
     Raises
     ------
     ValueError
-        If ``material`` names no preset.
+        If ``material`` names no preset, or is neither a name nor a Material.
     """
     if isinstance(material, Material):
         return material
@@ -142,7 +142,9 @@ def get_material(material: str | Material) -> Material:
         raise ValueError(
             f"Unknown material {material!r}; choose one of {sorted(MATERIALS)} or pass a Material"
         )
-    raise TypeError(f"material must be a preset name or a Material, got {type(material).__name__}")
+    # (A ValueError as for any bad argument of segment, match, simulate and track.)
+    raise ValueError(f"material must be a preset name ({', '.join(sorted(MATERIALS))}) or a Material, "
+                     f"got {material!r}")
 
 
 #: Image-force constant r (N/m) suggested for each preset: the paper's 2e3 for

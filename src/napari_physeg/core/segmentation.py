@@ -1493,9 +1493,9 @@ def _set_up(options: dict) -> _Setup:
     o = options
     image, missing = _without_missing(_validate_image(o["image"]))
     image = _in_working_range(image)
-    from ._validation import check_contour  # the one validation of segment, match and simulate
+    from ._validation import check_contour, check_drawing  # the one validation of segment, match and simulate
 
-    init = check_contour(o["init"], "init")
+    init = check_drawing(o["init"], "init")
     checked = signature_of(_checked_options).parameters
     material, weights, stiffness = _checked_options(**{name: o[name] for name in checked})
     # The drawing as the user made it (partly beyond the image, maybe) tells
@@ -1519,7 +1519,7 @@ def _set_up(options: dict) -> _Setup:
         if given is not None and np.shape(getattr(given, "edges", given)) != image.shape:
             raise ValueError(f"{name} must be of the image's shape {image.shape}, got "
                              f"{np.shape(getattr(given, 'edges', given))}")
-    avoid = _avoiding_missing(o["avoid"], missing, o["features"], warn)
+    avoid = _avoiding_missing(_checked_avoid(o["avoid"], image.shape), missing, o["features"], warn)
     features = _FeatureWindow(image, drawing, init, polarity={"bright": 1, "dark": -1}.get(o["polarity"]),
                               weights=weights, max_line_length=o["max_line_length"], isef_b=o["isef_b"],
                               refine=o["refine"] and o["reference"] == "incremental", shared=o["features"],
@@ -1629,6 +1629,21 @@ def _final_nodes(body: _ElasticBody, setup: _Setup, stop_reason: str, settled, s
     elif stop_reason in ("converged", "limited") and _on_the_image_frame(nodes, setup.shape):
         stop_reason = "stalled"
     return nodes, stop_reason
+
+
+def _checked_avoid(avoid, shape) -> np.ndarray | None:
+    """``avoid`` as a boolean mask of the image's ``shape``, or a ValueError
+    saying what it must be (a float image passed as avoid was read as
+    avoiding everything, and the contour said it collapsed)."""
+    if avoid is None:
+        return None
+    mask = np.asarray(avoid)
+    if mask.shape != tuple(shape):
+        raise ValueError(f"avoid must be a mask of the image's shape {tuple(shape)}, got shape {mask.shape}")
+    if mask.dtype != bool and not (mask.dtype.kind in "iuf" and np.isin(mask, (0, 1)).all()):
+        raise ValueError("avoid must be a boolean mask, True on the other objects' pixels; for a labels image "
+                         "give labels > 0 (without the object's own label)")
+    return mask.astype(bool, copy=False)
 
 
 def _avoiding_missing(avoid, missing, features: FrameFeatures | None, warn: bool = True):
@@ -1758,6 +1773,12 @@ def _before_collapse(features: _FeatureWindow, settled, drawing, steps: int, max
         return nodes, _rest_reason(features, nodes)
     # Nothing held it: the region force shrinks a contour drawn on a uniform
     # background until it is a point. Say so rather than return it.
+    covered = _avoided_share(drawing, features.avoid)
+    if covered >= 0.5:
+        # (Told to draw closer, the user would look for the fault in the drawing.)
+        raise ValueError(f"the contour collapsed to a point after {steps} steps: avoid covers {covered:.0%} of what "
+                         "init encloses, and its pixels are background whatever they look like; leave the object out "
+                         "of avoid (the other objects' pixels only)")
     across = float(np.ptp(drawing, axis=0).max())
     raise ValueError(
         f"the contour collapsed to a point after {steps} steps: no object border was found within reach "
@@ -1765,6 +1786,15 @@ def _before_collapse(features: _FeatureWindow, settled, drawing, steps: int, max
         + (f", or, inside it, larger than this {across:.0f}-px click (a few pixels say too little about "
            "the object's level)" if across < SMALL_DRAWING else "")
     )
+
+
+def _avoided_share(drawing: np.ndarray, avoid: np.ndarray | None) -> float:
+    """The share of the pixels ``drawing`` encloses that ``avoid`` holds (0 without it)."""
+    if avoid is None:
+        return 0.0
+    box = bounding_window(drawing, avoid.shape, 0.0)
+    inside = window_mask(drawing, box)
+    return float(avoid[box][inside].mean()) if inside is not None and inside.any() else 0.0
 
 
 def _phase_patience(phase: int, patience: int) -> int:

@@ -45,7 +45,7 @@ from skimage.filters import threshold_otsu
 from skimage.segmentation import watershed
 
 from ._drain import drain
-from ._validation import check_callback, check_contour, check_count, signature_of
+from ._validation import check_callback, check_count, check_drawing, signature_of
 from .contour import (area_centroid, as_contour, bounding_window, closest_on_polyline, depth_inside, nearest_node,
                       outward_normals, perimeter, positively_oriented, remove_loops, resample, rotation_matrix,
                       signed_area, through_nodes, window_mask)
@@ -363,7 +363,7 @@ def _check_inits(inits, frame_shape):
         inits = [inits]
     # As segment() checks its drawing (its error, before any frame is read,
     # rather than the object reported lost on the start frame).
-    out = [check_contour(as_contour(c, name=f"inits[{k}]"), f"inits[{k}]") for k, c in enumerate(inits)]
+    out = [check_drawing(as_contour(c, name=f"inits[{k}]"), f"inits[{k}]") for k, c in enumerate(inits)]
     if not out:
         raise ValueError("inits is empty: give one (N, 2) contour per object to track")
     for k, c in enumerate(out):
