@@ -361,10 +361,12 @@ def test_objects_lost_as_the_whole_movie_dims_fast_are_named_with_what_to_do():
     fades alone (it left the focal plane) is lost without that warning."""
     factors = np.geomspace(1.0, 0.1, 6)
     frames, inits = _dimming_disks(factors)
-    tr = track(frames, inits)
+    with pytest.warns(UserWarning, match="4 object.* faded out.*even out its frames") as caught:
+        tr = track(frames, inits)
+    assert caught[0].filename == __file__  # the caller's line
     assert all(LOST in row for row in tr.status)
     dimmed = [w for w in tr.warnings if "faded out" in w]
-    assert len(dimmed) >= 1 and "even out its frames" in dimmed[0]
+    assert len(dimmed) == 1 and "even out its frames" in dimmed[0]
     median = np.median(frames, axis=(1, 2), keepdims=True)
     even = (frames - median) / (np.percentile(frames, 99, axis=(1, 2), keepdims=True) - median)
     assert track(even, inits).status == [[TRACKED] * 6] * 4
