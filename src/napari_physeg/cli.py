@@ -306,7 +306,8 @@ def _segment(args) -> int:
         return 1
     results, frames = [res.contour for _, _, res in done], [(t,) for t, _, _ in done]
     # The input shape each result is of: a contour that failed leaves no row, so the index alone does not say.
-    write_shapes_csv(args.out, results, leading=frames if is_stack else None, columns={"object": [k for _, k, _ in done]})
+    write_shapes_csv(args.out, results, leading=frames if is_stack else None,
+                     columns={"object": [k for _, k, _ in done]})
     left_out = f" ({len(done)} of {len(jobs)} contours, without the {failed} that failed)" if failed else ""
     print(f"wrote {args.out}{left_out}")
     if args.mask:

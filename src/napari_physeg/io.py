@@ -101,18 +101,13 @@ def read_shapes_csv(path, *, leading: bool = False):
     bad = [i for i, (s, b) in enumerate(zip(out, before)) if not (np.isfinite(s).all() and np.isfinite(b).all())]
     if bad:
         raise ValueError(f"could not read contours from {path}: shape {bad[0]} has a NaN or infinite coordinate")
-    flat = [i for i, s in enumerate(out) if len(s) < 3 or _encloses_no_area(s)]
+    from .core._validation import on_one_line  # (not at import: the command line's start stays light)
+
+    flat = [i for i, s in enumerate(out) if len(s) < 3 or on_one_line(s)]
     if flat:
         raise ValueError(f"shape {flat[0]} of {path} encloses nothing ({len(out[flat[0]])} vertices on one line or "
                          "point): a contour needs 3 vertices or more around an area; draw it again")
     return (out, before) if leading else out
-
-
-def _encloses_no_area(shape: np.ndarray) -> bool:
-    """Whether the vertices of ``shape`` lie on one line (or one point), to a millionth of their extent."""
-    centred = shape - shape.mean(axis=0)
-    singular = np.linalg.svd(centred, compute_uv=False)
-    return bool(singular[1] <= 1e-6 * singular[0]) if singular[0] > 0 else True
 
 
 def _check_one_plane(shapes) -> None:

@@ -20,8 +20,8 @@ from functools import lru_cache
 import numpy as np
 from scipy.spatial import ConvexHull, cKDTree
 
-__all__ = ["check_contour", "check_drawing", "check_count", "check_number", "node_array", "NEAR_DUPLICATE",
-           "signature_of", "with_defaults"]
+__all__ = ["check_contour", "check_drawing", "check_count", "check_number", "node_array", "on_one_line",
+           "NEAR_DUPLICATE", "signature_of", "with_defaults"]
 
 #: Two nodes closer than this fraction of the mean node spacing count as one
 #: repeated node: the element's interpolation matrix becomes numerically
@@ -94,8 +94,7 @@ def check_contour(points, name: str = "contour", *, min_nodes: int = 3) -> np.nd
         _check_distinct(arr, name, min_nodes)
     # On one line first: a line drawn there and back, its nodes spaced along
     # it, repeats nodes too, and was told to pass each node once.
-    singular = np.linalg.svd(centred, compute_uv=False)
-    if singular[1] <= _COLLINEAR * singular[0]:
+    if on_one_line(centred):
         _check_distinct(arr, name, min_nodes)  # (too few distinct nodes says more)
         raise ValueError(f"{name} is degenerate: its nodes lie on one line (or within a millionth of its length "
                          "of one) and enclose no area")
@@ -123,13 +122,13 @@ def check_drawing(points, name: str = "init") -> np.ndarray:
     """:func:`check_contour` for a drawing that stands for an object's
     outline (segment's and track's): also a ValueError when its nodes do not
     follow one outline in order (see IN_ORDER_SHARE)."""
+    from .contour import signed_area  # (contour imports this module)
+
     arr = check_contour(points, name)
-    centred = arr - arr.mean(axis=0)  # (the area of a contour at 1e10 px keeps its digits)
-    area = abs(float(np.dot(centred[:, 0], np.roll(centred[:, 1], -1))
-                     - np.dot(centred[:, 1], np.roll(centred[:, 0], -1)))) / 2
+    area = abs(signed_area(arr))
     if area >= IN_ORDER_SHARE * float(np.prod(np.ptp(arr, axis=0))):  # most: the hull is no larger than the box
         return arr
-    hull = ConvexHull(centred).volume
+    hull = ConvexHull(arr - arr.mean(axis=0)).volume
     if area < IN_ORDER_SHARE * hull:
         raise ValueError(
             f"{name} goes back and forth: its {len(arr)} nodes enclose {area:.3g} px² of the {hull:.3g} px² they "
@@ -137,6 +136,13 @@ def check_drawing(points, name: str = "init") -> np.ndarray:
             "pixels as np.argwhere lists them); draw one outline around the object, or pass a mask's outline in "
             "order, e.g. skimage.measure.find_contours(mask, 0.5)[0]")
     return arr
+
+
+def on_one_line(points: np.ndarray) -> bool:
+    """Whether ``points`` lie on one line, or one point (to :data:`_COLLINEAR`
+    of their extent): they enclose no area."""
+    singular = np.linalg.svd(np.asarray(points, float) - np.mean(points, axis=0), compute_uv=False)
+    return bool(singular[1] <= _COLLINEAR * singular[0])
 
 
 def _check_distinct(arr: np.ndarray, name: str, min_nodes: int) -> None:

@@ -26,8 +26,8 @@ the edge it must reach while a node on the border looks only at its border.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
 from collections.abc import Mapping
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import cv2
@@ -64,14 +64,14 @@ def normalize_weights(forces=FORCE_NAMES, weights=None) -> dict[str, float]:
         raise ValueError(f"weights has unknown force name(s) {bad}; use {FORCE_NAMES}")
     out = {}
     for name in forces:
-        given = weights.get(name, DEFAULT_WEIGHTS[name])
+        value = weights.get(name, DEFAULT_WEIGHTS[name])
         try:  # a number (numpy's too), not a flag or a text
-            w = np.nan if isinstance(given, (bool, np.bool_, str, bytes)) else float(given)
+            w = np.nan if isinstance(value, (bool, np.bool_, str, bytes)) else float(value)
         except (TypeError, ValueError):
             w = np.nan
         if not (np.isfinite(w) and 0 <= w <= MAX_WEIGHT):
             raise ValueError(f"weight of {name!r} must be a number from 0 to {MAX_WEIGHT:g} (only the weights' "
-                             f"ratios and stiffness matter), got {given!r}")
+                             f"ratios and stiffness matter), got {value!r}")
         out[name] = w
     if sum(out.values()) <= 0:
         raise ValueError("at least one force weight must be positive")

@@ -678,11 +678,12 @@ def _outside_level(intensity, drawing, centre, on_line, along, within, floor) ->
         if far and best > (near_best if through else floor):
             break
         ring = intensity[_ring_mask(drawing, intensity.shape, lo, hi)]
-        # Far out the background may be a small part of a ring that still
-        # lies mostly on the object: the ring's class furthest from the centre.
-        level = _surrounding_class(intensity, drawing, ring, centre, floor) if far else _median(ring)
         if ring.size < _RING_SEEN_SHARE * (hi ** 2 - lo ** 2) * drawn_area:
             level = np.nan  # a corner of the ring, not a ring around the drawing
+        else:
+            # Far out the background may be a small part of a ring that still
+            # lies mostly on the object: the ring's class furthest from the centre.
+            level = _surrounding_class(intensity, drawing, ring, centre, floor) if far else _median(ring)
         # The first far ring that differs, beyond even rings, straddles the
         # border too: its class furthest from the centre may be a further
         # level (a small click in the phantom's large ellipse took the black

@@ -582,11 +582,7 @@ def _around_others(contour: np.ndarray, avoid: np.ndarray | None) -> bool:
     and a drawing around it), a closed contour about that rim, held by the
     object's edge, takes them in: tracking, two contours covered the same
     782 px of a nucleus."""
-    if avoid is None:
-        return False
-    box = bounding_window(contour, avoid.shape, 0.0)
-    inside = window_mask(contour, box)
-    return inside is not None and 2 * np.count_nonzero(avoid[box][inside]) > np.count_nonzero(inside)
+    return _avoided_share(contour, avoid) > 0.5
 
 
 #: A contour from a drawing read as lying inside its object that rests
