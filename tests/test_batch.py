@@ -265,7 +265,7 @@ def _track_task(path, out, inits, **kw):
 
 
 @pytest.mark.parametrize("case, message", [
-    ("channel on a grayscale stack", "has no channels (a 4 x 96 x 96 stack): leave out --channel"),
+    ("channel on a grayscale stack", "has no channels (a 4 x 96 x 96 stack): leave out the channel option (--channel)"),
     ("a 2-D image", "is a single 2-D image; track needs a time-lapse (T x H x W)"),
     ("contour outside", "shape 0 of the contours lies wholly outside the image (96 x 96 px)"),
     ("start beyond the end", "drawn on frame 9, not in the stack (frames 0 to 3)"),

@@ -752,7 +752,7 @@ def test_channel_on_a_grayscale_stack_is_refused(movie_files, capsys, no_work, c
     assert main([command, str(stack), "--init", str(init), "--out", str(out), "--channel", "1"]) == 2
     err = capsys.readouterr().err
     h, w = movie.frames.shape[1:]
-    assert f"{stack} has no channels (a 6 x {h} x {w} stack): leave out --channel" in err
+    assert f"{stack} has no channels (a 6 x {h} x {w} stack): leave out the channel option (--channel)" in err
     assert len(err.strip().splitlines()) == 1 and not out.exists()
 
 
@@ -823,9 +823,9 @@ def test_channel_of_a_hyperstack_and_of_an_rgb_zarr_movie_is_taken(tmp_path, cap
             np.testing.assert_array_equal(np.asarray(stack), expected)
     init = write_shapes_csv(tmp_path / "init.csv", [[[5, 5], [5, 15], [15, 10]]])
     for name, message in (("tcyx.tif", "has 2 channels (axis C of TCYX, shape 3 x 2 x 20 x 30): choose one with "
-                                       "--channel 0 or 1"),
+                                       "the channel option (--channel): 0 or 1"),
                           ("rgb.zarr", "has 3 channels (RGB(A) samples, the last axis, shape 3 x 20 x 30 x 3): "
-                                       "choose one with --channel 0, 1 or 2")):
+                                       "choose one with the channel option (--channel): 0, 1 or 2")):
         assert main(["track", str(tmp_path / name), "--init", str(init), "--out", str(tmp_path / "o")]) == 2
         assert f"{tmp_path / name} {message}" in capsys.readouterr().err
     with pytest.raises(ValueError, match="channel 2 is out of range: .* has 2 channels \\(axis C of TCYX\\)"):

@@ -513,18 +513,18 @@ def _as_frames(stack, axes: str | None, channel, path):
     if channel is not None:
         if where is None and stack.ndim <= 3:
             kind = "image" if stack.ndim == 2 else "stack"
-            raise ValueError(f"{path} has no channels (a {shape} {kind}): leave out --channel")
+            raise ValueError(f"{path} has no channels (a {shape} {kind}): leave out the channel option (--channel)")
         if where is None:
             raise ValueError(f"{path} has shape ({shape}) and names no channel axis: save one channel per file as "
                              "(frames, rows, cols), or as an ImageJ hyperstack (axes TCYX)")
         n = stack.shape[where]
         if not 0 <= channel < n:
             raise ValueError(f"channel {channel} is out of range: {path} has {n} channels "
-                             f"({_channel_name(where, axes)}): choose --channel {_choices(n)}")
+                             f"({_channel_name(where, axes)}): choose {_choices(n)}")
         stack = stack[(slice(None),) * where + (channel,)]
     elif where is not None:
         raise ValueError(f"{path} has {stack.shape[where]} channels ({_channel_name(where, axes)}, shape {shape}): "
-                         f"choose one with --channel {_choices(stack.shape[where])}")
+                         f"choose one with the channel option (--channel): {_choices(stack.shape[where])}")
     if stack.ndim == 2:
         stack = stack[None]
     if stack.ndim != 3:

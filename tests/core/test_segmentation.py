@@ -174,7 +174,7 @@ def test_nan_pixels_are_no_data_where_the_object_ends_as_at_the_image_side(brigh
     cut = int(rows.min() + 0.35 * np.ptp(rows))
     image = blob.image.astype(float)
     image[:cut] = np.nan
-    with pytest.warns(UserWarning, match=r"NaN pixels .* no data"):
+    with pytest.warns(UserWarning, match=r"NaN \(or masked\) pixels .* no data"):
         res = segment(image, blob.init_far)
     inside = polygon2mask(image.shape, res.contour)
     assert res.converged and not (inside & np.isnan(image)).any()
@@ -185,6 +185,26 @@ def test_nan_pixels_are_no_data_where_the_object_ends_as_at_the_image_side(brigh
     assert (inside & as_cropped).sum() / (inside | as_cropped).sum() > 0.98
 
 
+def test_a_masked_arrays_mask_is_no_data_as_nan_is():
+    """Found by an outside tester (session 67): np.asarray dropped a masked
+    array's mask, and the masked pixels' stored values (here as bright as the
+    object, a fill that joins it to the image's top) were segmented as image."""
+    blob = data.blob(seed=3)
+    rows = np.flatnonzero(blob.mask.any(1))
+    cut = int(rows.min() + 0.35 * np.ptp(rows))
+    with_nan = blob.image.astype(float)
+    with_nan[:cut] = np.nan
+    stored = blob.image.astype(float)
+    stored[:cut] = blob.image.max()
+    masked = np.ma.masked_array(stored, mask=np.isnan(with_nan))
+    with pytest.warns(UserWarning, match=r"NaN \(or masked\) pixels .* no data"):
+        res = segment(masked, blob.init_far)
+    with pytest.warns(UserWarning, match="no data"):
+        expected = segment(with_nan, blob.init_far)
+    np.testing.assert_allclose(res.contour, expected.contour)
+    assert not polygon2mask(stored.shape, res.contour)[:cut].any()
+
+
 @pytest.mark.parametrize(
     "kwargs, message",
     [
@@ -193,6 +213,8 @@ def test_nan_pixels_are_no_data_where_the_object_ends_as_at_the_image_side(brigh
         (dict(forces=("edges", "magic")), "forces"),
         (dict(weights={"edges": -1}), "weight"),
         (dict(sigma_factor=3.0), "sigma"),
+        (dict(sigma=True), "sigma .* must be a number"),  # (read as 1 px: session 67's fuzzer)
+        (dict(sigma="2"), "sigma .* must be a number"),
         (dict(n_nodes=2), "n_nodes"),
         (dict(n_nodes=100000), "n_nodes must be between 3 and 5000"),
         (dict(reference="sideways"), "reference"),

@@ -712,7 +712,7 @@ def test_a_registered_movie_s_nan_margin_is_the_side_of_its_field_of_view():
     frames = _disk_movie(centres)
     frames[1:, :, 72:] = np.nan  # the stage moved: nothing was seen there after frame 0
     inits = [_circle((48, 40), 16), _circle((30, 20), 16)]
-    with pytest.warns(UserWarning, match="NaN pixels, read as no data, in 6 of 7 frames"):
+    with pytest.warns(UserWarning, match=r"NaN \(or masked\) pixels, read as no data, in 6 of 7 frames"):
         tr = track(frames, inits)
     cropped = track(frames[:, :, :72], inits)
     assert tr.status == cropped.status and LEFT in tr.status[0] and tr.status[1] == [TRACKED] * 7
@@ -723,6 +723,25 @@ def test_a_registered_movie_s_nan_margin_is_the_side_of_its_field_of_view():
                 assert not (mask & np.isnan(frames[t])).any()
                 assert iou(tr.contours[k][t], np.pad(polygon_mask(cropped.contours[k][t], (96, 72)),
                                                      ((0, 0), (0, 24)))) > 0.97
+
+
+def test_a_masked_movie_s_mask_is_no_data_as_nan_is():
+    """np.asarray dropped a masked array's mask (an outside tester, session
+    67): its stored values, here as bright as the objects, were tracked."""
+    centres = [[(48, 40 + 8 * t)] for t in range(5)]
+    with_nan = _disk_movie(centres)
+    with_nan[1:, :, 72:] = np.nan
+    stored = np.where(np.isnan(with_nan), np.nanmax(with_nan), with_nan)
+    inits = [_circle((48, 40), 16)]
+    with pytest.warns(UserWarning, match="no data"):
+        expected = track(with_nan, inits)
+    for masked in (np.ma.masked_array(stored, mask=np.isnan(with_nan)),
+                   [np.ma.masked_array(s, mask=np.isnan(n)) for s, n in zip(stored, with_nan)]):  # a list of frames
+        with pytest.warns(UserWarning, match=r"NaN \(or masked\) pixels, read as no data, in 4 of 5 frames"):
+            tr = track(masked, inits)
+        assert tr.status == expected.status
+        for got, want in zip(tr.contours[0], expected.contours[0]):
+            assert (got is None and want is None) or np.allclose(got, want)
 
 
 def test_a_frame_without_data_is_a_gap_the_objects_are_followed_across():

@@ -140,6 +140,17 @@ def _check_noise(noise) -> float | None:
     return float(noise)
 
 
+def _masked_as_missing(image):
+    """``image``, or, when it is a numpy masked array with masked pixels, a
+    float64 copy with NaN there: a mask marks pixels with no data, which NaN
+    stands for everywhere in the core (np.asarray drops the mask silently, and
+    the masked pixels' stored values, often 0 or a fill value, were read as
+    image)."""
+    if np.ma.isMaskedArray(image) and np.ma.is_masked(image):
+        return np.ma.filled(image.astype(np.float64), np.nan)
+    return image
+
+
 def _without_missing(image, *, name: str = "image") -> tuple[np.ndarray, np.ndarray | None]:
     """``image`` with its NaN pixels (no data) filled, and where they were.
 

@@ -27,8 +27,8 @@ from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, conto
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
-from .features import (_as_image, _check_2d, _intensity_range, _noise_sigma, _normalize, _without_missing,
-                       _without_spikes, chamfer_distance, normalized_intensity, shen_castan_edges)
+from .features import (_as_image, _check_2d, _intensity_range, _masked_as_missing, _noise_sigma, _normalize,
+                       _without_missing, _without_spikes, chamfer_distance, normalized_intensity, shen_castan_edges)
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .magnify import MagnifiedView, magnification
 from .materials import Material, get_material, suggested_stiffness
@@ -145,8 +145,8 @@ def _validate_image(image) -> np.ndarray:
     """``image`` as an array, refused unless 2D and at least 2 px on each
     side (its values are checked where the features read them). Checked
     before the drawing is placed on it: an empty image is not a drawing
-    that "lies outside the image"."""
-    arr = np.asarray(image)
+    that "lies outside the image"; masked pixels hold no data, as NaN ones)."""
+    arr = np.asarray(_masked_as_missing(image))
     _check_2d(arr, "image")
     if min(arr.shape) < 2:
         raise ValueError(f"image has shape {arr.shape}: it holds no area for a contour; pass a 2D image at "
@@ -1268,6 +1268,8 @@ def _checked_options(material, forces, weights, stiffness, reference, integrator
     if check_count(n_nodes, "n_nodes", 3, allow_none=True) is not None and n_nodes > MAX_NODES:
         raise ValueError(f"n_nodes must be between 3 and {MAX_NODES}, got {n_nodes!r}: one node every 2-5 px "
                          "is typical (contour.nodes_for_spacing)")
+    if sigma is not None:  # (its bound, a multiple of the node spacing, is checked once the nodes are placed)
+        check_number(sigma, "sigma (the element's, in px)", inclusive=False)
     if sigma is None and not (isinstance(sigma_factor, (int, float, np.number)) and not isinstance(sigma_factor, bool)
                               and 0 < sigma_factor <= MAX_SIGMA_FACTOR):
         raise ValueError(f"sigma_factor must be above 0 and at most {MAX_SIGMA_FACTOR:g}, got {sigma_factor!r}; "
@@ -1648,8 +1650,8 @@ def _avoiding_missing(avoid, missing, features: FrameFeatures | None, warn: bool
     computed on): a contour keeps out of them as out of the image, whose
     side an object they cut takes for its own."""
     if missing is not None and warn:
-        warnings.warn(f"{int(missing.sum())} NaN pixels of the image ({missing.mean():.1%}) were read as no data: "
-                      "the contour keeps out of them", UserWarning,
+        warnings.warn(f"{int(missing.sum())} NaN (or masked) pixels of the image ({missing.mean():.1%}) were read "
+                      "as no data: the contour keeps out of them", UserWarning,
                       stacklevel=6)  # segment()'s caller (through _set_up, _evolve, drain and segment)
     if features is not None and features.missing is not None:
         missing = features.missing if missing is None else missing | features.missing

@@ -51,7 +51,7 @@ from .contour import (area_centroid, as_contour, bounding_window, closest_on_pol
                       signed_area, through_nodes, window_mask)
 from .background import plane_removed
 from .dynamics import DivergenceError
-from .features import _without_missing
+from .features import _masked_as_missing, _without_missing
 from .matching import _match_arguments, _match_pairs, _prepare, match
 from .region import _fill, hasty_margin
 from .segmentation import FrameFeatures, _segment_from, check_on_image, check_segment_options, segment
@@ -330,7 +330,8 @@ def _check_frames(frames):
             other = next(t for t, s in enumerate(shapes) if s != shapes[0])
             raise ValueError(f"frame {other} has shape {shapes[other]} and frame 0 {shapes[0]}: a movie's frames "
                              "must share one shape (crop or pad them to one)")
-        frames = np.asarray(frames)
+        masked = any(np.ma.isMaskedArray(frame) for frame in frames)
+        frames = np.ma.stack(frames) if masked else np.asarray(frames)  # (np.asarray drops masks)
         shape = frames.shape
     if len(shape) != 3:
         raise ValueError(f"frames must be a (T, H, W) stack of 2D frames, got shape {tuple(shape)}; "
@@ -737,8 +738,8 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
             break
     said += _warn_dimmed(dimmed)
     if with_missing:
-        said.append(f"NaN pixels, read as no data, in {len(with_missing)} of {n_frames} frames (first: frame "
-                    f"{min(with_missing)}): the contours keep out of them, and an object that goes into them has left "
+        said.append(f"NaN (or masked) pixels, read as no data, in {len(with_missing)} of {n_frames} frames "
+                    f"(first: frame {min(with_missing)}): the contours keep out of them, and an object that goes into them has left "
                     "the field of view")
         warnings.warn(said[-1], UserWarning, stacklevel=2)
     if empty:
@@ -845,7 +846,7 @@ def _frame(frames, t: int) -> np.ndarray:
     the frame if it cannot be read or holds infinite pixels (NaN ones hold no data, see
     _without_missing)."""
     try:
-        image = np.asarray(frames[t], dtype=np.float64)
+        image = np.asarray(_masked_as_missing(frames[t]), dtype=np.float64)
     except ValueError:  # already says what (a file reader's, see io.open_stack)
         raise
     except Exception as err:  # noqa: BLE001 - a decoder's or a store's error: one plain sentence
