@@ -764,3 +764,38 @@ def test_a_ring_the_view_shows_a_corner_of_is_not_read_as_the_surround():
     outside = _outside_level(image, drawing, centre=0.85, on_line=float(np.median(line)), along=line,
                              within=image[distance < radius], floor=0.005)
     assert outside == pytest.approx(0.5, abs=0.05)
+
+
+def _radial(profile_at, size=256):
+    """An image whose level at each pixel is ``profile_at(r)``, r its distance from the centre."""
+    rr, cc = np.mgrid[:size, :size] - size / 2
+    return profile_at(np.hypot(rr, cc))
+
+
+@pytest.mark.parametrize("kind", ["dome", "nucleus in a cell"])
+def test_a_click_on_a_dome_takes_its_steep_rim_for_the_border_not_a_step_between_plateaus(kind):
+    """Found by an outside tester (session 68): a click inside a well-lit
+    nucleus, bright in its middle and dimmer toward its rim, read its
+    background on the slope (the near rings' texture level, 0.48) and ended at
+    half the nucleus' area (IoU 0.52; Chan-Vese 0.85): the ground beyond it
+    differs from the line less than twice as much as that level. The border
+    is the steeper edge, the nucleus' rim. Where the level between is a
+    plateau of its own (a nucleus in a dimmer cell), the nucleus' edge is the
+    steeper: the cell's ground is not taken."""
+    from napari_physeg.core.region import _enclosing_background, _line_band
+
+    if kind == "dome":  # the radial medians of the tester's nucleus, every 2 px
+        profile = [0.96, 0.98, 0.99, 0.99, 0.97, 0.92, 0.87, 0.83, 0.80, 0.77, 0.72, 0.67, 0.61, 0.52, 0.37,
+                   0.25, 0.20, 0.16, 0.12, 0.10, 0.08, 0.06, 0.05, 0.04, 0.03, 0.03, 0.02]
+        image = _radial(lambda r: np.interp(r, 2 * np.arange(len(profile)), profile))
+    else:
+        image = ndi.gaussian_filter(_radial(lambda r: np.select([r < 14, r < 40], [0.99, 0.45], 0.02)), 1.0)
+    click = circle((128, 128), 5, n=16)
+    line = _line_band(click, image.shape, 1)
+    on_line = float(np.median(image[line]))
+    texture = 0.48 if kind == "dome" else 0.45
+    background = _enclosing_background(image, click, line, on_line, texture, 0.005, (True,) * 4)
+    if kind == "dome":
+        assert background == pytest.approx(0.02, abs=0.02)
+    else:
+        assert background is None
