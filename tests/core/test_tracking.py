@@ -567,6 +567,42 @@ def test_a_cell_that_divides_ends_its_track_with_a_warning_that_says_so():
     assert len(tr.warnings) == 1 and "divided" in tr.warnings[0]
 
 
+def _daughters_apart_movie(n_frames=10, shape=(80, 120), split=5):
+    """A disk of radius 12 that shows, from frame ``split`` on, as two
+    daughters of half its area 7 px apart, moving apart 2 px a frame (a
+    frame interval longer than the pinching)."""
+    from scipy import ndimage as ndi
+
+    rr, cc = np.mgrid[: shape[0], : shape[1]]
+    rng = np.random.default_rng(0)
+    frames = []
+    for t in range(n_frames):
+        if t < split:
+            cells = (rr - 40) ** 2 + (cc - 60) ** 2 < 12**2
+        else:
+            apart = 12 + 2 * (t - split)
+            cells = (np.hypot(rr - 40, cc - 60 + apart) < 8.5) | (np.hypot(rr - 40, cc - 60 - apart) < 8.5)
+        frames.append(0.1 + 0.7 * ndi.gaussian_filter(cells.astype(float), 1.2) + 0.02 * rng.standard_normal(shape))
+    return np.stack(frames)
+
+
+def test_daughters_that_first_show_apart_end_the_track_with_a_warning():
+    """An outside tester (session 68): daughters that first appear apart
+    were followed one of them, at half the area, as a nucleus condensing for
+    mitosis, 'tracked' and with no word (21 of 25 divisions of a simulated
+    Cell Tracking Challenge movie). A contour that shrank with an unclaimed
+    sister beside it, the two centred where the mother was, divided."""
+    with pytest.warns(UserWarning, match=r"object 0: it divided on frame 5, two bodies standing apart at "
+                                         r"\(40, 4[78]\) and \(40, 7[23]\); its track ends .*start=5"):
+        tr = track(_daughters_apart_movie(), _circle((40, 60), 16))
+    assert tr.status[0] == [TRACKED] * 5 + [LOST] * 5
+    assert all(c is None for c in tr.contours[0][5:])
+    # Tracked backward, the daughters come together: the same frame is named, as two that met.
+    with pytest.warns(UserWarning, match=r"object 0: tracked backward, it was two bodies there .* on frame 4"):
+        back = track(_daughters_apart_movie()[::-1], _circle((40, 60), 16), start=9)
+    assert back.status[0] == [LOST] * 5 + [TRACKED] * 5
+
+
 def test_tracked_backward_two_cells_that_came_together_are_not_said_to_divide():
     """Backward in time a division reads as two bodies that meet: the warning
     says so, and names the frame to draw the two on (it said 'divided ... from
@@ -742,6 +778,25 @@ def test_a_masked_movie_s_mask_is_no_data_as_nan_is():
         assert tr.status == expected.status
         for got, want in zip(tr.contours[0], expected.contours[0]):
             assert (got is None and want is None) or np.allclose(got, want)
+
+
+def test_most_objects_lost_on_one_frame_are_named_in_a_warning():
+    """An outside tester (session 68): on a scratch-assay movie whose nuclei
+    move about their spacing between frames, 30 of 59 were lost on the second
+    frame with no word. Small disks that each jump four radii a frame, every
+    one its own way (no stage shift), are lost together: a warning names the
+    frame and says what a movie sampled that sparsely needs."""
+    start = [(20, 20), (20, 76), (76, 20), (76, 76)]
+    jumped = [(44, 20), (20, 52), (52, 20), (76, 52)]  # 24 px: four radii, beyond the second looks' three
+    frames = _disk_movie([start, start, jumped], radius=6)
+    with pytest.warns(UserWarning, match=r"many of the objects followed were lost at once on frame\(s\) 2 "
+                                         r"\(4 of 4\): .*laptrack"):
+        tr = track(frames, [_circle(c, 9) for c in start])
+    assert [row[2] for row in tr.status] == [LOST] * 4
+    # One object lost alone is no such frame.
+    alone = track(_disk_movie([start, start, [jumped[0], *start[1:]]], radius=6), [_circle(c, 9) for c in start])
+    assert [row[2] for row in alone.status] == [LOST] + [TRACKED] * 3
+    assert not any("at once" in message for message in alone.warnings)
 
 
 def test_a_frame_without_data_is_a_gap_the_objects_are_followed_across():

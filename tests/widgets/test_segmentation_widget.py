@@ -138,7 +138,7 @@ def test_sample_hand_end_to_end(viewer_widget, wait_done, errors, monkeypatch, r
     assert out.data[0].dtype == np.float32 and out.data[0].shape[1] == 2
     assert iou(out.data[0], hand.mask) >= 0.9
     np.testing.assert_allclose(out.scale, viewer.layers["hand"].scale)
-    assert bool(out.features["converged"][0])
+    assert bool(out.features["converged"][0]) and out.features["stop_reason"][0] == "converged"
     assert not widget.is_running and widget._run_btn.enabled and not widget._cancel_btn.enabled
 
 

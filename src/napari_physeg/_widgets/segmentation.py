@@ -507,6 +507,8 @@ def result_layer_data(outcome: SegmentationOutcome, job: SegmentationJob, *, lab
         "shape": np.asarray([job.shape_indices[i] for i in outcome.indices], dtype=int),
         "steps": np.asarray([r.steps for r in outcome.results], dtype=int),
         "converged": np.asarray([r.converged for r in outcome.results], dtype=bool),
+        # why each stopped ("leaked": it spread over the image; see the warnings), in the layer's features table
+        "stop_reason": np.asarray([r.stop_reason for r in outcome.results], dtype=object),
         "nodes": np.asarray([len(r.contour) for r in outcome.results], dtype=int),
     }
     shapes_meta = {

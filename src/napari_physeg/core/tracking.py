@@ -82,6 +82,23 @@ MAX_AREA_CHANGE = 2.0
 #: holds twice the signal, and one that spread over the ground next to none.
 SPREAD_SIGNAL = 1.5
 
+#: A tracked object has divided when its contour shrank to at most
+#: DIVIDED_AREA of its area on the frame before, and a body of its looks that
+#: no object holds, apart from the contour (not within a pixel of it), lies
+#: beside it: a sister of at least SISTER_AREA and at most 1 / SISTER_AREA
+#: times its area, the two centred together where the object was, within
+#: SISTER_CENTRING of its radius and nearer than the contour alone (a
+#: division keeps the mother's matter about where she was, each daughter
+#: off to one side; a neighbour beside an object that stayed moves their
+#: centre away). Daughters that first appear apart were followed one of them, at
+#: half the area, as a nucleus condensing for mitosis (see MAX_AREA_CHANGE),
+#: with no word: 21 of the 25 divisions of a Cell Tracking Challenge
+#: simulation (an outside tester, session 68). A condensing nucleus has no
+#: sister beside it.
+DIVIDED_AREA = 0.7
+SISTER_AREA = 0.3
+SISTER_CENTRING = 0.5
+
 #: Consecutive contours share a frame of reference: the matching cost keeps
 #: each node near where it was (see match's ``displacement_weight``).
 DISPLACEMENT_WEIGHT = 1.0
@@ -696,6 +713,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
                seen=[_Seen(polarity, abs(signed_area(c))) for c in inits])
     total, done, stop_reason, said = n_obj * n_frames, 0, "completed", []
     brightness, dimmed = {}, []  # frame -> its brightness (see _brightness); see _faded_as_the_frame_dimmed
+    together = []  # see _lost_together
     with_missing, empty = [], []  # the frames with NaN pixels, and those with nothing else
     # Forward from the start frame, then backward from it.
     start_looks = None
@@ -734,13 +752,14 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
             said += _warn_not_found(run, image) if t == start else _warn_divided(run, t, step)
             if t != start:
                 dimmed += _faded_as_the_frame_dimmed(run, t, brightness)
+                together += _lost_together(run, t, step, shared.missing)
         if stop_reason == "cancelled":
             break
-    said += _warn_dimmed(dimmed)
+    said += _warn_dimmed(dimmed) + _warn_lost_together(together)
     if with_missing:
         said.append(f"NaN (or masked) pixels, read as no data, in {len(with_missing)} of {n_frames} frames "
-                    f"(first: frame {min(with_missing)}): the contours keep out of them, and an object that goes into them has left "
-                    "the field of view")
+                    f"(first: frame {min(with_missing)}): the contours keep out of them, and an object that goes "
+                    "into them has left the field of view")
         warnings.warn(said[-1], UserWarning, stacklevel=2)
     if empty:
         said.append(f"{len(empty)} frame(s) hold NaN pixels only, no data (first: frame {min(empty)}): every object "
@@ -754,6 +773,43 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
         contours=run.contours, status=status, **analysis, start=start, stop_reason=stop_reason,
         timings={"segmentation": t_segmented - t_start, "correspondence": t_end - t_segmented,
                  "total": t_end - t_start}, warnings=tuple(said))
+
+
+#: A frame where at least LOST_TOGETHER_SHARE of the objects followed on the
+#: frame before (and at least LOST_TOGETHER_LEAST of them) are lost at once,
+#: not as faded nor divided, is named in a warning: the objects moved further
+#: between frames than tracking looks (about their own size), or the frame
+#: changed. An outside tester's scratch-assay movie, nuclei moving about
+#: their spacing between frames, lost 26 of 59 on its second frame, silently.
+LOST_TOGETHER_SHARE = 1 / 3
+LOST_TOGETHER_LEAST = 3
+
+
+def _lost_together(run: _Run, t: int, step: int, missing) -> list[tuple[int, int, int]]:
+    """``[(t, lost, followed)]`` if frame ``t`` lost many of the objects
+    followed on the frame before (see LOST_TOGETHER_SHARE), else ``[]``. A
+    frame without data is warned of on its own."""
+    if missing is not None and missing.all():
+        return []
+    followed = [k for k in range(len(run.inits)) if run.status[k][t - step] == TRACKED]
+    lost = [k for k in followed if run.status[k][t] == LOST and t not in run.seen[k].fades
+            and (run.seen[k].divided is None or run.seen[k].divided[0] != t)]
+    if len(lost) < max(LOST_TOGETHER_LEAST, LOST_TOGETHER_SHARE * len(followed)):
+        return []
+    return [(t, len(lost), len(followed))]
+
+
+def _warn_lost_together(frames: list) -> list[str]:
+    """One warning naming the frames where many objects were lost at once (see _lost_together)."""
+    if not frames:
+        return []
+    shown = ", ".join(f"{t} ({lost} of {followed})" for t, lost, followed in sorted(frames)[:5])
+    said = (f"many of the objects followed were lost at once on frame(s) {shown}{' ...' if len(frames) > 5 else ''}: "
+            "they moved further between frames than about their own size, or those frames changed (focus, a jump "
+            "of the stage, a flash). Look at those frames; a movie whose objects move that far between frames "
+            "needs detection and linking (e.g. laptrack) rather than contours carried from frame to frame")
+    warnings.warn(said, UserWarning, stacklevel=5)  # track()'s caller (through iter_track, drain and track)
+    return [said]
 
 
 def _checked_start(start, n_frames: int) -> int:
@@ -926,6 +982,14 @@ def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
     for k in range(len(run.inits)):
         if run.status[k][t] != LOST:
             continue
+        if run.seen[k].divided is not None and run.seen[k].divided[0] == t:
+            where = " and ".join(f"({c[0]:.0f}, {c[1]:.0f})" for c in map(area_centroid, run.seen[k].divided[1]))
+            what = "it divided" if step > 0 else "tracked backward, it was two bodies there (two that came together)"
+            said.append(f"object {k}: {what} on frame {t}, two bodies standing apart at {where}; its track ends "
+                        f"there (lost from frame {t} on); to follow the two, draw each on frame {t} and track "
+                        f"from there (start={t})")
+            warnings.warn(said[-1], UserWarning, stacklevel=5)
+            continue
         # Its contour on the frame done before (t is not the start frame),
         # else the one it parted on this frame: two bodies a pixel or two
         # apart hold the contour between them no longer.
@@ -1063,6 +1127,7 @@ def _segment_frame(run: _Run, image, shared, t: int, step: int):
             others = order[n + 1:] if run.status[k][t] != TRACKED else [i for i in astray if i != k]
             _give_back(run, image, shared, owner, t, k, step, others)
         _link_lost(run, image, shared, owner, t, step)
+        _divisions(run, shared, owner, t, step)
     yield from order
 
 
@@ -1115,6 +1180,52 @@ def _link_lost(run: _Run, image, shared, owner, t: int, step: int) -> None:
         if run.status[k][t] != TRACKED:
             _unpainted(run, owner, k)
             run.contours[k][t], run.status[k][t], run.seen[k] = kept
+
+
+def _divisions(run: _Run, shared, owner: np.ndarray, t: int, step: int) -> None:
+    """End the track of each object that divided on frame ``t`` (see
+    DIVIDED_AREA): lost there and on, its two bodies kept for the warning
+    (see _warn_divided). Tracking backward, two bodies that came together.
+    Not at the image's side, where an object shrinks as it leaves."""
+    shape = shared.intensity.shape
+    for k in range(len(run.inits)):
+        contour, before = run.contours[k][t], run.contours[k][t - step]
+        if run.status[k][t] != TRACKED or before is None or \
+                abs(signed_area(contour)) > DIVIDED_AREA * abs(signed_area(before)):
+            continue
+        if _touches_side(contour, shape, shared.missing) or _touches_side(before, shape, shared.missing):
+            continue  # the side hides a part of an object it cuts (a nucleus leaving a drifting field: 0.49)
+        sister = _sister(shared.intensity, owner, contour, before, run.seen[k].polarity)
+        if sister is not None:
+            run.seen[k].divided = (t, (contour, sister))
+            _unpainted(run, owner, k)
+            run.contours[k][t], run.status[k][t] = None, LOST
+
+
+def _sister(intensity: np.ndarray, owner: np.ndarray, contour: np.ndarray, before: np.ndarray, polarity: str):
+    """The outline of the sister of ``contour`` on this frame (see
+    DIVIDED_AREA; ``before``: the object's contour on the frame before), or None."""
+    radius, area = _radius(before), abs(signed_area(contour))
+    box = bounding_window(before, intensity.shape, 2.0 * radius)
+    corner = np.array([box[0].start, box[1].start])
+    shape = (box[0].stop - box[0].start, box[1].stop - box[1].start)
+    beside = cv2.dilate(_fill(contour, shape, corner).view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+    like = _object_like(intensity[box], 1.0 if polarity == "bright" else -1.0) & (owner[box] < 0)
+    labels, n = ndi.label(like)
+    apart = np.setdiff1d(np.arange(1, n + 1), labels[beside])  # (a body that meets the contour is its own)
+    if apart.size == 0:
+        return None
+    sizes = np.bincount(labels.ravel(), minlength=n + 1)[apart]
+    centroids = np.array(ndi.center_of_mass(like, labels, apart)) + corner
+    was = area_centroid(before)
+    together = (area * area_centroid(contour) + sizes[:, None] * centroids) / (area + sizes)[:, None]
+    off = np.hypot(*(together - was).T)
+    off[(sizes < SISTER_AREA * area) | (sizes > area / SISTER_AREA)] = np.inf
+    best = int(np.argmin(off))
+    if not off[best] <= min(SISTER_CENTRING * radius, np.hypot(*(area_centroid(contour) - was))):
+        return None
+    outlines = cv2.findContours((labels == apart[best]).view(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)[0]
+    return max(outlines, key=len)[:, 0, ::-1].astype(float) + corner
 
 
 def _object_like(window: np.ndarray, sign: float) -> np.ndarray:
@@ -1187,6 +1298,7 @@ class _Seen:
     # frame -> the two bodies of a contour pinched on its way to being lost there
     parted: dict = field(default_factory=dict)
     fades: set = field(default_factory=set)  # the frames where it was lost as faded (see faded)
+    divided: tuple | None = None  # (frame, its two bodies there) once it divided (see _divisions): its track ends
     drawing: _Drawing | None = None  # the drawing its last tracked frame was segmented in (see _carried)
 
     def copy(self) -> _Seen:
@@ -1386,7 +1498,7 @@ def _history(run: _Run, k: int, t: int, step: int):
     the direction of travel (after a gap, the last one only: where it went
     meanwhile is not known)."""
     last = _last_seen(run.status[k], t, step)
-    if last is None:
+    if last is None or run.seen[k].divided is not None:  # (a division ends a track: see _divisions)
         return None, []
     contours = run.contours[k]
     before = contours[last - step] if last == t - step and 0 <= last - step < len(contours) else None
