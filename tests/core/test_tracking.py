@@ -592,15 +592,20 @@ def test_daughters_that_first_show_apart_end_the_track_with_a_warning():
     mitosis, 'tracked' and with no word (21 of 25 divisions of a simulated
     Cell Tracking Challenge movie). A contour that shrank with an unclaimed
     sister beside it, the two centred where the mother was, divided."""
-    with pytest.warns(UserWarning, match=r"object 0: it divided on frame 5, two bodies standing apart at "
+    with pytest.warns(UserWarning, match=r"object 0 divided on frame 5: they stand apart at "
                                          r"\(40, 4[78]\) and \(40, 7[23]\); its track ends .*start=5"):
         tr = track(_daughters_apart_movie(), _circle((40, 60), 16))
     assert tr.status[0] == [TRACKED] * 5 + [LOST] * 5
     assert all(c is None for c in tr.contours[0][5:])
     # Tracked backward, the daughters come together: the same frame is named, as two that met.
-    with pytest.warns(UserWarning, match=r"object 0: tracked backward, it was two bodies there .* on frame 4"):
+    with pytest.warns(UserWarning, match=r"object 0, tracked backward, was two bodies on frame 4 \(two that came"):
         back = track(_daughters_apart_movie()[::-1], _circle((40, 60), 16), start=9)
     assert back.status[0] == [LOST] * 5 + [TRACKED] * 5
+    # From a frame before the division, the frames before it are tracked too (the division ends the
+    # track forward only).
+    with pytest.warns(UserWarning, match="object 0 divided on frame 5"):
+        middle = track(_daughters_apart_movie(), _circle((40, 60), 16), start=2)
+    assert middle.status[0] == [TRACKED] * 5 + [LOST] * 5
 
 
 def test_tracked_backward_two_cells_that_came_together_are_not_said_to_divide():

@@ -793,7 +793,7 @@ def _lost_together(run: _Run, t: int, step: int, missing) -> list[tuple[int, int
         return []
     followed = [k for k in range(len(run.inits)) if run.status[k][t - step] == TRACKED]
     lost = [k for k in followed if run.status[k][t] == LOST and t not in run.seen[k].fades
-            and (run.seen[k].divided is None or run.seen[k].divided[0] != t)]
+            and t not in run.seen[k].divided]
     if len(lost) < max(LOST_TOGETHER_LEAST, LOST_TOGETHER_SHARE * len(followed)):
         return []
     return [(t, len(lost), len(followed))]
@@ -982,12 +982,13 @@ def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
     for k in range(len(run.inits)):
         if run.status[k][t] != LOST:
             continue
-        if run.seen[k].divided is not None and run.seen[k].divided[0] == t:
-            where = " and ".join(f"({c[0]:.0f}, {c[1]:.0f})" for c in map(area_centroid, run.seen[k].divided[1]))
-            what = "it divided" if step > 0 else "tracked backward, it was two bodies there (two that came together)"
-            said.append(f"object {k}: {what} on frame {t}, two bodies standing apart at {where}; its track ends "
-                        f"there (lost from frame {t} on); to follow the two, draw each on frame {t} and track "
-                        f"from there (start={t})")
+        if t in run.seen[k].divided:
+            where = " and ".join(f"({c[0]:.0f}, {c[1]:.0f})" for c in map(area_centroid, run.seen[k].divided[t]))
+            what = " divided on frame {t}" if step > 0 else ", tracked backward, was two bodies on frame {t} (two " \
+                "that came together)"
+            said.append(f"object {k}{what.format(t=t)}: they stand apart at {where}; its track ends there (lost "
+                        f"from frame {t} on, in that direction); to follow the two, draw each on frame {t} and "
+                        f"track from there (start={t})")
             warnings.warn(said[-1], UserWarning, stacklevel=5)
             continue
         # Its contour on the frame done before (t is not the start frame),
@@ -1197,7 +1198,7 @@ def _divisions(run: _Run, shared, owner: np.ndarray, t: int, step: int) -> None:
             continue  # the side hides a part of an object it cuts (a nucleus leaving a drifting field: 0.49)
         sister = _sister(shared.intensity, owner, contour, before, run.seen[k].polarity)
         if sister is not None:
-            run.seen[k].divided = (t, (contour, sister))
+            run.seen[k].divided[t] = (contour, sister)
             _unpainted(run, owner, k)
             run.contours[k][t], run.status[k][t] = None, LOST
 
@@ -1298,11 +1299,12 @@ class _Seen:
     # frame -> the two bodies of a contour pinched on its way to being lost there
     parted: dict = field(default_factory=dict)
     fades: set = field(default_factory=set)  # the frames where it was lost as faded (see faded)
-    divided: tuple | None = None  # (frame, its two bodies there) once it divided (see _divisions): its track ends
+    divided: dict = field(default_factory=dict)  # frame -> its two bodies where it divided (see _divisions)
     drawing: _Drawing | None = None  # the drawing its last tracked frame was segmented in (see _carried)
 
     def copy(self) -> _Seen:
-        return replace(self, contrasts=dict(self.contrasts), parted=dict(self.parted), fades=set(self.fades))
+        return replace(self, contrasts=dict(self.contrasts), parted=dict(self.parted), fades=set(self.fades),
+                       divided=dict(self.divided))
 
     def faded(self, contrast: float, t: int) -> bool:
         """Whether ``contrast`` on frame ``t`` is below FADED_CONTRAST times
@@ -1498,7 +1500,8 @@ def _history(run: _Run, k: int, t: int, step: int):
     the direction of travel (after a gap, the last one only: where it went
     meanwhile is not known)."""
     last = _last_seen(run.status[k], t, step)
-    if last is None or run.seen[k].divided is not None:  # (a division ends a track: see _divisions)
+    # A division ends a track, from its frame on in the direction of travel (see _divisions).
+    if last is None or any((t - d) * step >= 0 and (d - run.start) * step > 0 for d in run.seen[k].divided):
         return None, []
     contours = run.contours[k]
     before = contours[last - step] if last == t - step and 0 <= last - step < len(contours) else None
