@@ -489,7 +489,7 @@ def _model_of(s: _DrawingReading, around: bool, obj: float, background: float, p
     # their neighbours: 3 of 51 tracks, 11 frames under two contours).
     seen_sides = image_sides if user_drawing else (True, True, True, True)
     enclosing = _enclosing_background(s.intensity, s.drawing, s.line, s.on_line, texture, s.floor, seen_sides,
-                                      traced=traced)
+                                      traced=traced, inside=not around)
     # (Told the object's polarity the other way, the spot drawn around is the object.)
     if enclosing is not None and polarity in (None, np.sign(s.on_line - enclosing)):
         around, obj, background = False, s.on_line, enclosing
@@ -818,7 +818,7 @@ def _enclosed(body: np.ndarray, extent: np.ndarray, image_sides) -> bool | None:
 
 
 def _enclosing_background(intensity, drawing, line, on_line, texture, floor, image_sides,
-                          traced=False) -> float | None:
+                          traced=False, inside=False) -> float | None:
     """The background's level if a drawing lies inside an object at its
     line's level whose texture the drawing's reading took for the other
     level; else None.
@@ -854,7 +854,7 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, ima
     might = least if traced else max(abs(texture - on_line), floor)
     if max(intensity.max() - on_line, on_line - intensity.min()) <= might:
         return None  # no level differs enough (most drawings: cheaper than reading the rings)
-    extent = _fill(_scaled(drawing, _FAR_RINGS[-1][1]), shape)
+    extent = _reach_in_view(drawing, shape) if inside else _fill(_scaled(drawing, _FAR_RINGS[-1][1]), shape)
     rings = intensity[extent & ~_fill(_scaled(drawing, _OUTER_RINGS[0][0]), shape)]
     far = _other_level(rings, on_line, floor)
     dome = abs(far - on_line) < least
@@ -881,6 +881,26 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, ima
     if piece is None or np.count_nonzero(_on_side(intensity, texture, on_line)[piece]) >= 0.5 * piece.sum():
         return None
     return far
+
+
+#: The far rings an enclosing background is looked for in reach out to
+#: _FAR_RINGS' outermost scale; in a view they cover wholly (a small image, a
+#: crop about one cell), out to the largest of these scales that ends within it.
+_LEAST_REACH = 8.0
+
+
+def _reach_in_view(drawing, shape) -> np.ndarray:
+    """The pixels within the drawing scaled by the far rings' outermost
+    scale, or, where that covers the whole view, by the largest ring scale of
+    at least _LEAST_REACH that does not (a click of 10 px in a 128-px crop
+    about a nucleus 56 px across concluded nothing, and ended on the
+    nucleus' slope); the outermost when none does."""
+    scales = [hi for _, hi in _FAR_RINGS if hi >= _LEAST_REACH][::-1]
+    for scale in scales:
+        extent = _fill(_scaled(drawing, scale), shape)
+        if _rim(extent).any():
+            return extent
+    return _fill(_scaled(drawing, scales[0]), shape)
 
 
 def _sharper_beyond(intensity, on_line, texture, body, line, extent) -> bool:
