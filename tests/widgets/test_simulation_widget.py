@@ -130,12 +130,15 @@ def test_matching_computed_when_absent_or_for_other_contours(viewer_widgets, wai
     assert "matching computed (order)" in widget._status.value
     assert notes["warning"] == []
 
-    # a matching of the other direction (b -> a) does not fit a -> b
-    mwidget._layer_a.value, mwidget._layer_b.value = mwidget._layer_b.value, mwidget._layer_a.value
+    # a matching of the other direction (b -> a): a and b follow it (session 68); set back, it does not fit a -> b
+    la, lb = widget._layer_a.value, widget._layer_b.value
+    mwidget._layer_a.value, mwidget._layer_b.value = lb, la
     mwidget._method.value = "local"
     mwidget.run()
     wait_done(mwidget)
     assert widget._matching.value is mwidget.output_layer
+    assert widget._layer_a.value is lb and widget._layer_b.value is la
+    widget._layer_a.value, widget._layer_b.value = la, lb
     widget.run()
     wait_done(widget)
     assert len(notes["warning"]) == 1 and "computed for other contours" in notes["warning"][0]
@@ -465,3 +468,31 @@ def test_a_simulation_beside_a_movie_plays_on_its_time_slider_at_its_step(viewer
     assert "Move the 't' slider" in notes["info"][-1]
     (layer,) = sim_layers(viewer)
     assert layer.scale[0] == 5
+
+
+def test_a_and_b_follow_the_matching_it_uses_and_shape_numbers_stay_in_range(dock, wait_done, notes):
+    """An outside tester (session 68): the simulation widget, opened after a
+    matching of the hands, said it used that matching while a and b stayed on
+    the coins listed first, and ran coin 0 into coin 1 with a new matching;
+    and in the matching widget 'shape of b' kept the 1 of a two-shape layer
+    after one-shape layers were chosen, so the first Run failed."""
+    viewer, matchw = dock(MatchingWidget)
+    triangles = [np.array([[10, 10], [10, 30], [30, 20]], float), np.array([[50, 50], [50, 70], [70, 60]], float)]
+    viewer.add_shapes(triangles, shape_type="polygon", name="two triangles")
+    viewer.open_sample("napari-physeg", "hand_poses")
+    two = viewer.layers["two triangles"]
+    matchw._layer_a.value = matchw._layer_b.value = two
+    assert matchw._index_b.value == 1
+    matchw._layer_a.value = viewer.layers["hand open outline"]
+    matchw._layer_b.value = viewer.layers["hand closed outline"]
+    assert matchw._index_a.value == 0 and matchw._index_b.value == 0  # back within their one shape
+    matchw.run()
+    wait_done(matchw)
+    simw = SimulationWidget(viewer)
+    viewer.window.add_dock_widget(simw, name="simulation")
+    assert simw._matching.value is matchw.output_layer
+    assert simw._layer_a.value is viewer.layers["hand open outline"] and simw._index_a.value == 0
+    assert simw._layer_b.value is viewer.layers["hand closed outline"] and simw._index_b.value == 0
+    simw.run()
+    wait_done(simw)
+    assert simw.last_outcome.ok and not simw.last_outcome.matching_computed and notes["warning"] == []

@@ -470,3 +470,67 @@ def test_nothing_drawn_is_said_so_not_sent_to_another_frame(dock, errors, kind):
     widget.run()
     expected = "is empty: draw a polygon" if kind == "empty shapes" else "has 2 point(s) on this slice"
     assert len(errors) == 1 and expected in errors[0], errors
+
+
+def test_objects_out_of_view_are_counted_and_a_division_says_what_to_press(dock, wait_done, errors, warned):
+    """An outside tester (session 68): the summary counted tracked and lost
+    object-frames only (37 of 42: the others had left the field of view, said
+    nowhere), and the division warning told the widget's user to pass
+    start=5, a Python argument."""
+    rr, cc = np.mgrid[:96, :120]
+    rng = np.random.default_rng(0)
+    frames = []
+    for t in range(10):
+        cells = np.hypot(rr - 30, cc - 60) < 12 if t < 5 else \
+            (np.hypot(rr - 30, cc - 48 + 2 * (t - 5)) < 8.5) | (np.hypot(rr - 30, cc - 72 - 2 * (t - 5)) < 8.5)
+        leaving = np.hypot(rr - 75, cc - 80 - 6 * t) < 10  # out by the right side
+        frames.append(np.where(cells | leaving, 0.8, 0.2) + rng.normal(0, 0.03, rr.shape))
+    viewer, widget = dock(TrackingWidget)
+    viewer.add_image(np.stack(frames), name="movie")
+    viewer.add_shapes([_circle_on_frame((30, 60), 16), _circle_on_frame((75, 80), 14)], shape_type="polygon",
+                      name="drawn")
+    widget.reset_choices()
+    viewer.dims.set_point(0, 0)
+    widget.run()
+    wait_done(widget)
+    status = widget.last_result.status
+    assert errors == [] and status[0] == ["tracked"] * 5 + ["lost"] * 5 and "left the field of view" in status[1]
+    left = status[1].count("left the field of view")
+    assert f"lost, {left} out of the field of view" in widget._status.value
+    divided = [m for m in warned if "divided on frame 5" in m]
+    assert len(divided) == 1 and "press Run standing on frame 5" in divided[0] and "start=" not in divided[0]
+
+
+def test_a_movie_with_z_is_refused_with_advice_that_keeps_its_time_axis(dock, errors):
+    """An outside tester (session 68): the advice was napari's Split Stack,
+    which splits a (T, Z, Y, X) movie along time, into z-stacks the widget
+    then tracked through z."""
+    viewer, widget = dock(TrackingWidget)
+    viewer.add_image(np.zeros((3, 4, 32, 32)), name="tzyx")
+    viewer.add_shapes([np.array([[0, 0, 5, 5], [0, 0, 5, 20], [0, 0, 20, 12]], float)], shape_type="polygon",
+                      name="drawn")
+    widget.reset_choices()
+    widget._image.value = viewer.layers["tzyx"]
+    assert widget.run() is None
+    assert len(errors) == 1 and "Split Stack" not in errors[0] and ".data[:, 0]" in errors[0]
+
+
+def test_closing_the_dock_during_a_run_cancels_it(make_napari_viewer, qtbot):
+    """An outside tester (session 68) saw the result layers of a run whose
+    dock had been closed appear seconds later, with nothing left to show or
+    cancel them. The dock's widget is deleted once Qt's event loop runs (the
+    tester's loop only processed events, which leaves deleted widgets
+    standing): the run is then cancelled and adds nothing."""
+    viewer = make_napari_viewer()
+    widget = TrackingWidget(viewer)
+    dock_widget = viewer.window.add_dock_widget(widget, name="tracking")
+    viewer.add_image(_disk_movie(n_frames=40), name="movie")
+    viewer.add_shapes([_circle_on_frame((40, 40), 20)], shape_type="polygon", name="drawn")
+    widget.reset_choices()
+    viewer.dims.set_point(0, 0)
+    n_layers = len(viewer.layers)
+    assert widget.run() is not None
+    viewer.window.remove_dock_widget(dock_widget)
+    qtbot.waitUntil(lambda: widget._cancel.is_set(), timeout=5000)
+    qtbot.wait(2000)
+    assert len(viewer.layers) == n_layers  # (nor is its preview left behind)

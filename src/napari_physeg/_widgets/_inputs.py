@@ -34,12 +34,14 @@ __all__ = [
     "PhysicsControls",
     "contour_layer_choices",
     "core_default",
+    "follow_matching",
     "image_layer_choices",
+    "index_in_range",
     "is_matching_layer",
     "matching_fits",
+    "node_count",
     "pick_default_b",
     "read_contour_pair",
-    "node_count",
 ]
 
 #: Key in a layer's metadata that marks a temporary preview layer.
@@ -226,6 +228,33 @@ def pick_default_b(layer_a, index_a, layer_b, index_b, candidates) -> None:
         layer_b.value = others[0]
     elif n_shapes >= 2 and index_a.value == index_b.value:
         index_b.value = 1 if index_a.value == 0 else 0
+
+
+def index_in_range(layer_choice, index) -> None:
+    """Bring ``index`` (a magicgui SpinBox of shape numbers) back within the
+    shapes of the layer ``layer_choice`` holds, once that layer is chosen: a
+    number left from another layer made the first Run fail (its maximum
+    stays open: the user may draw more shapes)."""
+    layer = layer_choice.value
+    if layer is None:
+        return
+    n_shapes = 1 if isinstance(layer, Points) else len(layer.data)
+    if index.value >= n_shapes:
+        index.value = max(n_shapes - 1, 0)
+
+
+def follow_matching(matching_layer, layer_a, index_a, layer_b, index_b, candidates) -> None:
+    """Set a's and b's layers and shapes to those ``matching_layer``'s
+    matching was computed for, where those layers are among ``candidates``
+    (the choices, ``(name, layer)``): the simulation runs on the contours of
+    the matching it says it uses."""
+    meta = getattr(matching_layer, "metadata", None) or {}
+    layers = {name: layer for name, layer in candidates}
+    for name, index, layer_choice, index_box in (("a_layer", "a_index", layer_a, index_a),
+                                                 ("b_layer", "b_index", layer_b, index_b)):
+        if meta.get(name) in layers and isinstance(meta.get(index), (int, np.integer)):
+            layer_choice.value = layers[meta[name]]
+            index_box.value = int(meta[index])
 
 
 class MatchingInputError(InputError):

@@ -21,6 +21,7 @@ import numpy as np
 from magicgui.widgets import Container, ProgressBar
 from napari.qt.threading import GeneratorWorker, thread_worker
 from napari.utils.notifications import show_error, show_warning
+from qtpy.QtCore import QEvent, QObject
 from threadpoolctl import threadpool_limits
 
 from ..core._drain import drain
@@ -208,6 +209,8 @@ class WorkerWidget(Container):
         if self._cancel_btn is not None:
             self._cancel_btn.changed.connect(self.cancel)
         self.native.destroyed.connect(self._on_destroyed)
+        self._dock_watcher = _DockWatcher(self._on_undocked)
+        self.native.installEventFilter(self._dock_watcher)
         events = self.viewer.layers.events
         for name in ("inserted", "removed", "reordered", "renamed"):
             emitter = getattr(events, name, None)
@@ -271,12 +274,20 @@ class WorkerWidget(Container):
 
     # ------------------------------------------------------------ worker signals (GUI thread)
     def _gui_alive(self) -> bool:
-        """False once Qt has deleted this widget (e.g. the viewer was closed during a run)."""
+        """False once Qt has deleted this widget (e.g. the viewer was closed
+        during a run), or its dock was closed (see _DockWatcher)."""
         try:
             self.native.isHidden()
         except RuntimeError:
             return False
-        return True
+        return not getattr(self, "_dock_watcher", None) or not self._dock_watcher.closed
+
+    def _on_undocked(self):
+        """The dock was closed: the run stops, and adds nothing (an outside
+        tester saw its layers appear seconds later, with nothing left to show
+        or cancel them)."""
+        if self.is_running:
+            self._on_destroyed()
 
     def _deliver(self, slot, *args):
         """Run the worker's signal handlers one at a time, in the order the
@@ -381,6 +392,26 @@ class WorkerWidget(Container):
                 self._cancel_btn.enabled = False
         except RuntimeError:  # the viewer or this widget was closed during the run
             pass
+
+
+class _DockWatcher(QObject):
+    """Watches a widget for being taken out of its dock: napari's
+    ``remove_dock_widget`` (the dock's close button) leaves the widget alive,
+    with no parent, so Qt's ``destroyed`` never comes. ``closed`` holds until
+    the widget is docked again."""
+
+    def __init__(self, on_closed):
+        super().__init__()
+        self._on_closed, self._docked, self.closed = on_closed, False, False
+
+    def eventFilter(self, watched, event):  # noqa: N802 - Qt's name
+        if event.type() == QEvent.Type.ParentChange:
+            if watched.parent() is not None:
+                self._docked, self.closed = True, False
+            elif self._docked:
+                self._docked, self.closed = False, True
+                self._on_closed()
+        return False
 
 
 def _in_worker(generator_function, note_clock):

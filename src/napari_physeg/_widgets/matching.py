@@ -26,6 +26,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass
+from functools import partial
 
 import napari
 import numpy as np
@@ -42,6 +43,7 @@ from ._inputs import (
     InputError,
     contour_layer_choices,
     core_default,
+    index_in_range,
     is_matching_layer,
     matching_fits,
     pick_default_b,
@@ -337,6 +339,8 @@ class MatchingWidget(WorkerWidget):
         self._lay_out([self._layer_a, self._index_a, self._layer_b, self._index_b, self._method, self._output,
                        self._legend], advanced=[self._in_place, self._n_modes], buttons=[self._export_btn])
         self._export_btn.changed.connect(self._ask_export)
+        for layer, index in ((self._layer_a, self._index_a), (self._layer_b, self._index_b)):
+            layer.changed.connect(partial(index_in_range, layer, index))
         self._set_item_tooltips()
         self._connect_signals()
         self._pick_defaults()

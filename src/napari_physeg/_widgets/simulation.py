@@ -28,6 +28,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass
+from functools import partial
 
 import napari
 import numpy as np
@@ -43,6 +44,8 @@ from ._inputs import (
     InputError,
     contour_layer_choices,
     core_default,
+    follow_matching,
+    index_in_range,
     is_matching_layer,
     matching_fits,
     pick_default_b,
@@ -390,6 +393,9 @@ class SimulationWidget(WorkerWidget):
                        self._matching_info, self._q, self._material, self._n_frames],
                       advanced=[self._max_steps, self._tracks], buttons=[self._export_btn])
         self._matching_info.native.setWordWrap(True)
+        for layer, index in ((self._layer_a, self._index_a), (self._layer_b, self._index_b)):
+            layer.changed.connect(partial(index_in_range, layer, index))
+        self._matching.changed.connect(self._follow_matching)
         for w in (self._matching, self._method):
             w.changed.connect(self._show_matching_info)
         self._export_btn.changed.connect(self._ask_export)
@@ -418,6 +424,13 @@ class SimulationWidget(WorkerWidget):
         else:
             method = getattr(chosen.metadata.get(MATCHING_KEY), "method", "?")
             self._matching_info.value = f"Run uses the matching in {chosen.name!r} (method {method!r})."
+
+    def _follow_matching(self, *_):
+        """a and b are the contours of the matching chosen (it said it ran on
+        them while a and b stayed on another layer's, an outside tester)."""
+        if self._matching.value not in (None, COMPUTE_MATCHING):
+            follow_matching(self._matching.value, self._layer_a, self._index_a, self._layer_b, self._index_b,
+                            self._shapes_choices())
 
     def _select_newest_matching(self):
         layers = [layer for layer in self.viewer.layers if is_matching_layer(layer)]

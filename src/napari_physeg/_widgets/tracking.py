@@ -20,6 +20,7 @@ position), the objects' side by side, with a Points layer numbering them.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import napari
@@ -29,7 +30,7 @@ from napari.layers import Points, Shapes
 from napari.utils.notifications import show_info, show_warning
 from skimage.util import montage
 
-from ..core import LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, segment, track
+from ..core import LEFT, LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, segment, track
 from ._inputs import (MAP_NUMBERS_KEY, PHYSICS_TIPS, PREVIEW_COLOR, PREVIEW_KEY, PhysicsControls, check_plane_view,
                       contour_layer_choices, core_default, image_layer_choices, nothing_drawn, off_image)
 from ._layers import PointsAsPolygon, image_transform_kwargs, shapes_to_image_coords, slice_index, slices_drawn_on
@@ -233,6 +234,11 @@ _TIPS = {
 }
 
 
+def _for_the_widget(message: str) -> str:
+    """A warning of ``track()`` as the widget's user acts on it: no Python argument."""
+    return re.sub(r"track from there \(start=(\d+)\)", r"press Run standing on frame \1", message)
+
+
 def _frames_named(row, status: str) -> str:
     """The frames of ``row`` (one object's statuses) that are ``status``, as
     runs: "frame 5", "frames 5-9, 20"."""
@@ -294,9 +300,13 @@ class TrackingWidget(WorkerWidget):
             raise ValueError("no contours: add a Shapes layer and draw a contour around each object on one frame")
         frames = image.data[0] if image.multiscale else image.data
         if len(frames.shape) != 3:
+            # (Not "Split Stack": it splits along the first axis, time, and a (T, Z, Y, X) movie became one
+            # z-stack per time point, which this widget then tracked through z.)
             raise ValueError(f"the movie {image.name!r} has shape {tuple(frames.shape)}: the Tracking widget needs "
-                             "(time, rows, cols): split a movie with z slices or channels into one image per "
-                             "z or channel first (right-click the layer > Split Stack, or Split RGB)")
+                             "(time, rows, cols): make an image of one z-plane or channel, or of a projection over "
+                             f"z, e.g. in napari's console: viewer.add_image(viewer.layers[{image.name!r}].data"
+                             "[:, 0]) or ...data.max(axis=1)" + (" (an RGB movie: right-click the layer > Split "
+                                                                 "RGB)" if image.rgb else ""))
         point = tuple(self.viewer.dims.point)
         check_plane_view(len(point), self.viewer.dims.ndisplay, tuple(self.viewer.dims.order),
                          "track from the current frame")
@@ -384,7 +394,7 @@ class TrackingWidget(WorkerWidget):
         self.last_result = result
         if not self._gui_alive():
             return
-        for message in _grouped(result.warnings):
+        for message in _grouped([_for_the_widget(m) for m in result.warnings]):
             show_warning(message)
         if not any(TRACKED in row for row in result.status):
             self._remove_preview()
@@ -399,12 +409,13 @@ class TrackingWidget(WorkerWidget):
             self._fail(f"Could not add the tracking layers: {type(err).__name__}: {err}")
             return
         self._export_btn.enabled = True
-        counts = {s: sum(row.count(s) for row in result.status) for s in (TRACKED, LOST)}
+        counts = {s: sum(row.count(s) for row in result.status) for s in (TRACKED, LOST, LEFT)}
         done = {"cancelled": "cancelled: the frames tracked so far were kept",
                 "frame error": "stopped at a frame that could not be used (see the warning): the frames tracked "
                                "so far were kept"}.get(result.stop_reason, "done")
+        left = f", {counts[LEFT]} out of the field of view" if counts[LEFT] else ""
         self._status.value = (f"{result.n_objects} object(s), {counts[TRACKED]} object-frames tracked, "
-                              f"{counts[LOST]} lost ({done}, {result.timings['total']:.1f} s)")
+                              f"{counts[LOST]} lost{left} ({done}, {result.timings['total']:.1f} s)")
         show_info(f"Tracking: {self._status.value}. The membrane maps (frame x arc, one tile per object) are "
                   "hidden image layers")
         lost = [f"{k} on {_frames_named(row, LOST)}" for k, row in enumerate(result.status)
