@@ -376,31 +376,42 @@ def test_the_summary_line_counts_lost_objects_and_the_exit_status_as_track_does(
     from napari_physeg.cli import _batch_report
 
     def table(*rows):
-        return pd.DataFrame([dict(input=f"m{k}.tif", object=0, status=s, error=e, lost=n)
+        return pd.DataFrame([dict(input=str(batch.Path(f"m{k}.tif").absolute()), object=0, status=s, error=e, lost=n)
                              for k, (s, e, n) in enumerate(rows)]).convert_dtypes()
 
-    assert _batch_report(table(("ok", "", 0), ("ok", "", 0)), batch.Path("o")) == 0
-    assert _batch_report(table(("ok", "", 2), ("ok", "", 0)), batch.Path("o")) == 1  # track: exit 1 when lost
+    def report(summary):
+        return _batch_report(summary, batch.Path("o"), [f"m{k}.tif" for k in range(len(summary))])
+
+    assert report(table(("ok", "", 0), ("ok", "", 0))) == 0
+    assert report(table(("ok", "", 2), ("ok", "", 0))) == 1  # track: exit 1 when lost
     assert "2 of 2 rows ok, 1 lost on some frames" in capsys.readouterr().out
-    assert _batch_report(table(("ok", "", 0), ("not found", "object 0 was found on none", 4),
-                               ("failed", "could not read", pd.NA)), batch.Path("o")) == 1
+    assert report(table(("ok", "", 0), ("not found", "object 0 was found on none", 4),
+                        ("failed", "could not read", pd.NA))) == 1
     out, err = capsys.readouterr()
     assert "1 of 3 rows ok, 1 failed, 1 object(s) never found" in out
-    assert "not found: m1.tif: object 0 was found on none" in err and "failed: m2.tif: could not read" in err
+    assert "m1.tif: object 0 was found on none" in err and "m2.tif: could not read" in err
+    # An earlier run's failure into the same folder, on another input (an outside tester, session 68: a run
+    # of good files exited 1 and printed that failure): kept in the summary, not this run's outcome.
+    earlier = table(("ok", "", 0), ("failed", "could not read", pd.NA))
+    assert _batch_report(earlier, batch.Path("o"), ["m0.tif"]) == 0
+    out, err = capsys.readouterr()
+    assert "1 of 1 rows ok; summary in" in out and "(with 1 row(s) of other inputs an earlier run did)" in out
+    assert err == ""
 
 
 def test_a_segmentation_batch_exits_1_when_a_contour_did_not_converge_as_segment_does(capsys):
     from napari_physeg.cli import _batch_report
 
     def table(*rows):
-        return pd.DataFrame([dict(input=f"m{k}.tif", frame=0, object=0, status=s, error="", converged=c)
-                             for k, (s, c) in enumerate(rows)])
+        return pd.DataFrame([dict(input=str(batch.Path(f"m{k}.tif").absolute()), frame=0, object=0, status=s,
+                                  error="", converged=c) for k, (s, c) in enumerate(rows)])
 
-    assert _batch_report(table(("ok", True), ("ok", True)), batch.Path("o")) == 0
-    assert _batch_report(table(("ok", True), ("ok", False)), batch.Path("o")) == 1
+    inputs = ["m0.tif", "m1.tif"]
+    assert _batch_report(table(("ok", True), ("ok", True)), batch.Path("o"), inputs) == 0
+    assert _batch_report(table(("ok", True), ("ok", False)), batch.Path("o"), inputs) == 1
     assert "2 of 2 rows ok, 1 did not converge" in capsys.readouterr().out
-    assert _batch_report(pd.DataFrame([dict(input="m.tif", status="failed", error="could not read")]),
-                         batch.Path("o")) == 1  # no row ran: no converged column
+    failed = pd.DataFrame([dict(input=str(batch.Path("m.tif").absolute()), status="failed", error="could not read")])
+    assert _batch_report(failed, batch.Path("o"), ["m.tif"]) == 1  # no row ran: no converged column
 
 
 # --------------------------------------------------------------------------
@@ -583,3 +594,49 @@ def test_any_frame_spec_is_read_or_refused_with_a_reason(spec, n_frames):
         check_frames(spec)
     except ValueError:
         pass
+
+
+def test_an_interrupted_batch_on_a_given_client_cancels_its_tasks(client, movies, monkeypatch):
+    """An outside tester (session 68): interrupted (Ctrl-C, a notebook's
+    Interrupt kernel), track_files(..., client=c) raised but its tasks went
+    on running on the user's cluster, writing results, for minutes. The
+    tasks not finished are cancelled; at most those already running end."""
+    import dask.distributed
+
+    def interrupted(futures, **kwargs):
+        raise KeyboardInterrupt
+        yield  # (a generator, as as_completed is)
+
+    monkeypatch.setattr(dask.distributed, "as_completed", interrupted)
+    paths, init, tmp = movies
+    many = []
+    for i in range(8):
+        many.append(tmp / f"copy{i}.tif")
+        many[-1].write_bytes(paths[0].read_bytes())
+    with pytest.raises(KeyboardInterrupt) as caught:  # (its traceback holds the futures, as a notebook's does)
+        batch.track_files(many, init, tmp / "out", client=client, progress=False)
+    deadline = time.time() + 20
+    while sum(len(tasks) for tasks in client.processing().values()) and time.time() < deadline:
+        time.sleep(0.2)
+    time.sleep(1.0)
+    assert sum(len(tasks) for tasks in client.processing().values()) == 0
+    assert len(list((tmp / "out" / "results").iterdir())) <= 2  # the two workers' tasks in flight, at most
+    assert caught.value is not None
+
+
+def test_sigterm_stops_a_batch_as_ctrl_c_does(movies, monkeypatch, capsys):
+    """An outside tester (session 68): SIGTERM, what SLURM sends at the
+    walltime, ended a batch with no word. It is taken as Ctrl-C: the command
+    says it was interrupted and how to resume, and gives the handler back."""
+    def terminated(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(10)  # (the signal interrupts this)
+
+    monkeypatch.setattr(batch, "track_files", terminated)
+    paths, init, tmp = movies
+    before = signal.getsignal(signal.SIGTERM)
+    started = time.time()
+    code = main(["batch", "track", *map(str, paths), "--init", str(init), "--out", str(tmp / "out"), "--quiet"])
+    assert code == 130 and time.time() - started < 5
+    assert "interrupted (run the same command again to resume)" in capsys.readouterr().err
+    assert signal.getsignal(signal.SIGTERM) is before

@@ -838,8 +838,12 @@ def _gather(c, futures: dict, bar) -> list[dict]:
             except Exception as err:  # noqa: BLE001 - e.g. KilledWorker: the task's workers kept dying
                 rows.extend(futures[future].failed(_one_line(err)))
             bar.update(1)
-    except KeyboardInterrupt:  # the cluster now closes with tasks running: dask's warnings about it are no news
-        logging.getLogger("distributed").setLevel(logging.ERROR)
+    except BaseException as err:
+        # Interrupted (Ctrl-C, a notebook's Interrupt kernel) or failed here: a cluster the caller gave runs on,
+        # so the tasks not finished are cancelled (they went on writing results after the call had raised).
+        c.cancel([future for future in futures if not future.done()])
+        if isinstance(err, KeyboardInterrupt):  # a local cluster now closes with tasks running: no news
+            logging.getLogger("distributed").setLevel(logging.ERROR)
         raise
     finally:
         bar.close()

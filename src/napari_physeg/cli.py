@@ -17,6 +17,7 @@ import argparse
 import contextlib
 import inspect
 import logging
+import signal
 import sys
 import warnings
 from pathlib import Path
@@ -570,14 +571,18 @@ def _batch(args) -> int:
         table = batch.track_files(args.inputs, shapes, args.out, start=_start_frame(args, leading),
                                   max_steps=args.steps_per_frame, match_options=_match_options(args),
                                   **common, **options)
-    return _batch_report(table, args.out)
+    return _batch_report(table, args.out, args.inputs)
 
 
-def _batch_report(table, out) -> int:
+def _batch_report(summary, out, inputs) -> int:
     """The summary line, a line per input that failed (or whose objects were never found), the exit status:
-    1 as for one file (a task failed; segment: a contour did not converge; track: an object was lost)."""
+    1 as for one file (a task failed; segment: a contour did not converge; track: an object was lost). Of
+    this run's ``inputs`` only: the summary also keeps the rows of other inputs an earlier run into ``out``
+    did (their failures made a run of good files exit 1, an outside tester)."""
     from . import batch
 
+    table = summary[summary["input"].isin({str(Path(p).absolute()) for p in inputs})]
+    earlier = len(summary) - len(table)
     counts = [f"{(table['status'] == batch.OK).sum()} of {len(table)} rows ok"]
     failed = (table["status"] == batch.FAILED).sum()
     if failed:
@@ -591,7 +596,8 @@ def _batch_report(table, out) -> int:
         done = table[table["status"] == batch.OK]
         partly = int((~done["converged"].astype(bool)).sum()) if "converged" in done else 0
         counts += [f"{partly} did not converge"] * bool(partly)
-    print(f"{', '.join(counts)}; summary in {out / 'summary.csv'}")
+    kept = f" (with {earlier} row(s) of other inputs an earlier run did)" if earlier else ""
+    print(f"{', '.join(counts)}; summary in {out / 'summary.csv'}{kept}")
     bad = table[table["status"] != batch.OK]
     for _, row in bad.drop_duplicates(["input", "status"]).iterrows():
         named = str(row["input"]) in str(row["error"])  # e.g. "could not read FILE: ..."
@@ -765,7 +771,7 @@ def main(argv=None) -> int:
     try:
         # The core's dense problems are small: more BLAS threads only fight each
         # other (a 128 x 128 eigenproblem took 0.5 s instead of 2 ms on a busy machine).
-        with threadpool_limits(limits=1, user_api="blas"), warnings.catch_warnings():
+        with threadpool_limits(limits=1, user_api="blas"), warnings.catch_warnings(), _terminate_as_interrupt():
             warnings.showwarning = _show_warning
             return args.run(args)
     except (ValueError, OSError) as err:  # bad input, or a file that cannot be read or written
@@ -778,6 +784,26 @@ def main(argv=None) -> int:
         resume = " (run the same command again to resume)" if args.command == "batch" else ""
         print(f"\n{PROG}: interrupted{resume}", file=sys.stderr)
         return 130
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt():
+    """SIGTERM (what SLURM sends at the walltime, and ``kill``'s default) handled as Ctrl-C: a batch's
+    tasks are cancelled and the command says it was interrupted and how to resume (it ended with no
+    word, an outside tester). Only in the main thread, where Python takes signals."""
+    try:
+        previous = signal.signal(signal.SIGTERM, _interrupt)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
 
 
 if __name__ == "__main__":

@@ -802,6 +802,13 @@ def test_most_objects_lost_on_one_frame_are_named_in_a_warning():
     alone = track(_disk_movie([start, start, [jumped[0], *start[1:]]], radius=6), [_circle(c, 9) for c in start])
     assert [row[2] for row in alone.status] == [LOST] + [TRACKED] * 3
     assert not any("at once" in message for message in alone.warnings)
+    # A frame of zeros (a chunk missing from a zarr store) is said to be blank, not blamed on motion.
+    frames = _disk_movie([start, start, start, start], radius=6)
+    frames[2] = 0.0
+    with pytest.warns(UserWarning, match=r"frame\(s\) 2 hold one value throughout \(a dropped frame, or a chunk"):
+        tr = track(frames, [_circle(c, 9) for c in start])
+    assert [row[2:] for row in tr.status] == [[LOST, TRACKED]] * 4
+    assert not any("at once" in message for message in tr.warnings)
 
 
 def test_a_frame_without_data_is_a_gap_the_objects_are_followed_across():

@@ -752,7 +752,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
             said += _warn_not_found(run, image) if t == start else _warn_divided(run, t, step)
             if t != start:
                 dimmed += _faded_as_the_frame_dimmed(run, t, brightness)
-                together += _lost_together(run, t, step, shared.missing)
+                together += _lost_together(run, t, step, image, shared.missing)
         if stop_reason == "cancelled":
             break
     said += _warn_dimmed(dimmed) + _warn_lost_together(together)
@@ -785,9 +785,10 @@ LOST_TOGETHER_SHARE = 1 / 3
 LOST_TOGETHER_LEAST = 3
 
 
-def _lost_together(run: _Run, t: int, step: int, missing) -> list[tuple[int, int, int]]:
-    """``[(t, lost, followed)]`` if frame ``t`` lost many of the objects
-    followed on the frame before (see LOST_TOGETHER_SHARE), else ``[]``. A
+def _lost_together(run: _Run, t: int, step: int, image: np.ndarray, missing) -> list[tuple[int, int, int, bool]]:
+    """``[(t, lost, followed, blank)]`` if frame ``t`` (``image``, its NaN
+    pixels filled) lost many of the objects followed on the frame before (see
+    LOST_TOGETHER_SHARE), else ``[]``; ``blank``: the frame holds one value. A
     frame without data is warned of on its own."""
     if missing is not None and missing.all():
         return []
@@ -796,20 +797,30 @@ def _lost_together(run: _Run, t: int, step: int, missing) -> list[tuple[int, int
             and t not in run.seen[k].divided]
     if len(lost) < max(LOST_TOGETHER_LEAST, LOST_TOGETHER_SHARE * len(followed)):
         return []
-    return [(t, len(lost), len(followed))]
+    return [(t, len(lost), len(followed), bool(np.ptp(image) == 0))]
 
 
 def _warn_lost_together(frames: list) -> list[str]:
-    """One warning naming the frames where many objects were lost at once (see _lost_together)."""
-    if not frames:
-        return []
-    shown = ", ".join(f"{t} ({lost} of {followed})" for t, lost, followed in sorted(frames)[:5])
-    said = (f"many of the objects followed were lost at once on frame(s) {shown}{' ...' if len(frames) > 5 else ''}: "
-            "they moved further between frames than about their own size, or those frames changed (focus, a jump "
-            "of the stage, a flash). Look at those frames; a movie whose objects move that far between frames "
-            "needs detection and linking (e.g. laptrack) rather than contours carried from frame to frame")
-    warnings.warn(said, UserWarning, stacklevel=5)  # track()'s caller (through iter_track, drain and track)
-    return [said]
+    """The warnings naming the frames where many objects were lost at once
+    (see _lost_together): blank ones, then the others."""
+    said = []
+    blank = sorted(t for t, _, _, flat in frames if flat)
+    if blank:
+        # (Not "they moved further": a tester's missing zarr chunk, read as zeros, was blamed on motion.)
+        said.append(f"frame(s) {', '.join(map(str, blank[:5]))}{' ...' if len(blank) > 5 else ''} hold one value "
+                    "throughout (a dropped frame, or a chunk missing from a zarr store, which reads as zeros): the "
+                    "objects followed were lost there, and looked for again on the next frames")
+    others = sorted((t, lost, followed) for t, lost, followed, flat in frames if not flat)
+    if others:
+        shown = ", ".join(f"{t} ({lost} of {followed})" for t, lost, followed in others[:5])
+        said.append(f"many of the objects followed were lost at once on frame(s) {shown}"
+                    f"{' ...' if len(others) > 5 else ''}: they moved further between frames than about their own "
+                    "size, or those frames changed (focus, a jump of the stage, a flash). Look at those frames; a "
+                    "movie whose objects move that far between frames needs detection and linking (e.g. laptrack) "
+                    "rather than contours carried from frame to frame")
+    for message in said:
+        warnings.warn(message, UserWarning, stacklevel=5)  # track()'s caller (through iter_track, drain and track)
+    return said
 
 
 def _checked_start(start, n_frames: int) -> int:
