@@ -223,7 +223,7 @@ def pick_default_b(layer_a, index_a, layer_b, index_b, candidates) -> None:
     if a is None or b is not a:
         return
     others = [layer for _, layer in candidates if layer is not a]
-    n_shapes = 1 if isinstance(a, Points) else len(a.data)  # a Points layer is one polygon
+    n_shapes = _shape_count(a)
     if n_shapes < 2 and others:
         layer_b.value = others[0]
     elif n_shapes >= 2 and index_a.value == index_b.value:
@@ -238,9 +238,14 @@ def index_in_range(layer_choice, index) -> None:
     layer = layer_choice.value
     if layer is None:
         return
-    n_shapes = 1 if isinstance(layer, Points) else len(layer.data)
+    n_shapes = _shape_count(layer)
     if index.value >= n_shapes:
         index.value = max(n_shapes - 1, 0)
+
+
+def _shape_count(layer) -> int:
+    """How many contours a Shapes or Points layer offers (a Points layer is one polygon)."""
+    return 1 if isinstance(layer, Points) else len(layer.data)
 
 
 def follow_matching(matching_layer, layer_a, index_a, layer_b, index_b, candidates) -> None:

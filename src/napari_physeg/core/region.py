@@ -895,12 +895,13 @@ def _reach_in_view(drawing, shape) -> np.ndarray:
     at least _LEAST_REACH that does not (a click of 10 px in a 128-px crop
     about a nucleus 56 px across concluded nothing, and ended on the
     nucleus' slope); the outermost when none does."""
-    scales = [hi for _, hi in _FAR_RINGS if hi >= _LEAST_REACH][::-1]
-    for scale in scales:
+    outermost = None
+    for scale in [hi for _, hi in _FAR_RINGS if hi >= _LEAST_REACH][::-1]:
         extent = _fill(_scaled(drawing, scale), shape)
         if _rim(extent).any():
             return extent
-    return _fill(_scaled(drawing, scales[0]), shape)
+        outermost = extent if outermost is None else outermost
+    return outermost
 
 
 def _sharper_beyond(intensity, on_line, texture, body, line, extent) -> bool:
@@ -926,7 +927,7 @@ def _sharper_beyond(intensity, on_line, texture, body, line, extent) -> bool:
     inner = extent[box] & ~_view_edge(extent[box].shape)
 
     def rim_steepness(piece):
-        rim = piece & ~cv2.erode(piece.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool) & inner
+        rim = _rim(piece) & inner
         return _median(steepness[rim]) if rim.any() else np.nan
 
     return bool(rim_steepness(body[box]) >= _SHARPER_EDGE * rim_steepness(near[box]))

@@ -1236,7 +1236,13 @@ def _sister(intensity: np.ndarray, owner: np.ndarray, contour: np.ndarray, befor
     best = int(np.argmin(off))
     if not off[best] <= min(SISTER_CENTRING * radius, np.hypot(*(area_centroid(contour) - was))):
         return None
-    outlines = cv2.findContours((labels == apart[best]).view(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)[0]
+    return _outline_of(labels == apart[best], corner)
+
+
+def _outline_of(blob: np.ndarray, corner) -> np.ndarray:
+    """The outer outline (row, col) of the boolean ``blob``, a window whose
+    first pixel is pixel ``corner`` of the frame: its longest, if it is in pieces."""
+    outlines = cv2.findContours(blob.view(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)[0]
     return max(outlines, key=len)[:, 0, ::-1].astype(float) + corner
 
 
@@ -1289,8 +1295,7 @@ def _unclaimed_blob(intensity: np.ndarray, owner: np.ndarray, last: np.ndarray, 
     best = int(np.argmin(cost))
     if not np.isfinite(cost[best]):
         return None
-    outlines = cv2.findContours((labels == best + 1).view(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)[0]
-    outline = max(outlines, key=len)[:, 0, ::-1].astype(float) + [box[0].start, box[1].start]
+    outline = _outline_of(labels == best + 1, [box[0].start, box[1].start])
     try:
         return float(cost[best]), as_contour(outline)
     except ValueError:  # a blob too thin to outline
