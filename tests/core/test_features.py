@@ -240,6 +240,20 @@ def test_a_given_noise_level_sets_the_floor():
     assert not shen_castan_edges(image, noise=100.0).any()
 
 
+@pytest.mark.parametrize("step", [1, 16])
+def test_rounding_to_levels_is_noise_of_a_step_over_root_12(step):
+    """An image rounded to levels ``step`` apart carries a rounding noise of
+    step / sqrt(12) (as a uniform error over one step); one whose levels run
+    on carries none."""
+    from napari_physeg.core.features import _rounding_sigma
+
+    rng = np.random.default_rng(0)
+    smooth = rng.normal(100.0, 3.0, (300, 300))
+    assert _rounding_sigma(step * np.round(smooth / step)) == pytest.approx(step / np.sqrt(12))
+    assert _rounding_sigma(smooth) < 1e-3
+    assert _rounding_sigma(np.full((20, 20), 7.0)) == 0.0
+
+
 @pytest.mark.parametrize("value", [0.0, 3.3, -7, 1e9])
 def test_constant_image_has_no_edges(value):
     edges, strength = shen_castan_edges(np.full((40, 50), value), return_strength=True)

@@ -9,6 +9,7 @@ from skimage.draw import polygon2mask
 from napari_physeg import data
 from napari_physeg.core._drain import drain
 from napari_physeg.core import DivergenceError, iter_segment, segment
+from napari_physeg.core._validation import CLICK_RADIUS
 from napari_physeg.core.contour import segment_lengths, signed_area
 
 
@@ -143,7 +144,6 @@ GOOD_INIT = data.ellipse((64, 64)).init_near
     [
         (GOOD_IMAGE, np.empty((0, 2)), "empty"),
         (GOOD_IMAGE, [[10, 10], [20, 20]], "at least 3"),
-        (GOOD_IMAGE, [[10, 10], [10, 10], [10, 10]], "at least 3"),
         (GOOD_IMAGE, [[10, 10], [20, 20], [30, 30]], "degenerate"),
         (GOOD_IMAGE, GOOD_INIT + 500, "wholly outside"),
         (GOOD_IMAGE, GOOD_INIT[:, :1], r"\(N, 2\)"),
@@ -161,6 +161,48 @@ GOOD_INIT = data.ellipse((64, 64)).init_near
 def test_bad_input_gets_a_clear_error(image, init, message):
     with pytest.raises(ValueError, match=message):
         segment(image, init)
+
+
+@pytest.mark.parametrize("copies", [1, 3])
+def test_one_point_is_a_click(copies):
+    """A Points layer's one point (or its copies) is a click: a circle of a
+    few pixels about it, as the user guide asks for, not a refusal."""
+    shape = data.ellipse((96, 96))
+    centre = np.argwhere(shape.mask).mean(0)
+    res = segment(shape.image, [centre] * copies)
+    angles = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    click = segment(shape.image, centre + CLICK_RADIUS * np.column_stack([np.sin(angles), np.cos(angles)]))
+    assert res.converged and np.array_equal(res.contour, click.contour)
+    assert iou(res.contour, shape.mask) > 0.9
+
+
+@pytest.mark.parametrize("width, flat", [(0.2, True), (0.8, True), (1.5, False), (4.0, False)])
+def test_a_contour_folded_onto_itself_is_flat(width, flat):
+    """A contour thinner than a pixel on average encloses no object (around
+    faint rings in noise, 3-4 nodes about 2 px said converged); a filament
+    1.5 px wide is still one, and so is a sliver of an object at the image's side."""
+    from napari_physeg.core.segmentation import _folded
+
+    length = 40.0
+    rod = np.array([[0, 0], [0, length], [width, length], [width, 0]], float)
+    assert _folded(rod + 10, (64, 64)) is flat
+    assert not _folded(rod, (64, 64))
+
+
+def test_a_circle_on_the_flat_ground_of_an_8_bit_image_is_not_converged():
+    """An 8-bit image whose ground rounds to one level with a few specks one
+    level below: a circle drawn on it, nothing in it, shrank onto 53 px of
+    specks and said converged. A level less than one step of the image's is
+    no contrast (see features._rounding_sigma)."""
+    rng = np.random.default_rng(17)
+    rows, cols = np.mgrid[:200, :260]
+    image = 18.8 + rng.normal(0, 0.2, rows.shape)
+    for r, c in [(50, 60), (60, 190), (150, 100)]:  # nuclei, far from the drawing
+        image += 30 * ndi.gaussian_filter((((rows - r) ** 2 + (cols - c) ** 2) < 15 ** 2).astype(float), 1.5)
+    image = np.round(image).astype(np.uint8)
+    angles = np.linspace(0, 2 * np.pi, 30, endpoint=False)
+    res = segment(image, np.column_stack([150 + 19 * np.sin(angles), 210 + 19 * np.cos(angles)]))
+    assert not res.converged
 
 
 @pytest.mark.parametrize("bright", [True, False])

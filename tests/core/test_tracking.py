@@ -33,6 +33,16 @@ def test_the_deforming_cell_is_followed_through_every_frame(movie, tracked):
         assert iou(contour, movie.masks[t]) > 0.98
 
 
+@pytest.mark.parametrize("as_list", [False, True])
+def test_a_click_on_the_start_frame_is_followed(movie, as_list):
+    """One point, alone or in the list of inits, is a click (see
+    segment): the cell is followed from it."""
+    click = np.argwhere(movie.masks[0]).mean(0)[None]
+    res = track(movie.frames[:4], [click] if as_list else click)
+    assert res.status == [[TRACKED] * 4]
+    assert all(iou(c, m) > 0.95 for c, m in zip(res.contours[0], movie.masks))
+
+
 def test_normal_velocity_matches_the_known_membrane_motion(movie, tracked):
     errors = []
     for t in range(1, 12):

@@ -6,6 +6,7 @@ import time
 
 import numpy as np
 import pytest
+from scipy import ndimage as ndi
 from skimage.draw import polygon2mask
 
 napari = pytest.importorskip("napari")
@@ -13,6 +14,7 @@ napari = pytest.importorskip("napari")
 from napari.layers import Labels, Shapes  # noqa: E402
 
 from napari_physeg import data  # noqa: E402
+from napari_physeg.core._validation import clicked  # noqa: E402
 from napari_physeg._widgets import _worker  # noqa: E402
 from napari_physeg._widgets import segmentation as seg  # noqa: E402
 from napari_physeg._widgets.segmentation import (  # noqa: E402
@@ -24,7 +26,7 @@ from napari_physeg._widgets.segmentation import (  # noqa: E402
     segment_contours,
     segment_kwargs,
 )
-from napari_physeg.core import DivergenceError, Material  # noqa: E402
+from napari_physeg.core import DivergenceError, Material, segment  # noqa: E402
 
 pytestmark = [
     pytest.mark.gui,
@@ -807,6 +809,22 @@ def test_a_points_layer_is_a_contour(viewer_widget, wait_done, errors, hand):
     assert errors == [] and widget.last_outcome.ok
     (out,) = output_layers(viewer)
     assert iou(out.data[0], hand.mask) >= 0.9
+
+
+def test_a_points_layer_of_one_point_is_a_click(viewer_widget, wait_done, errors, hand):
+    """One point clicked inside the object is a click: a circle of a few pixels about it."""
+    viewer, widget = viewer_widget
+    viewer.add_image(hand.image, name="hand")
+    palm = np.argwhere(ndi.binary_erosion(hand.mask, iterations=15)).mean(0)
+    viewer.add_points([palm], name="one click")
+    widget.reset_choices()
+    widget._shapes.value = viewer.layers["one click"]
+    widget.run()
+    wait_done(widget)
+    assert errors == [] and widget.last_outcome.ok
+    (out,) = output_layers(viewer)
+    expected = segment(hand.image, clicked(palm[None]))
+    assert iou(out.data[0], polygon2mask(hand.mask.shape, expected.contour)) >= 0.99
 
 
 def test_a_points_layer_with_too_few_points_says_so(viewer_widget, errors, hand):

@@ -193,6 +193,17 @@ def test_points_clicked_around_a_cell_are_a_contour(movie_in_viewer, wait_done):
     assert widget.last_result.status == [["tracked"] * 8]
 
 
+def test_one_point_clicked_inside_a_cell_is_a_click(movie_in_viewer, wait_done):
+    viewer, widget = movie_in_viewer
+    drawn = np.asarray(viewer.layers["contour on frame 0"].data[0])
+    viewer.add_points([drawn.mean(0)], name="one click")
+    widget.reset_choices()
+    widget._shapes.value = viewer.layers["one click"]
+    widget.run()
+    wait_done(widget)
+    assert widget.last_result.status == [["tracked"] * 8]
+
+
 def test_the_preview_does_not_take_the_users_selection(movie_in_viewer, qtbot, wait_done):
     """The live preview layer goes in without changing which layer the user
     has selected (napari selects every layer it adds: the layer controls

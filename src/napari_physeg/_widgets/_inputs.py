@@ -100,7 +100,7 @@ def nothing_drawn(layer, what: str) -> str | None:
     draw to ``what``; None when it holds one."""
     if isinstance(layer, PointsAsPolygon) and not layer.data:
         return (f"the Points layer {layer.name!r} has {layer.n_points} point(s) on this slice: a contour needs at "
-                "least 3; click them around (or inside) the object, in order")
+                "least 3; click them around (or inside) the object, in order, or click once inside it")
     if len(layer.data) == 0:
         return (f"the Shapes layer {layer.name!r} is empty: draw a polygon, lasso, ellipse or rectangle around (or "
                 f"inside) the object to {what}, then press Run again")

@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core._validation import clicked
+
 __all__ = [
     "created_layer",
     "CLOSED_SHAPE_TYPES",
@@ -258,9 +260,11 @@ class PointsAsPolygon:
     """The points of a Points layer on the current slice, seen as one polygon
     (in the order they were added) by :func:`shapes_to_image_coords`: the
     parts of a Shapes layer it reads (``name``, ``ndim``, ``data``,
-    ``shape_type`` and the layer's transforms)."""
+    ``shape_type`` and the layer's transforms). With ``click``, one point
+    is a click: the core's circle of a few pixels about it (see
+    :func:`~napari_physeg.core._validation.clicked`)."""
 
-    def __init__(self, layer, world_point=None):
+    def __init__(self, layer, world_point=None, click: bool = False):
         self.name, self.ndim = layer.name, int(layer.ndim)
         self.data_to_world, self.world_to_data = layer.data_to_world, layer.world_to_data
         points = np.asarray(layer.data, dtype=np.float64).reshape(-1, self.ndim)
@@ -272,6 +276,8 @@ class PointsAsPolygon:
             here = np.asarray(layer.world_to_data(point), dtype=float)[: self.ndim - 2]
             points = points[np.all(np.abs(points[:, : self.ndim - 2] - here) < 0.5, axis=1)]
         self.n_points = len(points)
+        if click and len(points) == 1:
+            points = np.hstack([np.repeat(points[:, :-2], 12, axis=0), clicked(points[:, -2:])])
         self.data = [points] if len(points) >= 3 else []
         self.shape_type = ["polygon"] * len(self.data)
 

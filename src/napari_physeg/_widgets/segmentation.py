@@ -334,7 +334,7 @@ def _checked_layers(image_layer, shapes_layer, world_point):
                          "a polygon, ellipse or rectangle around (or inside) the object and select it in "
                          "'initial contours'")
     if isinstance(shapes_layer, Points):
-        shapes_layer = PointsAsPolygon(shapes_layer, world_point)
+        shapes_layer = PointsAsPolygon(shapes_layer, world_point, click=True)
     if (why := nothing_drawn(shapes_layer, "segment")) is not None:
         raise InputError(why)
     return shapes_layer

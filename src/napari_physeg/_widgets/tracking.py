@@ -311,7 +311,7 @@ class TrackingWidget(WorkerWidget):
         check_plane_view(len(point), self.viewer.dims.ndisplay, tuple(self.viewer.dims.order),
                          "track from the current frame")
         if isinstance(shapes, Points):  # its points on this frame, in the order clicked: one contour
-            shapes = PointsAsPolygon(shapes, point)
+            shapes = PointsAsPolygon(shapes, point, click=True)
         if (why := nothing_drawn(shapes, "track")) is not None:  # (not "go to the frame ...": nothing is drawn)
             raise ValueError(why)
         sliced = shapes_to_image_coords(shapes, image, world_point=point)

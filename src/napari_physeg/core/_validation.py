@@ -118,13 +118,35 @@ def check_contour(points, name: str = "contour", *, min_nodes: int = 3) -> np.nd
 IN_ORDER_SHARE = 0.05
 
 
+#: A drawing of one point (a click: a Points layer's one point, or its
+#: copies) is a circle of this radius about it, the click-sized circle of a
+#: few pixels the user guide asks for (refused as too few nodes, it said
+#: nothing of what to do instead).
+CLICK_RADIUS = 3.0
+
+
+def clicked(points):
+    """A circle of CLICK_RADIUS px about the one point of ``points``, if
+    they are one point given once or more; else ``points`` as given."""
+    try:
+        arr = np.asarray(points)
+    except (TypeError, ValueError):  # (ragged: check_contour says what is wrong)
+        return points
+    if arr.dtype.kind not in "iuf" or arr.ndim != 2 or arr.shape[1] != 2 or not len(arr) or \
+            not np.all(np.isfinite(arr)) or np.ptp(arr, axis=0).any():
+        return points
+    angles = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
+    return arr[0].astype(float) + CLICK_RADIUS * np.column_stack([np.sin(angles), np.cos(angles)])
+
+
 def check_drawing(points, name: str = "init") -> np.ndarray:
     """:func:`check_contour` for a drawing that stands for an object's
     outline (segment's and track's): also a ValueError when its nodes do not
-    follow one outline in order (see IN_ORDER_SHARE)."""
+    follow one outline in order (see IN_ORDER_SHARE). One point is a click
+    (see :func:`clicked`)."""
     from .contour import signed_area  # (contour imports this module)
 
-    arr = check_contour(points, name)
+    arr = check_contour(clicked(points), name)
     area = abs(signed_area(arr))
     if area >= IN_ORDER_SHARE * float(np.prod(np.ptp(arr, axis=0))):  # most: the hull is no larger than the box
         return arr

@@ -28,6 +28,7 @@ from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
 from .features import (_as_image, _check_2d, _intensity_range, _masked_as_missing, _noise_sigma, _normalize,
+                       _rounding_sigma,
                        _without_missing, _without_spikes, chamfer_distance, normalized_intensity, shen_castan_edges)
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .magnify import MagnifiedView, magnification
@@ -100,7 +101,8 @@ class SegmentationResult:
         the object runs on beyond the drawing, which is its limit; the
         contour is the part drawn around), ``"stalled"`` (at rest
         elsewhere: nothing in reach pulls it; or on the image's frame, along
-        all four sides with 90 % of its nodes), ``"leaked"`` (along all four sides of the
+        all four sides with 90 % of its nodes; or folded onto itself, less
+        than a pixel wide on average, away from the image's sides), ``"leaked"`` (along all four sides of the
         image, which the drawing did not reach; over more than half of the
         image along two of its sides, from a drawing that held less than a
         twentieth of that; or,
@@ -859,7 +861,8 @@ class _FeatureWindow:
             self.noise = _noise_sigma(normalised) if self.image_noise is None else \
                 self.image_noise / max(self.levels[1] - self.levels[0], 1e-300)
             intensity = _lightly_smoothed(normalised)
-            noise = _SMOOTHED_NOISE_GAIN * self.noise
+            rounding = _rounding_sigma(self.image[context]) / max(self.levels[1] - self.levels[0], 1e-300)
+            noise = max(_SMOOTHED_NOISE_GAIN * self.noise, rounding)
             # The first feature window is often the context (the whole image).
             self._context = context, normalised, intensity
         if np.ptp(intensity) <= 1e-12:
@@ -1624,9 +1627,25 @@ def _final_nodes(body: _ElasticBody, setup: _Setup, stop_reason: str, settled, s
             _spread_beyond_the_object(nodes, setup.init, setup.drawing, features, features.fields[0], setup.shape)
             or _around_others(nodes, features.avoid)):
         stop_reason = "leaked"
-    elif stop_reason in ("converged", "limited") and _on_the_image_frame(nodes, setup.shape):
+    elif stop_reason in ("converged", "limited") and (_on_the_image_frame(nodes, setup.shape) or
+                                                       _folded(nodes, setup.shape)):
         stop_reason = "stalled"
     return nodes, stop_reason
+
+
+#: A contour whose mean width (twice its area over its length) is less than
+#: this many px encloses no object: it folded onto itself. Around the faint
+#: rings of a nuclear envelope in noise, contours came to rest as 3 or 4
+#: nodes about 2 px, said converged (an outside tester, session 69); the
+#: thinnest objects of the benchmarks, rods 4-6 px wide, are several. But
+#: the image's side may show a sliver of an object it cuts (2 px of a disk
+#: coming into view is followed in).
+LEAST_WIDTH = 1.0
+
+
+def _folded(contour: np.ndarray, shape) -> bool:
+    """Whether ``contour``, away from the image's sides, is thinner than LEAST_WIDTH on average."""
+    return 2.0 * abs(signed_area(contour)) < LEAST_WIDTH * perimeter(contour) and _sides_met(contour, shape) == 0
 
 
 def _checked_avoid(avoid, shape) -> np.ndarray | None:
@@ -1896,7 +1915,9 @@ def segment(
         the image, with a warning.
     init : (N, 2) array_like
         Initial contour, ``(row, col)`` nodes, closed without a repeated node,
-        ``N >= 3``. Nodes outside the image are clipped to it (with a warning).
+        ``N >= 3``; or one point (a click), taken as a circle of
+        ``CLICK_RADIUS`` (3) px about it. Nodes outside the image are clipped
+        to it (with a warning).
     material : str or Material, optional
         Virtual material: a preset of :data:`MATERIALS` (``"rubber"``,
         ``"copper"``, ...) or a :class:`Material`.

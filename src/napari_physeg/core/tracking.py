@@ -45,7 +45,7 @@ from skimage.filters import threshold_otsu
 from skimage.segmentation import watershed
 
 from ._drain import drain
-from ._validation import check_callback, check_count, check_drawing, signature_of
+from ._validation import check_callback, check_count, check_drawing, clicked, signature_of
 from .contour import (area_centroid, as_contour, bounding_window, closest_on_polyline, depth_inside, nearest_node,
                       outward_normals, perimeter, positively_oriented, remove_loops, resample, rotation_matrix,
                       signed_area, through_nodes, window_mask)
@@ -381,7 +381,7 @@ def _check_inits(inits, frame_shape):
         inits = [inits]
     # As segment() checks its drawing (its error, before any frame is read,
     # rather than the object reported lost on the start frame).
-    out = [check_drawing(as_contour(c, name=f"inits[{k}]"), f"inits[{k}]") for k, c in enumerate(inits)]
+    out = [check_drawing(as_contour(clicked(c), name=f"inits[{k}]"), f"inits[{k}]") for k, c in enumerate(inits)]
     if not out:
         raise ValueError("inits is empty: give one (N, 2) contour per object to track")
     for k, c in enumerate(out):
@@ -2144,7 +2144,7 @@ def track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_option
         at a time. NaN pixels hold no data (see :func:`segment`).
     inits : (N, 2) array_like or sequence of them
         One contour per object, drawn on frame ``start`` (around or inside the
-        object, as for :func:`segment`).
+        object, as for :func:`segment`; one point is a click there).
     start : int, optional
         The frame the contours were drawn on; tracking runs forward from it
         to the last frame, then backward from it to the first.
