@@ -14,6 +14,7 @@ from skimage import io
 
 from napari_physeg import data
 from napari_physeg.cli import main
+from napari_physeg.core import track
 from napari_physeg.core.contour import polygon_mask
 from napari_physeg.io import read_shapes_csv, write_shapes_csv
 
@@ -77,10 +78,15 @@ def test_nd_shapes_keep_the_last_two_axes_and_plain_tables_work(tmp_path):
     q = tmp_path / "plain.csv"
     q.write_text("row,col\n1,2\n3,4\n5,1\n")
     assert np.array_equal(read_shapes_csv(q)[0], [[1, 2], [3, 4], [5, 1]])
-    # A Points layer saved by napari: each point is no contour.
-    q.write_text("index,axis-0,axis-1\n0,10,20\n1,30,40\n")
-    with pytest.raises(ValueError, match="Points layer's CSV"):
-        read_shapes_csv(q)
+    # A Points layer saved by napari: each point is a click (its frame kept, for a movie's).
+    q.write_text("index,axis-0,axis-1,axis-2\n0,3,10,20\n1,3,30,40\n")
+    shapes, before = read_shapes_csv(q, leading=True)
+    assert [s.tolist() for s in shapes] == [[[10, 20]], [[30, 40]]] and before == [(3.0,), (3.0,)]
+    # So is each object of an id,row,col table given one row; a row number (index, Fiji's " ") names none.
+    q.write_text("id,row,col\n0,10,20\n1,30,40\n")
+    assert [s.tolist() for s in read_shapes_csv(q)] == [[[10, 20]], [[30, 40]]]
+    q.write_text("index,row,col\n0,1,2\n1,3,4\n2,5,1\n")
+    assert np.array_equal(read_shapes_csv(q)[0], [[1, 2], [3, 4], [5, 1]])
     # Named x, y (col, row): read as (row, col) it lay transposed, or outside a non-square image.
     for header in ("x,y", "X,Y", "col,row"):
         q.write_text(f"{header}\n2,1\n4,3\n1,5\n")
@@ -136,6 +142,23 @@ def test_track_writes_contours_per_frame_and_the_tidy_table(movie_files, capsys)
     assert table_file.exists()
     captured = capsys.readouterr()
     assert "object 0: 6 tracked" in captured.out and "object-frames" in captured.err
+
+
+def test_track_from_a_points_layers_clicks_as_the_api_does(movie_files, capsys):
+    """A Points layer saved by napari, one point in the cell on frame 2: a
+    click, tracked as track() tracks the point (an outside tester, session
+    69: an id,row,col table of one row per object was one contour through
+    them all, and one or two points were refused)."""
+    movie, stack, _, tmp = movie_files
+    centre = np.argwhere(movie.masks[2]).mean(0)
+    clicks = tmp / "points.csv"
+    clicks.write_text(f"index,axis-0,axis-1,axis-2\n0,2,{float(centre[0])!r},{float(centre[1])!r}\n")
+    out = tmp / "clicked"
+    assert main(["track", str(stack), "--init", str(clicks), "--out", str(out)]) == 0
+    shapes, _ = read_shapes_csv(out / "contours.csv", leading=True)
+    expected = track((movie.frames * 1000).astype(np.uint16), centre[None], start=2)
+    assert len(shapes) == 6 and all(np.allclose(a, b) for a, b in zip(shapes, expected.contours[0]))
+    assert "object 0: 6 tracked" in capsys.readouterr().out
 
 
 def test_track_of_some_frames_numbers_the_progress_bar_as_the_stack(movie_files, capsys):

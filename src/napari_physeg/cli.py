@@ -220,8 +220,8 @@ def _add_io(p, *, out_help: str, init: bool = True) -> None:
     if init:
         p.add_argument("--init", type=_path, required=True, metavar="CONTOURS.csv",
                        help="initial contour(s): napari shapes CSV (polygon, rectangle, path or ellipse; nD "
-                       "shapes use their last two axes) or a 'row,col' table (an 'id,row,col' table: one "
-                       "contour per id)")
+                       "shapes use their last two axes; a Points layer's CSV: each point a click) or a "
+                       "'row,col' table (an 'id,row,col' table: one contour per id, one row a click)")
     p.add_argument("--out", type=_path, required=True, help=out_help)
     p.add_argument("--overwrite", action="store_true", help="replace existing output (never an input file)")
 

@@ -45,8 +45,8 @@ def read_shapes_csv(path, *, leading: bool = False):
         shapes the last two axes are the contour. Or a table whose last two
         columns are ``row, col`` (or ``x, y``, so named in a header line):
         one shape, or one per object when the column before them is named
-        ``id``, ``object``, ``label``... (see OBJECT_COLUMNS). A closed
-        contour's repeated first point is dropped.
+        ``id``, ``object``, ``label``... (see OBJECT_COLUMNS; one row of an
+        object is a click). A closed contour's repeated first point is dropped.
     leading : bool, optional
         Also return, per shape, the coordinates of its first vertex on the
         axes before the last two (e.g. ``(frame,)`` for a shape drawn on one
@@ -62,7 +62,9 @@ def read_shapes_csv(path, *, leading: bool = False):
     ------
     ValueError
         If the file holds no shape, a shape that encloses nothing (a line) or
-        columns that cannot be read.
+        columns that cannot be read. One point is a shape: a click (see
+        :func:`napari_physeg.core.segment`), as each point of napari's
+        Points CSV is.
     """
     path = Path(path)
     rows = _csv_rows(path)
@@ -72,10 +74,9 @@ def read_shapes_csv(path, *, leading: bool = False):
             index = header.index("index")
             indices = [r[index] for r in rows[1:]]
             if "shape-type" not in header and len(set(indices)) == len(indices):
-                raise ValueError("it is a Points layer's CSV (one point per row, no shape type): contours are "
-                                 "shapes; draw each object in a Shapes layer (a polygon, or an ellipse about a "
-                                 "point) and save that layer")
-            full = _napari_shapes(header, rows[1:], path)
+                full = _napari_points(header, rows[1:])  # a Points layer's: each point a click
+            else:
+                full = _napari_shapes(header, rows[1:], path)
             out = [v[:, -2:] for v in full]
             before = [tuple(v[0, :-2]) for v in full]
             _check_one_plane(full)
@@ -103,10 +104,11 @@ def read_shapes_csv(path, *, leading: bool = False):
         raise ValueError(f"could not read contours from {path}: shape {bad[0]} has a NaN or infinite coordinate")
     from .core._validation import on_one_line  # (not at import: the command line's start stays light)
 
-    flat = [i for i, s in enumerate(out) if len(s) < 3 or on_one_line(s)]
+    flat = [i for i, s in enumerate(out) if len(s) > 1 and (len(s) < 3 or on_one_line(s))]
     if flat:
         raise ValueError(f"shape {flat[0]} of {path} encloses nothing ({len(out[flat[0]])} vertices on one line or "
-                         "point): a contour needs 3 vertices or more around an area; draw it again")
+                         "point): a contour needs 3 vertices or more around an area (or one point, a click inside "
+                         "the object); draw it again")
     return (out, before) if leading else out
 
 
@@ -154,12 +156,21 @@ OBJECT_COLUMNS = ("id", "object", "label", "shape", "cell", "contour", "roi", "t
 
 def _object_column(header, body) -> np.ndarray | None:
     """The object of each row of a plain table, when the column before its two
-    coordinates is named as one of OBJECT_COLUMNS and its values repeat (a
-    row number, as in Fiji's Results, names no object); else None."""
+    coordinates is named as one of OBJECT_COLUMNS, and its values repeat or
+    it is named for an object (one row per object: a click on each; an
+    ``index`` of values that do not repeat is a row number, as Fiji's
+    Results' column, which names no object); else None."""
     if len(header) < 3 or header[-3].lower() not in OBJECT_COLUMNS:
         return None
     objects = np.asarray([r[-3].strip() for r in body])
-    return objects if len(set(objects)) < len(objects) else None
+    return objects if len(set(objects)) < len(objects) or header[-3].lower() != "index" else None
+
+
+def _napari_points(header, body) -> list[np.ndarray]:
+    """The points of napari's Points CSV, each a one-point shape (all axes): a click."""
+    axes = sorted((c for c in header if c.startswith("axis-")), key=lambda c: int(c[5:]))
+    cols = [header.index(a) for a in axes]
+    return [np.asarray([[float(r[c]) for c in cols]], dtype=np.float64) for r in body]
 
 
 def _unclosed(points: np.ndarray) -> np.ndarray:
