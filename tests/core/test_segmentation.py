@@ -163,11 +163,13 @@ def test_bad_input_gets_a_clear_error(image, init, message):
         segment(image, init)
 
 
-@pytest.mark.parametrize("copies", [1, 3])
-def test_one_point_is_a_click(copies):
+@pytest.mark.parametrize("copies, axes", [(1, None), (3, None), (1, (6.0, 5.0))])
+def test_one_point_is_a_click(copies, axes):
     """A Points layer's one point (or its copies) is a click: a circle of a
-    few pixels about it, as the user guide asks for, not a refusal."""
-    shape = data.ellipse((96, 96))
+    few pixels about it, as the user guide asks for, not a refusal; in the
+    image's pixels, on a small object's magnified view too (there it was
+    read in the view's, a third the size)."""
+    shape = data.ellipse((96, 96), axes=axes, noise=0.05)
     centre = np.argwhere(shape.mask).mean(0)
     res = segment(shape.image, [centre] * copies)
     angles = np.linspace(0, 2 * np.pi, 12, endpoint=False)

@@ -1377,6 +1377,24 @@ def test_labels_numbered_per_frame_are_linked_and_a_division_ends_the_track(warp
     assert ids[1] != 2 and ids[2] != 2
 
 
+@pytest.mark.parametrize("label", [80, 110])
+def test_a_click_on_a_real_nucleus_starts_as_segment_alone_reads_it(hela_start, label):
+    """A click on the brightest spot of a HeLa nucleus, read at the frame's
+    scale as around that spot, ended on it (IoU 0.03 and 0.15; segment()
+    alone 0.95, on a magnified view): a click is inside its object, and the
+    start frame reads it on that view too (a MitoCheck nucleus clicked so
+    was lost on every later frame; an outside tester, session 69)."""
+    from scipy import ndimage as ndi
+
+    frames, labels = hela_start
+    nucleus = labels[0] == label
+    brightest = np.unravel_index(np.argmax(np.where(nucleus, ndi.gaussian_filter(frames[0].astype(float), 1), -np.inf)),
+                                 nucleus.shape)
+    res = track(frames, np.array([brightest], float))
+    assert res.status[0][0] == TRACKED
+    assert iou(res.contours[0][0], nucleus) > 0.8
+
+
 def test_a_real_nucleus_read_first_on_the_ground_is_still_tracked(hela_start):
     """HeLa nucleus 43 on frame 1: the margin about its frame-0 contour is
     first read as lying inside an object at the ground's level, and the
