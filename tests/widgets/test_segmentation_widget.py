@@ -797,34 +797,31 @@ def test_a_node_count_of_1_or_2_is_refused_at_run_by_the_control_s_name(viewer_w
     assert errors == [f"node count must be 0 (the nodes spaced by 'node spacing') or at least 3, got {count}"]
 
 
-def test_a_points_layer_is_a_contour(viewer_widget, wait_done, errors, hand):
-    """Points clicked around the object, in order, are one initial contour."""
-    viewer, widget = viewer_widget
-    viewer.add_image(hand.image, name="hand")
-    viewer.add_points(hand.init_far[::6], name="clicked")
+def _segmented_from_points(viewer, widget, wait_done, image, points):
+    """The one result layer of the segmentation widget run on a Points layer of ``points`` over ``image``."""
+    viewer.add_image(image, name="image")
+    viewer.add_points(points, name="clicked")
     widget.reset_choices()
     widget._shapes.value = viewer.layers["clicked"]
     widget.run()
     wait_done(widget)
-    assert errors == [] and widget.last_outcome.ok
+    assert widget.last_outcome.ok
     (out,) = output_layers(viewer)
-    assert iou(out.data[0], hand.mask) >= 0.9
+    return out
+
+
+def test_a_points_layer_is_a_contour(viewer_widget, wait_done, errors, hand):
+    """Points clicked around the object, in order, are one initial contour."""
+    out = _segmented_from_points(*viewer_widget, wait_done, hand.image, hand.init_far[::6])
+    assert errors == [] and iou(out.data[0], hand.mask) >= 0.9
 
 
 def test_a_points_layer_of_one_point_is_a_click(viewer_widget, wait_done, errors, hand):
     """One point clicked inside the object is a click: a circle of a few pixels about it."""
-    viewer, widget = viewer_widget
-    viewer.add_image(hand.image, name="hand")
     palm = np.argwhere(ndi.binary_erosion(hand.mask, iterations=15)).mean(0)
-    viewer.add_points([palm], name="one click")
-    widget.reset_choices()
-    widget._shapes.value = viewer.layers["one click"]
-    widget.run()
-    wait_done(widget)
-    assert errors == [] and widget.last_outcome.ok
-    (out,) = output_layers(viewer)
+    out = _segmented_from_points(*viewer_widget, wait_done, hand.image, [palm])
     expected = segment(hand.image, clicked(palm[None]))
-    assert iou(out.data[0], polygon2mask(hand.mask.shape, expected.contour)) >= 0.99
+    assert errors == [] and iou(out.data[0], polygon2mask(hand.mask.shape, expected.contour)) >= 0.99
 
 
 def test_a_points_layer_with_too_few_points_says_so(viewer_widget, errors, hand):
