@@ -868,6 +868,13 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, ima
     if traced and not _runs_on_beyond(body, line, _fill(drawing, shape)):
         return None
     enclosed = _enclosed(body, extent, image_sides)
+    if enclosed is False and inside and body.sum() > 0.5 * extent.sum():
+        # Most of the rings lie in the body: it may be an object larger than
+        # their reach (a click 3 px across in a textured nucleus 100 px
+        # across ended on a speck of it), or the ground. Read further out.
+        # (Not a body that only runs out of them, less than half: among
+        # touching nuclei, further out the whole crowd was enclosed.)
+        enclosed = _enclosed_further(intensity, drawing, on_line, far, line, image_sides)
     if enclosed is None:
         return None
     if enclosed:
@@ -881,6 +888,24 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, ima
     if piece is None or np.count_nonzero(_on_side(intensity, texture, on_line)[piece]) >= 0.5 * piece.sum():
         return None
     return far
+
+
+#: How many times further than the far rings an object's body is looked
+#: for about a drawing inside it, when it fills them (see _enclosed_further).
+_FURTHER_REACH = (2.0, 4.0)
+
+
+def _enclosed_further(intensity, drawing, on_line, far, line, image_sides) -> bool | None:
+    """Whether the body of the line's level (see _marked_piece) is enclosed
+    within the far rings' reach scaled by each of _FURTHER_REACH: the first
+    answer that is not False (see _enclosed), else False."""
+    for times in _FURTHER_REACH:
+        extent = _fill(_scaled(drawing, times * _FAR_RINGS[-1][1]), intensity.shape)
+        body, _ = _marked_piece(intensity, on_line, far, line, extent)
+        enclosed = False if body is None else _enclosed(body, extent, image_sides)
+        if enclosed is not False:
+            return enclosed
+    return False
 
 
 #: The far rings an enclosing background is looked for in reach out to
