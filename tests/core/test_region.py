@@ -794,7 +794,7 @@ def test_a_click_on_a_dome_takes_its_steep_rim_for_the_border_not_a_step_between
     line = _line_band(click, image.shape, 1)
     on_line = float(np.median(image[line]))
     texture = 0.48 if kind == "dome" else 0.45
-    background = _enclosing_background(image, click, line, on_line, texture, 0.005, (True,) * 4)
+    background, _ = _enclosing_background(image, click, line, on_line, texture, 0.005, (True,) * 4)
     if kind == "dome":
         assert background == pytest.approx(0.02, abs=0.02)
     else:

@@ -207,6 +207,22 @@ def test_a_click_in_the_middle_of_a_large_textured_nucleus_reaches_its_border():
     assert res.converged and iou(res.contour, disk) > 0.95
 
 
+def test_a_click_on_a_bright_speck_of_a_large_nucleus_reaches_its_border():
+    """A click on the brightest speck of a disk 104 px across, read as
+    drawn around that speck: the disk fills most of the rings about it, and
+    is read further out; the contour may then reach as far (at 25 times the
+    click it stopped there, leaked). It ended on the speck (IoU 0.0)."""
+    rng = np.random.default_rng(0)
+    rows, cols = np.mgrid[:256, :256]
+    disk = (rows - 128) ** 2 + (cols - 128) ** 2 < 52 ** 2
+    specks = ndi.gaussian_filter((rng.random(disk.shape) < 0.01).astype(float), 2.0)
+    image = 5 + ndi.gaussian_filter(disk * (55 + 60 * specks / specks.max()), 1.0) + rng.normal(0, 2, disk.shape)
+    image = np.clip(image, 0, 255).astype(np.uint8)
+    brightest = np.where(ndi.binary_erosion(disk, iterations=15), ndi.gaussian_filter(image.astype(float), 1), -1)
+    res = segment(image, [np.unravel_index(np.argmax(brightest), disk.shape)])
+    assert res.converged and iou(res.contour, disk) > 0.95
+
+
 def test_a_circle_on_the_flat_ground_of_an_8_bit_image_is_not_converged():
     """An 8-bit image whose ground rounds to one level with a few specks one
     level below: a circle drawn on it, nothing in it, shrank onto 53 px of

@@ -180,6 +180,10 @@ class RegionModel:
         Whether a person drew the drawing, centred on what they mean (see
         :func:`object_region`), rather than a program around a known
         contour (a tracked frame's margin).
+    reach : float
+        How many times its size the object of a drawing inside it may
+        reach (_INSIDE_LIMIT, or further where its background was read
+        further out, see :func:`_enclosed_further`).
     """
 
     polarity: int
@@ -189,6 +193,7 @@ class RegionModel:
     least_contrast: float = MIN_CONTRAST
     border_level: float | None = None
     user_drawing: bool = True
+    reach: float = _INSIDE_LIMIT
 
     @property
     def contrast(self) -> float:
@@ -488,11 +493,13 @@ def _model_of(s: _DrawingReading, around: bool, obj: float, background: float, p
     # the margins of nuclei leaving a warped DSB movie through its side took
     # their neighbours: 3 of 51 tracks, 11 frames under two contours).
     seen_sides = image_sides if user_drawing else (True, True, True, True)
-    enclosing = _enclosing_background(s.intensity, s.drawing, s.line, s.on_line, texture, s.floor, seen_sides,
-                                      traced=traced, inside=not around)
+    enclosing, scale = _enclosing_background(s.intensity, s.drawing, s.line, s.on_line, texture, s.floor,
+                                             seen_sides, traced=traced, inside=not around)
+    reach = _INSIDE_LIMIT
     # (Told the object's polarity the other way, the spot drawn around is the object.)
     if enclosing is not None and polarity in (None, np.sign(s.on_line - enclosing)):
         around, obj, background = False, s.on_line, enclosing
+        reach = max(_INSIDE_LIMIT, scale * _INSIDE_LIMIT / _FAR_RINGS[-1][1])  # (as far beyond the rings read)
     if polarity is None:
         polarity = 1 if obj >= background else -1
     elif np.sign(obj - background) not in (0, polarity):
@@ -508,7 +515,7 @@ def _model_of(s: _DrawingReading, around: bool, obj: float, background: float, p
         obj, background = (max(obj, background), min(obj, background)) if polarity > 0 else \
             (min(obj, background), max(obj, background))
     return RegionModel(int(polarity), float(obj), float(background), bool(around), s.floor,
-                       user_drawing=user_drawing)
+                       user_drawing=user_drawing, reach=reach)
 
 
 #: A drawing is traced on its object's border when, along at least
@@ -818,7 +825,7 @@ def _enclosed(body: np.ndarray, extent: np.ndarray, image_sides) -> bool | None:
 
 
 def _enclosing_background(intensity, drawing, line, on_line, texture, floor, image_sides,
-                          traced=False, inside=False) -> float | None:
+                          traced=False, inside=False) -> tuple[float | None, float]:
     """The background's level if a drawing lies inside an object at its
     line's level whose texture the drawing's reading took for the other
     level; else None.
@@ -848,37 +855,38 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, ima
     """
     shape = intensity.shape
     if np.isnan(texture):
-        return None
+        return None, _FAR_RINGS[-1][1]
     least = _ENCLOSING_CONTRAST * max(abs(texture - on_line), floor)
     # (A dome's far level may differ less; see _sharper_beyond.)
     might = least if traced else max(abs(texture - on_line), floor)
     if max(intensity.max() - on_line, on_line - intensity.min()) <= might:
-        return None  # no level differs enough (most drawings: cheaper than reading the rings)
+        return None, _FAR_RINGS[-1][1]  # no level differs enough (most drawings: cheaper than reading the rings)
     extent = _reach_in_view(drawing, shape) if inside else _fill(_scaled(drawing, _FAR_RINGS[-1][1]), shape)
     rings = intensity[extent & ~_fill(_scaled(drawing, _OUTER_RINGS[0][0]), shape)]
     far = _other_level(rings, on_line, floor)
     dome = abs(far - on_line) < least
     if abs(far - on_line) <= might or (dome and (far - on_line) * (texture - on_line) <= 0):
-        return None
+        return None, _FAR_RINGS[-1][1]
     body, on_body = _marked_piece(intensity, on_line, far, line, extent)
     if body is None or (traced and on_body < 0.9 * line.sum()):
-        return None
+        return None, _FAR_RINGS[-1][1]
     if dome and not _sharper_beyond(intensity, on_line, texture, body, line, extent):
-        return None
+        return None, _FAR_RINGS[-1][1]
     if traced and not _runs_on_beyond(body, line, _fill(drawing, shape)):
-        return None
-    enclosed = _enclosed(body, extent, image_sides)
-    if enclosed is False and inside and body.sum() > 0.5 * extent.sum():
+        return None, _FAR_RINGS[-1][1]
+    enclosed, scale = _enclosed(body, extent, image_sides), _FAR_RINGS[-1][1]
+    if enclosed is False and body.sum() > 0.5 * extent.sum():
         # Most of the rings lie in the body: it may be an object larger than
         # their reach (a click 3 px across in a textured nucleus 100 px
-        # across ended on a speck of it), or the ground. Read further out.
-        # (Not a body that only runs out of them, less than half: among
-        # touching nuclei, further out the whole crowd was enclosed.)
-        enclosed = _enclosed_further(intensity, drawing, on_line, far, line, image_sides)
+        # across ended on a speck of it), or the ground. Read further out,
+        # and the object may reach as far (see RegionModel.reach). (Not a
+        # body that only runs out of them, less than half: among touching
+        # nuclei, further out the whole crowd was enclosed.)
+        enclosed, scale = _enclosed_further(intensity, drawing, on_line, far, line, image_sides)
     if enclosed is None:
-        return None
+        return None, _FAR_RINGS[-1][1]
     if enclosed:
-        return far
+        return far, scale
     # Texture is a part of its object, not most of it: a piece of a body that
     # runs out of the view, mostly at the texture's level, is the ground about
     # the drawing's object (a click on a dim nucleus in a gap among bright
@@ -886,8 +894,8 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, ima
     # bright ones all around).
     piece = _piece_enclosed_apart(body, line, extent, image_sides)
     if piece is None or np.count_nonzero(_on_side(intensity, texture, on_line)[piece]) >= 0.5 * piece.sum():
-        return None
-    return far
+        return None, _FAR_RINGS[-1][1]
+    return far, scale
 
 
 #: How many times further than the far rings an object's body is looked
@@ -895,17 +903,19 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, ima
 _FURTHER_REACH = (2.0, 4.0)
 
 
-def _enclosed_further(intensity, drawing, on_line, far, line, image_sides) -> bool | None:
+def _enclosed_further(intensity, drawing, on_line, far, line, image_sides) -> tuple[bool | None, float]:
     """Whether the body of the line's level (see _marked_piece) is enclosed
     within the far rings' reach scaled by each of _FURTHER_REACH: the first
-    answer that is not False (see _enclosed), else False."""
+    answer that is not False (see _enclosed), else False; and the scale of
+    the drawing it was read within."""
     for times in _FURTHER_REACH:
-        extent = _fill(_scaled(drawing, times * _FAR_RINGS[-1][1]), intensity.shape)
+        scale = times * _FAR_RINGS[-1][1]
+        extent = _fill(_scaled(drawing, scale), intensity.shape)
         body, _ = _marked_piece(intensity, on_line, far, line, extent)
         enclosed = False if body is None else _enclosed(body, extent, image_sides)
         if enclosed is not False:
-            return enclosed
-    return False
+            return enclosed, scale
+    return False, _FAR_RINGS[-1][1]
 
 
 #: The far rings an enclosing background is looked for in reach out to
@@ -1477,7 +1487,7 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
     # Everything happens near the drawing: within its reach (below) and one
     # drawing size beyond, where neighbours that could take the object lie.
     found = _object_region_on_crop(signed, drawing, model, image_sides, stronger,
-                                   1.0 if model.drawn_around else _INSIDE_LIMIT)
+                                   1.0 if model.drawn_around else model.reach)
     if found is not None and model.drawn_around and _cut_by_crop(found):
         # Read as drawn across a body larger than the crop around the
         # drawing (see _drawn_across): the body whole, up to the reach of a
@@ -1485,7 +1495,7 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
         # disk's radius over its edge ended on the crop's side, "converged".
         # Seen whole, the body may be no body (touching nuclei, not convex
         # together, are limited to the drawing): then the crop's part stands.
-        whole = _object_region_on_crop(signed, drawing, model, image_sides, stronger, _INSIDE_LIMIT)
+        whole = _object_region_on_crop(signed, drawing, model, image_sides, stronger, model.reach)
         if whole is not None and np.count_nonzero(found[1] & ~whole[1]) <= WHOLE_HOLDS * np.count_nonzero(found[1]):
             found = whole
     if found is None:
@@ -1609,7 +1619,7 @@ def drawing_limit(drawing: np.ndarray, shape, model: RegionModel, drawn: np.ndar
     leak. ``drawn``: the pixels the drawing encloses, if already filled.
     """
     if not model.drawn_around:
-        return _fill(_scaled(drawing, _INSIDE_LIMIT), shape)
+        return _fill(_scaled(drawing, model.reach), shape)
     drawn = _fill(drawing, shape) if drawn is None else drawn
     # A line traced on the border was drawn with care, or is an earlier
     # result: no margin beyond it, else each run from the last result took
@@ -1662,7 +1672,7 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
         if not region.any():
             return None
     if model.drawn_around and _drawn_across(region, limit):
-        limit = _fill(_scaled(drawing, _INSIDE_LIMIT), shape)
+        limit = _fill(_scaled(drawing, model.reach), shape)
     cut = region & ~limit
     region = _smoothed(region & limit, image_sides)
     # A person's drawing around the object holds all of it: bodies of its

@@ -33,7 +33,7 @@ from .features import (_as_image, _check_2d, _intensity_range, _masked_as_missin
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .magnify import MagnifiedView, magnification
 from .materials import Material, get_material, suggested_stiffness
-from .region import (_INSIDE_LIMIT, RegionModel, _box_of, _disk, _fill, _least_contrast, _scaled, drawing_levels,
+from .region import (RegionModel, _box_of, _disk, _fill, _least_contrast, _scaled, drawing_levels,
                      drawing_limit, level_beyond_object, object_region, objectness)
 from .subpixel import level_along, polish
 from ._validation import CLICK_RADIUS, check_callback, check_count, check_number, signature_of, with_defaults
@@ -628,7 +628,7 @@ def _held_by_the_reach(contour: np.ndarray, drawing: np.ndarray, model: RegionMo
     off_sides = ~(low | high).any(axis=1)
     if not off_sides.any():
         return False
-    at_reach = np.abs(depth_inside(_scaled(drawing, _INSIDE_LIMIT), contour[off_sides])) <= AT_REACH_PX
+    at_reach = np.abs(depth_inside(_scaled(drawing, model.reach), contour[off_sides])) <= AT_REACH_PX
     if np.mean(at_reach) < AT_REACH_SHARE:  # (most contours: the edges need not be read)
         return False
     on_edge = field.on_edge(contour - origin)[off_sides]
