@@ -277,7 +277,8 @@ class PointsAsPolygon:
             points = points[np.all(np.abs(points[:, : self.ndim - 2] - here) < 0.5, axis=1)]
         self.n_points = len(points)
         if click and len(points) == 1:
-            points = np.hstack([np.repeat(points[:, :-2], 12, axis=0), clicked(points[:, -2:])])
+            circle = clicked(points[:, -2:])
+            points = np.hstack([np.repeat(points[:, :-2], len(circle), axis=0), circle])
         self.data = [points] if len(points) >= 3 else []
         self.shape_type = ["polygon"] * len(self.data)
 

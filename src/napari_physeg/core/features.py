@@ -505,13 +505,12 @@ def _noise_sigma(image: np.ndarray) -> float:
 def _rounding_sigma(image: np.ndarray) -> float:
     """The standard deviation rounding to ``image``'s levels adds (its
     least step between levels, over the square root of 12; 0 for levels
-    that run on), measured on the sub-grid of :func:`_noise_sigma`.
+    that run on), measured on the sub-grid of :func:`_subsample`.
 
     Where the noise is less than a level (an 8-bit image's flat ground,
     which rounds to one level), smoothing does not average it away: a true
     level between two rounds to the same one over a whole region."""
-    step = int(np.ceil(np.sqrt(image.size / _MAX_SAMPLES)))
-    levels = np.unique(np.asarray(image)[::step, ::step])
+    levels = np.unique(_subsample(np.asarray(image)))
     return float(np.diff(levels).min()) / np.sqrt(12.0) if levels.size > 1 else 0.0
 
 

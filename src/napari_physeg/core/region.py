@@ -53,6 +53,7 @@ __all__ = ["RegionModel", "drawing_levels", "level_beyond_object", "object_regio
 #: centre (a small drawing deep inside a large object).
 _OUTER_RINGS = ((1.15, 1.5), (1.5, 2.2), (2.2, 3.2))
 _FAR_RINGS = ((3.2, 5.0), (5.0, 8.0), (8.0, 13.0), (13.0, 21.0))
+_FAR_SCALE = _FAR_RINGS[-1][1]  # the far rings' outermost scale
 
 #: Width of the bands either side of the drawn line that tell a line traced
 #: on the object's border (a fraction of the drawing's size, at most
@@ -499,7 +500,7 @@ def _model_of(s: _DrawingReading, around: bool, obj: float, background: float, p
     # (Told the object's polarity the other way, the spot drawn around is the object.)
     if enclosing is not None and polarity in (None, np.sign(s.on_line - enclosing)):
         around, obj, background = False, s.on_line, enclosing
-        reach = max(_INSIDE_LIMIT, scale * _INSIDE_LIMIT / _FAR_RINGS[-1][1])  # (as far beyond the rings read)
+        reach = _INSIDE_LIMIT * scale / _FAR_SCALE  # (as far beyond the rings it was read within)
     if polarity is None:
         polarity = 1 if obj >= background else -1
     elif np.sign(obj - background) not in (0, polarity):
@@ -855,26 +856,26 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, ima
     """
     shape = intensity.shape
     if np.isnan(texture):
-        return None, _FAR_RINGS[-1][1]
+        return None, _FAR_SCALE
     least = _ENCLOSING_CONTRAST * max(abs(texture - on_line), floor)
     # (A dome's far level may differ less; see _sharper_beyond.)
     might = least if traced else max(abs(texture - on_line), floor)
     if max(intensity.max() - on_line, on_line - intensity.min()) <= might:
-        return None, _FAR_RINGS[-1][1]  # no level differs enough (most drawings: cheaper than reading the rings)
-    extent = _reach_in_view(drawing, shape) if inside else _fill(_scaled(drawing, _FAR_RINGS[-1][1]), shape)
+        return None, _FAR_SCALE  # no level differs enough (most drawings: cheaper than reading the rings)
+    extent = _reach_in_view(drawing, shape) if inside else _fill(_scaled(drawing, _FAR_SCALE), shape)
     rings = intensity[extent & ~_fill(_scaled(drawing, _OUTER_RINGS[0][0]), shape)]
     far = _other_level(rings, on_line, floor)
     dome = abs(far - on_line) < least
     if abs(far - on_line) <= might or (dome and (far - on_line) * (texture - on_line) <= 0):
-        return None, _FAR_RINGS[-1][1]
+        return None, _FAR_SCALE
     body, on_body = _marked_piece(intensity, on_line, far, line, extent)
     if body is None or (traced and on_body < 0.9 * line.sum()):
-        return None, _FAR_RINGS[-1][1]
+        return None, _FAR_SCALE
     if dome and not _sharper_beyond(intensity, on_line, texture, body, line, extent):
-        return None, _FAR_RINGS[-1][1]
+        return None, _FAR_SCALE
     if traced and not _runs_on_beyond(body, line, _fill(drawing, shape)):
-        return None, _FAR_RINGS[-1][1]
-    enclosed, scale = _enclosed(body, extent, image_sides), _FAR_RINGS[-1][1]
+        return None, _FAR_SCALE
+    enclosed, scale = _enclosed(body, extent, image_sides), _FAR_SCALE
     if enclosed is False and body.sum() > 0.5 * extent.sum():
         # Most of the rings lie in the body: it may be an object larger than
         # their reach (a click 3 px across in a textured nucleus 100 px
@@ -884,7 +885,7 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, ima
         # nuclei, further out the whole crowd was enclosed.)
         enclosed, scale = _enclosed_further(intensity, drawing, on_line, far, line, image_sides)
     if enclosed is None:
-        return None, _FAR_RINGS[-1][1]
+        return None, _FAR_SCALE
     if enclosed:
         return far, scale
     # Texture is a part of its object, not most of it: a piece of a body that
@@ -894,7 +895,7 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, ima
     # bright ones all around).
     piece = _piece_enclosed_apart(body, line, extent, image_sides)
     if piece is None or np.count_nonzero(_on_side(intensity, texture, on_line)[piece]) >= 0.5 * piece.sum():
-        return None, _FAR_RINGS[-1][1]
+        return None, _FAR_SCALE
     return far, scale
 
 
@@ -909,13 +910,13 @@ def _enclosed_further(intensity, drawing, on_line, far, line, image_sides) -> tu
     answer that is not False (see _enclosed), else False; and the scale of
     the drawing it was read within."""
     for times in _FURTHER_REACH:
-        scale = times * _FAR_RINGS[-1][1]
+        scale = times * _FAR_SCALE
         extent = _fill(_scaled(drawing, scale), intensity.shape)
         body, _ = _marked_piece(intensity, on_line, far, line, extent)
         enclosed = False if body is None else _enclosed(body, extent, image_sides)
         if enclosed is not False:
             return enclosed, scale
-    return False, _FAR_RINGS[-1][1]
+    return False, _FAR_SCALE
 
 
 #: The far rings an enclosing background is looked for in reach out to
