@@ -330,6 +330,9 @@ def test_track_messages_number_the_frames_as_the_stack_does(tmp_path, movie):
     assert batch._in_stack_numbers("object 0 held two bodies on frame 1 ... (start=1); could not read frame 1 of "
                                    "m.zarr", [5, 6]) == \
         "object 0 held two bodies on frame 6 ... (start=6); could not read frame 1 of m.zarr"
+    # Runs of frames tracked are runs of the stack's only where its frames follow on.
+    assert batch._in_stack_numbers("object 2 on frames 0-2, 4: it faded", [3, 5, 6, 7, 9]) == \
+        "object 2 on frames 3, 5-6, 9: it faded"
 
 
 def test_a_failed_track_task_is_tried_again_by_the_next_run(tmp_path, movie):

@@ -170,6 +170,28 @@ def test_track_of_some_frames_numbers_the_progress_bar_as_the_stack(movie_files,
     assert sorted(set(shown)) == [2, 4]
 
 
+def test_track_says_why_an_object_was_lost_in_the_stacks_frame_numbers(movie_files, capsys):
+    """The cell gone from the stack's frames 4 and 5 (blank), tracked on its
+    frames 2, 3, 4 and 5: lost on frames 4 and 5 of the stack, as printed, in
+    the warning and in the table's reason column (an outside tester's objects
+    were lost for 29 frames with no word of why, session 69)."""
+    tifffile = pytest.importorskip("tifffile")
+    movie, _, init, tmp = movie_files
+    frames = (movie.frames * 1000).astype(np.uint16)
+    frames[4:] = np.median(frames[0])
+    tifffile.imwrite(tmp / "gone.tif", frames)
+    out = tmp / "gone"
+    assert main(["track", str(tmp / "gone.tif"), "--init", str(init), "--out", str(out), "--frames", "2:6"]) == 1
+    captured = capsys.readouterr()
+    assert "object 0: 2 tracked, 2 lost (first lost on frame 4: " in captured.out
+    assert "object 0 on frames 4-5: " in captured.err and "The reason column of OUT/tracks.csv says why" in captured.err
+    pd = pytest.importorskip("pandas")
+    table = pd.read_parquet(out / "tracks.parquet") if (out / "tracks.parquet").exists() else \
+        pd.read_csv(out / "tracks.csv", keep_default_na=False)
+    lost = table[table["status"] == "lost"]
+    assert list(lost["frame"]) == [4, 5] and all(lost["reason"] != "")
+
+
 def test_track_refuses_contours_drawn_on_several_frames(movie_files, capsys):
     movie, stack, _, tmp = movie_files
     init = write_shapes_csv(tmp / "two.csv", [movie.outlines[0][::6], movie.outlines[3][::6]], leading=[(0,), (3,)])

@@ -268,15 +268,24 @@ def _in_stack_frames(callback, chosen):
 #: A frame number in a message of track(): "frame 4", "start frame 4", "(start=4)"; not the
 #: stack's own number in a read error it passes on ("could not read frame 6 of movie.zarr").
 _FRAME_NUMBER = re.compile(r"(?<!read )(\bframe |start=)(\d+)")
+#: Frames as runs in a message of track() (see tracking.frame_runs): "frames 4-6, 9".
+_FRAME_RUNS = re.compile(r"\bframes (\d+(?:-\d+)?(?:, \d+(?:-\d+)?)*)")
 
 
 def _in_stack_numbers(text: str, chosen) -> str:
     """A message of track() on the frames ``chosen`` of a stack, with the stack's frame numbers."""
+    from .core.tracking import frame_runs
+
     def renumbered(match):
         t = int(match.group(2))
         return match.group(1) + str(chosen[t]) if t < len(chosen) else match.group(0)
 
-    return _FRAME_NUMBER.sub(renumbered, text)
+    def runs_renumbered(match):
+        ends = [[int(n) for n in run.split("-")] for run in match.group(1).split(", ")]
+        frames = [t for run in ends for t in range(run[0], run[-1] + 1)]
+        return frame_runs([chosen[t] for t in frames]) if frames[-1] < len(chosen) else match.group(0)
+
+    return _FRAME_NUMBER.sub(renumbered, _FRAME_RUNS.sub(runs_renumbered, text))
 
 
 @contextlib.contextmanager
@@ -342,7 +351,8 @@ def track_file(path, inits, folder, *, frames: str | None = None, start: int | N
             tr = track(movie, inits, start=chosen.index(start), callback=_in_stack_frames(callback, chosen),
                        segment_options=segment_options_for(_mean_contour(inits), segment_options, node_spacing),
                        match_options=dict(match_options or {}), **options)
-        tr = replace(tr, warnings=tuple(_in_stack_numbers(text, chosen) for text in tr.warnings))
+        tr = replace(tr, warnings=tuple(_in_stack_numbers(text, chosen) for text in tr.warnings),
+                     reason=[[_in_stack_numbers(why, chosen) for why in row] for row in tr.reason])
     shapes, leading, objects = [], [], []
     for k in range(tr.n_objects):
         for t, c in enumerate(tr.contours[k]):

@@ -503,6 +503,7 @@ def _new_line() -> str:
 
 #: The core's advice names its Python parameters; the command line's user has options instead.
 _CLI_TERMS = {
+    "TrackingResult.reason (the table's reason column)": "The reason column of OUT/tracks.csv",
     "the segment_options (e.g. max_steps, material and stiffness)": "--steps-per-frame, --material or --stiffness",
     "or pass a Material": "or make one with --young, --poisson and --density",
 }
@@ -544,7 +545,10 @@ def _track(args) -> int:
                                      callback=_ProgressBar(), **options)
     for k in range(tr.n_objects):
         counts = {s: tr.status[k].count(s) for s in dict.fromkeys(tr.status[k])}
-        print(f"object {k}: " + ", ".join(f"{n} {s}" for s, n in counts.items()))
+        lost = [t for t, why in enumerate(tr.reason[k]) if why]
+        first = min(lost, key=lambda t: abs(t - tr.start)) if lost else None
+        print(f"object {k}: " + ", ".join(f"{n} {s}" for s, n in counts.items())
+              + (f" (first lost on frame {frames[first]}: {tr.reason[k][first]})" if lost else ""))
     print(f"wrote {', '.join(str(p) for p in written if p.exists())} ({tr.timings['total']:.1f} s)")
     # A frame that could not be used stopped the run (its warning says which): what was done is written.
     return 1 if tr.stop_reason != "completed" or any(LOST in row for row in tr.status) else 0
@@ -711,7 +715,7 @@ def _add_track(sub):
                    "with node correspondences and membrane velocities (the Tracking widget). Writes OUT/contours.csv "
                    "(one polygon per object and frame, the frame as axis-0: open it in napari over the stack) and "
                    "OUT/tracks.csv (and tracks.parquet with pyarrow): object, frame, node, row, col, arc, "
-                   "normal_velocity, curvature, status.")
+                   "normal_velocity, curvature, status, reason (why an object is lost on a frame).")
     p.add_argument("stack", type=_path, help="(frames, rows, cols) TIFF stack or zarr array, read a frame at a time")
     _add_io(p, out_help="output folder (created): contours.csv and the tidy table")
     _add_track_options(p)

@@ -253,7 +253,7 @@ def test_an_object_not_found_on_the_start_frame_is_named_with_its_cause(dock, wa
     wait_done(widget)
     assert errors == []
     assert any("object 1 was not found on the start frame 0" in m or "object 0 was not found" in m for m in warned)
-    assert not any("lost on the way" in m for m in warned)
+    assert not any("lost on some frames" in m for m in warned)
     assert any(isinstance(layer, Shapes) for layer in widget.output_layers)
 
 
@@ -323,8 +323,10 @@ def test_an_object_lost_on_a_blank_frame_only_is_said_to_be_lost_there(dock, wai
     movie[3] = 0.2  # a blank frame
     widget = _tracked_from_a_circle(dock, wait_done, movie)
     assert errors == [] and widget.last_result.status[0] == ["tracked"] * 3 + ["lost"] + ["tracked"] * 3
-    assert [m for m in warned if "lost on the way" in m] == [
-        "object(s) lost on the way, with no contour there: 0 on frame 3"]
+    assert [m for m in warned if "lost on some frames" in m] == [
+        "1 object(s) were lost on some frames. object 0 on frame 3: frame 3 holds one value throughout (a dropped "
+        "frame, or a chunk missing from a zarr store). The reason column of the table Save CSV writes says why on "
+        "each frame"]
 
 
 def test_a_movie_with_a_time_scale_keeps_its_slider_and_extent(dock, wait_done, errors):

@@ -230,25 +230,15 @@ _TIPS = {
     "cancel": "Stop: the frames tracked so far become layers.",
     "export": "Save the last run's tidy table as a CSV file, one row per object, frame and node: object, frame, "
               "node, row, col (the movie's pixels), arc position, normal velocity (px/frame, protrusion > 0), "
-              "curvature and status; as napari-physeg track writes it.",
+              "curvature, status and why an object is lost (reason); as napari-physeg track writes it.",
 }
 
 
 def _for_the_widget(message: str) -> str:
     """A warning of ``track()`` as the widget's user acts on it: no Python argument."""
+    message = message.replace("TrackingResult.reason (the table's reason column)",
+                              "The reason column of the table Save CSV writes")
     return re.sub(r"track from there \(start=(\d+)\)", r"press Run standing on frame \1", message)
-
-
-def _frames_named(row, status: str) -> str:
-    """The frames of ``row`` (one object's statuses) that are ``status``, as
-    runs: "frame 5", "frames 5-9, 20"."""
-    frames = [t for t, s in enumerate(row) if s == status]
-    runs, start = [], frames[0]
-    for before, t in zip(frames, frames[1:] + [None]):
-        if t != before + 1:
-            runs.append(f"{start}" if start == before else f"{start}-{before}")
-            start = t
-    return ("frame " if len(frames) == 1 else "frames ") + ", ".join(runs)
 
 
 class TrackingWidget(WorkerWidget):
@@ -418,11 +408,6 @@ class TrackingWidget(WorkerWidget):
                               f"{counts[LOST]} lost{left} ({done}, {result.timings['total']:.1f} s)")
         show_info(f"Tracking: {self._status.value}. The membrane maps (frame x arc, one tile per object) are "
                   "hidden image layers")
-        lost = [f"{k} on {_frames_named(row, LOST)}" for k, row in enumerate(result.status)
-                if LOST in row and TRACKED in row]
-        if lost:
-            # (Not "their later frames": an object lost on a blank frame is tracked again after it.)
-            show_warning(f"object(s) lost on the way, with no contour there: {'; '.join(lost)}")
 
     # ------------------------------------------------------------ export
     export_what = "tracks"

@@ -246,6 +246,10 @@ class TrackingResult:
     warnings : tuple of str
         What the run also warned of (an object not found on the start frame,
         and why), for callers that show warnings their own way (the widget).
+    reason : list of list of str
+        Why object ``k`` is lost on frame ``t`` (it faded, what was found
+        there is another object, its contour did not come to rest, its
+        track ended at a division, ...); ``""`` where it is not lost.
     """
 
     contours: list
@@ -258,6 +262,7 @@ class TrackingResult:
     stop_reason: str
     timings: dict = field(default_factory=dict)
     warnings: tuple = ()
+    reason: list = field(default_factory=list)
 
     @property
     def n_objects(self) -> int:
@@ -314,8 +319,9 @@ class TrackingResult:
         """A tidy pandas DataFrame, one row per node per frame per object.
 
         Columns: object, frame, node, row, col, arc, normal_velocity,
-        curvature, status. Frames where an object is lost or gone have one row
-        with NaN coordinates and its status. Needs pandas (napari brings it).
+        curvature, status, reason. Frames where an object is lost or gone
+        have one row with NaN coordinates, its status and why it is lost
+        (``reason``). Needs pandas (napari brings it).
         """
         import pandas as pd
 
@@ -323,16 +329,17 @@ class TrackingResult:
         for k in range(self.n_objects):
             for t in range(self.n_frames):
                 c = self.contours[k][t]
+                why = self.reason[k][t] if self.reason else ""
                 if c is None:
                     parts.append(pd.DataFrame(dict(object=[k], frame=[t], node=[-1], row=[np.nan], col=[np.nan],
                                                    arc=[np.nan], normal_velocity=[np.nan], curvature=[np.nan],
-                                                   status=[self.status[k][t]])))
+                                                   status=[self.status[k][t]], reason=[why])))
                     continue
                 n = len(c)
                 parts.append(pd.DataFrame(dict(
                     object=np.full(n, k), frame=np.full(n, t), node=np.arange(n), row=c[:, 0], col=c[:, 1],
                     arc=self.arc[k][t], normal_velocity=self.normal_velocity[k][t],
-                    curvature=self.curvature[k][t], status=[self.status[k][t]] * n)))
+                    curvature=self.curvature[k][t], status=[self.status[k][t]] * n, reason=[why] * n)))
         return pd.concat(parts, ignore_index=True)
 
 
@@ -644,17 +651,17 @@ def _touches_side(contour: np.ndarray, shape, missing: np.ndarray | None = None)
 
 
 def _judge(contour, previous, predicted, whole_area, shape, missing=None, seen_whole: bool = False,
-           condensed: bool = False, spread: bool = False) -> str:
+           condensed: bool = False, spread: bool = False) -> tuple[str, str]:
     """Is ``contour`` the object seen on ``previous`` (and ``predicted`` on
-    this frame), or has it gone? (``missing``: the frame's pixels that hold
-    no data, see _touches_side; ``seen_whole``: whether ``whole_area`` is
-    that of a contour the image's side did not cut; ``condensed``,
-    ``spread``: whether it keeps the object's signal, see MAX_AREA_CHANGE and
-    SPREAD_SIGNAL.)"""
+    this frame), or has it gone? Its status, and why where it is not
+    tracked. (``missing``: the frame's pixels that hold no data, see
+    _touches_side; ``seen_whole``: whether ``whole_area`` is that of a
+    contour the image's side did not cut; ``condensed``, ``spread``: whether
+    it keeps the object's signal, see MAX_AREA_CHANGE and SPREAD_SIGNAL.)"""
     area, prev_area = abs(signed_area(contour)), abs(signed_area(previous))
     at_side, was_at_side = _touches_side(contour, shape, missing), _touches_side(previous, shape, missing)
     if at_side and area < LEFT_FRACTION * whole_area:
-        return LEFT
+        return LEFT, ""
     # The image's side hides part of an object it cuts: one that moves in
     # shows more of itself (a sliver may become the whole), one that moves
     # out less; neither is a sign of another object. But an object seen
@@ -666,13 +673,15 @@ def _judge(contour, previous, predicted, whole_area, shape, missing=None, seen_w
     else:
         most = MAX_AREA_CHANGE * max(whole_area, prev_area) if seen_whole else np.inf
     if not least <= area <= most:
-        return LOST
+        change = area / prev_area if area > prev_area else prev_area / max(area, 1e-12)
+        return LOST, (f"what was found there is {change:.1f} times {'larger' if area > prev_area else 'smaller'} "
+                      "than the object on the frame before: another object, or a part of it")
     # A contour that holds no pixel of where the object was predicted has
     # found another object (a vanished one's contour is drawn to the next
     # edges within reach), not this one moved.
     if not _overlap(contour, predicted, shape):
-        return LOST
-    return TRACKED
+        return LOST, "what was found lies wholly off where the object was expected: another object"
+    return TRACKED, ""
 
 
 def _overlap(a: np.ndarray, b: np.ndarray, shape) -> bool:
@@ -753,6 +762,8 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
             if t != start:
                 dimmed += _faded_as_the_frame_dimmed(run, t, brightness)
                 together += _lost_together(run, t, step, image, shared.missing)
+                if (nothing := _nothing_to_find(run, t, image, shared.missing)) is not None:
+                    run.nothing_there[t] = nothing
         if stop_reason == "cancelled":
             break
     said += _warn_dimmed(dimmed) + _warn_lost_together(together)
@@ -765,6 +776,8 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
         said.append(f"{len(empty)} frame(s) hold NaN pixels only, no data (first: frame {min(empty)}): every object "
                     "is lost there, and followed again after")
         warnings.warn(said[-1], UserWarning, stacklevel=2)
+    reason = _reasons(run)
+    said += _warn_lost(run, reason)
     t_segmented = time.perf_counter()
     analysis = _correspondences(run.contours, start, match_options or {})
     t_end = time.perf_counter()
@@ -772,7 +785,93 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
     return TrackingResult(
         contours=run.contours, status=status, **analysis, start=start, stop_reason=stop_reason,
         timings={"segmentation": t_segmented - t_start, "correspondence": t_end - t_segmented,
-                 "total": t_end - t_start}, warnings=tuple(said))
+                 "total": t_end - t_start}, warnings=tuple(said), reason=reason)
+
+
+#: Why nothing is found on a frame of no data (see _nothing_to_find); iter_track warns of such frames.
+NO_DATA = "frame {t} holds no data (NaN pixels only)"
+
+
+def _nothing_to_find(run: _Run, t: int, image: np.ndarray, missing) -> str | None:
+    """Why the objects lost on frame ``t`` (``image``, its NaN pixels filled;
+    ``missing``: those) could be found on it by nothing, if so: it holds
+    no data, or one value throughout; None if it shows something, or lost none."""
+    if not any(status[t] == LOST for status in run.status):
+        return None
+    if missing is not None and missing.all():
+        return NO_DATA.format(t=t)
+    if np.ptp(image) == 0:
+        return f"frame {t} holds one value throughout (a dropped frame, or a chunk missing from a zarr store)"
+    return None
+
+
+def _reasons(run: _Run) -> list[list[str]]:
+    """Why each object is lost on each frame it is lost on ("" elsewhere):
+    as found there (see _Seen.why), else the division that ended its track
+    or the frame it went missing on (after MAX_GAP frames it is no longer
+    looked for)."""
+    out = []
+    for k, seen in enumerate(run.seen):
+        row = [""] * len(run.status[k])
+        for t, status in enumerate(run.status[k]):
+            if status != LOST:
+                continue
+            ended = [d for d in seen.divided if (t - d) * (d - run.start) >= 0 and d != run.start]
+            if t in run.nothing_there:
+                row[t] = run.nothing_there[t]
+            elif t in seen.divided:
+                row[t] = "it divided here: its two bodies stand apart (see the warnings)"
+            elif ended:
+                row[t] = f"its track ended where it divided, on frame {ended[0]}"
+            elif seen.why.get(t):
+                row[t] = seen.why[t]
+            else:
+                step = 1 if t > run.start else -1
+                went = t
+                while 0 <= went - step < len(row) and run.status[k][went - step] == LOST and went != run.start:
+                    went -= step
+                row[t] = (f"no longer looked for: lost since frame {went}, more than {MAX_GAP} frames before"
+                          if went != t else "not found")
+        out.append(row)
+    return out
+
+
+def frame_runs(frames: list[int]) -> str:
+    """Frames (sorted) as runs: "frame 5", "frames 5-9, 20"."""
+    runs, start = [], frames[0]
+    for before, t in zip(frames, frames[1:] + [None]):
+        if t != before + 1:
+            runs.append(f"{start}" if start == before else f"{start}-{before}")
+            start = t
+    return ("frame " if len(frames) == 1 else "frames ") + ", ".join(runs)
+
+
+#: Where the warning of objects lost (see _warn_lost) sends its reader for the rest.
+WHY_ON_EACH_FRAME = "TrackingResult.reason (the table's reason column) says why on each frame"
+
+#: How many objects the warning of objects lost (see _warn_lost) names, each with its first loss.
+LOST_NAMED = 5
+
+
+def _warn_lost(run: _Run, reason: list[list[str]]) -> list[str]:
+    """One warning naming the objects lost on some frame that no other
+    warning named (a division, a frame that lost many, or one that dimmed,
+    an object not found on the start frame), and why each was first lost;
+    the result's ``reason`` says why on every frame. Returns the message."""
+    first = []
+    for k, row in enumerate(reason):
+        lost = [t for t, why in enumerate(row) if why and t != run.start]
+        no_data = {t for t, why in run.nothing_there.items() if why == NO_DATA.format(t=t)}  # (warned of apart)
+        if lost and k not in run.warned and not set(lost) <= no_data:
+            t = min(lost, key=lambda frame: abs(frame - run.start))
+            first.append(f"object {k} on {frame_runs(lost)}: {row[t]}")
+    if not first:
+        return []
+    named = "; ".join(first[:LOST_NAMED]) + (f"; and {len(first) - LOST_NAMED} more" if len(first) > LOST_NAMED
+                                              else "")
+    said = [f"{len(first)} object(s) were lost on some frames. {named}. {WHY_ON_EACH_FRAME}"]
+    warnings.warn(said[-1], UserWarning, stacklevel=5)
+    return said
 
 
 #: A frame where at least LOST_TOGETHER_SHARE of the objects followed on the
@@ -797,6 +896,7 @@ def _lost_together(run: _Run, t: int, step: int, image: np.ndarray, missing) -> 
             and t not in run.seen[k].divided]
     if len(lost) < max(LOST_TOGETHER_LEAST, LOST_TOGETHER_SHARE * len(followed)):
         return []
+    run.warned.update(lost)
     return [(t, len(lost), len(followed), bool(np.ptp(image) == 0))]
 
 
@@ -950,6 +1050,8 @@ def _warn_not_found(run: _Run, image: np.ndarray) -> list[str]:
             why = ("no object came to rest under its drawing; check that it is drawn around (or inside) one "
                    "object, or the contour's options (steps per frame, material and stiffness: the Tracking "
                    "widget's; max_steps and segment_options of track())")
+        run.seen[k].why[run.start] = f"not found on the start frame: {why}"
+        run.warned.add(k)
         said.append(f"object {k} was not found on the start frame {run.start} and is reported lost: {why}")
         warnings.warn(said[-1], UserWarning, stacklevel=5)
     return said
@@ -1001,6 +1103,7 @@ def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
                         f"from frame {t} on, in that direction); to follow the two, draw each on frame {t} and "
                         f"track from there (start={t})")
             warnings.warn(said[-1], UserWarning, stacklevel=5)
+            run.warned.add(k)
             continue
         # Its contour on the frame done before (t is not the start frame),
         # else the one it parted on this frame: two bodies a pixel or two
@@ -1026,6 +1129,7 @@ def _warn_divided(run: _Run, t: int, step: int) -> list[str]:
                     f"{neck:.1f} px wide): {what.format(t=t)}; to follow the two, draw each on frame {t} "
                     f"and track from there (start={t})")
         warnings.warn(said[-1], UserWarning, stacklevel=5)
+        run.warned.add(k)
     return said
 
 
@@ -1055,7 +1159,10 @@ def _faded_as_the_frame_dimmed(run: _Run, t: int, brightness: dict) -> list[tupl
     faded = [k for k, seen in enumerate(run.seen) if t in seen.fades and run.status[k][t] == LOST]
     brightest = max(b for frame, b in brightness.items() if abs(frame - t) <= FADE_WINDOW)
     share = brightness[t] / brightest if brightest > 0 else 1.0
-    return [(t, faded, share)] if len(faded) >= DIMMED_OBJECTS and share < DIMMED_BRIGHTNESS else []
+    if len(faded) < DIMMED_OBJECTS or share >= DIMMED_BRIGHTNESS:
+        return []
+    run.warned.update(faded)
+    return [(t, faded, share)]
 
 
 def _warn_dimmed(dimmed: list[tuple]) -> list[str]:
@@ -1317,10 +1424,11 @@ class _Seen:
     fades: set = field(default_factory=set)  # the frames where it was lost as faded (see faded)
     divided: dict = field(default_factory=dict)  # frame -> its two bodies where it divided (see _divisions)
     drawing: _Drawing | None = None  # the drawing its last tracked frame was segmented in (see _carried)
+    why: dict = field(default_factory=dict)  # frame -> why it was not tracked there, as found (see _reasons)
 
     def copy(self) -> _Seen:
         return replace(self, contrasts=dict(self.contrasts), parted=dict(self.parted), fades=set(self.fades),
-                       divided=dict(self.divided))
+                       divided=dict(self.divided), why=dict(self.why))
 
     def faded(self, contrast: float, t: int) -> bool:
         """Whether ``contrast`` on frame ``t`` is below FADED_CONTRAST times
@@ -1346,6 +1454,8 @@ class _Run:
     looks: np.ndarray | None = None  # the current frame, its illumination taken out (see background.plane_removed)
     before: np.ndarray | None = None  # the same of the frame before, in the direction of travel
     painted: dict = field(default_factory=dict)  # see _paint: per object, the box of its pixels on the current frame
+    warned: set = field(default_factory=set)  # the objects a warning named lost (see _warn_lost)
+    nothing_there: dict = field(default_factory=dict)  # frame -> why nothing is found there (see _nothing_to_find)
 
 
 def _claim_before(run: _Run, k: int, t: int, step: int) -> np.ndarray | None:
@@ -1836,10 +1946,14 @@ def _found(image, shared, avoid, t, drawing: _Drawing, predicted, previous, seen
         # Not found: gone from the view if it was at the image's side (where
         # it was to start from; its drawing, moved with it, may reach beyond
         # the side while the object lies wholly inside).
-        return None, LEFT if previous is not None and _touches_side(predicted, image.shape, shared.missing) else LOST
+        if previous is not None and _touches_side(predicted, image.shape, shared.missing):
+            return None, LEFT
+        seen.why[t] = "no object where it was looked for (the contour collapsed, or could not be followed)"
+        return None, LOST
     # The drawing on the start frame is the user's: what it holds of an object
     # it cuts off (a touching neighbour's blob) is the object to follow.
     if not (res.converged or (previous is None and res.stop_reason == "limited")):
+        seen.why[t] = f"the contour did not come to rest on a border there ({res.stop_reason})"
         return None, LOST
     contour = positively_oriented(res.contour)
     if previous is None:
@@ -1853,8 +1967,9 @@ def _found(image, shared, avoid, t, drawing: _Drawing, predicted, previous, seen
     contrast, area = _contrast(image, contour, res.polarity, avoid), abs(signed_area(contour))
     signal = contrast * area
     condensed = signal >= seen.signal / MAX_AREA_CHANGE
-    verdict = _judge(contour, previous, predicted, seen.whole_area, image.shape, shared.missing, seen.seen_whole,
-                     condensed, spread=condensed and seen.signal > 0 and signal <= SPREAD_SIGNAL * seen.signal)
+    verdict, seen.why[t] = _judge(contour, previous, predicted, seen.whole_area, image.shape, shared.missing,
+                                  seen.seen_whole, condensed,
+                                  spread=condensed and seen.signal > 0 and signal <= SPREAD_SIGNAL * seen.signal)
     if verdict == LOST:
         # Pinched in two on its way (a division, or a neighbour it took in
         # let go), it kept one body: see _warn_divided.
@@ -1866,6 +1981,8 @@ def _found(image, shared, avoid, t, drawing: _Drawing, predicted, previous, seen
     if verdict == TRACKED and seen.faded(contrast, t):
         verdict = LOST
         seen.fades.add(t)
+        seen.why[t] = (f"it faded, its contrast below {FADED_CONTRAST:g} of its best within {FADE_WINDOW} frames "
+                       "(it left the focal plane or bleached, or what is left is a neighbour's halo)")
     if verdict == TRACKED and np.isfinite(contrast):
         seen.contrasts[t], seen.signal = contrast, contrast * area
     if verdict == TRACKED:
