@@ -223,6 +223,25 @@ def test_a_click_on_a_bright_speck_of_a_large_nucleus_reaches_its_border():
     assert res.converged and iou(res.contour, disk) > 0.95
 
 
+@pytest.mark.parametrize("nucleolus", [0.2, 0.35])
+def test_a_click_on_a_nucleolus_darker_than_its_nucleus_reaches_the_nucleus_border(nucleolus):
+    """A click on a dark nucleolus of a bright nucleus on a darker ground:
+    the nucleolus is a hole of the nucleus, not a dark object of its own on
+    it (one would be no further from the ground than the nucleus is). Its
+    contour outlined the nucleolus, converged (a tester's GOWT1 nuclei: 32
+    of 129 clicks, IoU 0.08). A dark disk on a bright ground that no darker
+    one encloses stays the object clicked."""
+    rng = np.random.default_rng(0)
+    rows, cols = np.mgrid[:200, :200]
+    d = np.hypot(rows - 100, cols - 100)
+    image = ndi.gaussian_filter(np.where(d < 12, nucleolus, np.where(d < 40, 0.8, 0.02)), 1.0)
+    res = segment(image + 0.02 * rng.standard_normal(image.shape), [[100.0, 100.0]])
+    assert res.converged and res.polarity == 1 and iou(res.contour, d < 40) > 0.95
+    on_bright_ground = ndi.gaussian_filter(np.where(d < 12, nucleolus, 0.8), 1.0)
+    res = segment(on_bright_ground + 0.02 * rng.standard_normal(image.shape), [[100.0, 100.0]])
+    assert res.converged and res.polarity == -1 and iou(res.contour, d < 12) > 0.9
+
+
 def test_a_circle_on_the_flat_ground_of_an_8_bit_image_is_not_converged():
     """An 8-bit image whose ground rounds to one level with a few specks one
     level below: a circle drawn on it, nothing in it, shrank onto 53 px of
