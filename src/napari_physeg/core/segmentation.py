@@ -1763,17 +1763,28 @@ def _magnified(view: MagnifiedView, features: _FeatureWindow, options: dict, t_s
              "image_noise": noise * _magnified_noise_gain(factor), "pixel_noise": noise,
              # (Shared features hold no levels in the image's units: the view reads its own.)
              "raw_model": None if features.levels is None else features.model_in_image_units()}
-    run, res = _evolve(**inner), None
+    run, res, cut = _evolve(**inner), None, None
     try:
         state = next(run)
         while not view.reaches_a_cut(contour := view.outward(state.contour)):
             stop = yield SegmentationProgress(state.step, contour, state.phase)
             state = run.send(stop)
         run.close()
+        cut = contour
     except StopIteration as done:
         res = done.value
     except (ValueError, DivergenceError):
         pass  # as it would fail on the image itself, or not: see there
+    if cut is not None and _click_sized(drawing):
+        # A click grown on the view out to its cut lies in an object larger
+        # than the view: on the image, it is read from what it grew to
+        # (read there as it was, a click on a bright speck of a large
+        # nucleus is drawn around the speck, and ended on it, converged).
+        try:
+            res = yield from _evolve(**{**options, "init": cut, "magnify": False, "warn": False})
+            return replace(res, timings={**res.timings, "total": time.perf_counter() - t_start})
+        except (ValueError, DivergenceError):
+            res = None
     if res is None or (res.stop_reason != "cancelled" and (view.reaches_a_cut(view.outward(res.contour))
                                                           or _encloses_nothing(view.outward(res.contour)))):
         res = yield from _evolve(**{**options, "magnify": False, "warn": False})
