@@ -556,7 +556,7 @@ def _ground_about_a_hole(s: _DrawingReading, image_sides) -> float | None:
     # The body: the pixels nearer its level than the line's (a hole's level
     # may lie near the midpoint between the body's and the ground's).
     side = _on_side(s.intensity, body_level, s.on_line)
-    body, _ = _marked_piece(_filled(side).astype(float), 1.0, 0.0, s.line, extent)
+    body, _ = _piece_holding(_filled(side), s.line, extent)
     if body is None or _enclosed(body, extent, image_sides) is not True:
         return None
     # The line lies in its holes, which are at the line's level: not pieces
@@ -567,7 +567,7 @@ def _ground_about_a_hole(s: _DrawingReading, image_sides) -> float | None:
             np.mean(_on_side(s.intensity[holes], ground, s.on_line)) > HOLE_GROUND_SHARE:
         return None
     # A hole, not what a thin wall rings: no larger than the body about it.
-    hole, _ = _marked_piece(holes.astype(float), 1.0, 0.0, s.line)
+    hole, _ = _piece_holding(holes, s.line)
     return ground if hole is not None and hole.sum() <= (body & side).sum() else None
 
 
@@ -1110,11 +1110,17 @@ def _marked_piece(intensity, level, other, marks, within=None):
     between ``level`` and ``other`` (those ``within`` it, if given) that holds
     most of the pixels ``marks``, and how many of ``marks`` lie on that side;
     ``(None, 0)`` when none does."""
-    side = _on_side(intensity, level, other)
+    return _piece_holding(_on_side(intensity, level, other), marks, within)
+
+
+def _piece_holding(mask, marks, within=None):
+    """The 4-connected piece of ``mask`` (within ``within``, if given) that
+    holds most of the pixels ``marks``, and how many of ``marks`` it holds;
+    ``(None, 0)`` when none does."""
     if within is not None:
-        side &= within
-    pieces, _ = _label(side)
-    held = pieces[marks & side]
+        mask = mask & within
+    pieces, _ = _label(mask)
+    held = pieces[marks & mask]
     if held.size == 0:
         return None, 0
     return pieces == np.bincount(held).argmax(), held.size
