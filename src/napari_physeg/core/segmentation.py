@@ -1749,7 +1749,8 @@ def _magnified(view: MagnifiedView, features: _FeatureWindow, options: dict, t_s
     contour meets the view's cut, the object is segmented on the image
     itself: at once, as the contour on the view will not come back from
     the cut (a click on a rod of a packed colony crawled 440 steps over its
-    neighbours on the view, 3.5 s, before the image took over)."""
+    neighbours on the view, 3.5 s, before the image took over); a click,
+    from the contour it grew to on the view."""
     drawing, start, sigma, factor = options["init"], options["start"], options["sigma"], view.factor
     window = features.evenly_lit(view.window)
     noise = _noise_sigma(window)
