@@ -674,8 +674,12 @@ def _judge(contour, previous, predicted, whole_area, shape, missing=None, seen_w
         most = MAX_AREA_CHANGE * max(whole_area, prev_area) if seen_whole else np.inf
     if not least <= area <= most:
         change = area / prev_area if area > prev_area else prev_area / max(area, 1e-12)
+        # (Not "another object" flatly: an outside tester's spreading cell and a
+        # nucleus rounding up for mitosis were the same object, session 70.)
         return LOST, (f"what was found there is {change:.1f} times {'larger' if area > prev_area else 'smaller'} "
-                      "than the object on the frame before: another object, or a part of it")
+                      f"than the object on the frame before, beyond the {MAX_AREA_CHANGE:g}-fold change tracking "
+                      "takes for one object: read as another object or a part of it (an object that spreads or "
+                      "rounds up that fast is lost so too)")
     # A contour that holds no pixel of where the object was predicted has
     # found another object (a vanished one's contour is drawn to the next
     # edges within reach), not this one moved.
