@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist
+from skimage.measure import points_in_poly
 
 from .background import background_plane, plane_removed
 from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, contour_gap, crosses_itself,
@@ -1777,15 +1778,18 @@ def _magnified(view: MagnifiedView, features: _FeatureWindow, options: dict, t_s
     except (ValueError, DivergenceError):
         pass  # as it would fail on the image itself, or not: see there
     if cut is not None and _click_sized(drawing):
-        # A click grown on the view out to its cut lies in an object larger
-        # than the view: on the image, it is read from what it grew to
-        # (read there as it was, a click on a bright speck of a large
+        # A click grown on the view out to its cut may lie in an object
+        # larger than the view: on the image, it is read from what it grew
+        # to (read there as it was, a click on a bright speck of a large
         # nucleus is drawn around the speck, and ended on it, converged).
+        # The object found so holds what the click grew to: a click on
+        # shading grew over it, and what it grew to found a piece of it.
         try:
-            res = yield from _evolve(**{**options, "init": cut, "magnify": False, "warn": False})
-            return replace(res, timings={**res.timings, "total": time.perf_counter() - t_start})
+            grown = yield from _evolve(**{**options, "init": cut, "magnify": False, "warn": False})
+            if grown.stop_reason == "cancelled" or (grown.converged and points_in_poly(cut, grown.contour).all()):
+                return replace(grown, timings={**grown.timings, "total": time.perf_counter() - t_start})
         except (ValueError, DivergenceError):
-            res = None
+            pass
     if res is None or (res.stop_reason != "cancelled" and (view.reaches_a_cut(view.outward(res.contour))
                                                           or _encloses_nothing(view.outward(res.contour)))):
         res = yield from _evolve(**{**options, "magnify": False, "warn": False})
