@@ -142,6 +142,9 @@ def test_track_writes_contours_per_frame_and_the_tidy_table(movie_files, capsys)
     assert table_file.exists()
     captured = capsys.readouterr()
     assert "object 0: 6 tracked" in captured.out and "object-frames" in captured.err
+    # stderr is not a terminal here (a log): whole lines, one each time the bar grows, no carriage returns.
+    bars = [line for line in captured.err.splitlines() if line.startswith("[")]
+    assert "\r" not in captured.err and len(bars) == 6 and bars[-1].endswith("6/6 object-frames")
 
 
 def test_track_from_a_points_layers_clicks_as_the_api_does(movie_files, capsys):

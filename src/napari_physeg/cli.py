@@ -474,19 +474,27 @@ def _simulate(args) -> int:
 
 
 class _ProgressBar:
-    """A one-line text progress bar on stderr."""
+    """A one-line text progress bar on stderr; in a log (stderr not a
+    terminal), a line each time the bar grows: a carriage return per
+    object-frame made 672 updates of one run's log (an outside tester)."""
 
     #: Whether a bar is drawn on the current line of stderr (a message must start a new one).
     mid_line = False
 
     def __init__(self, width: int = 30):
         self.width = width
+        self.shown = -1  # the bar's length last written to a log
 
     def __call__(self, progress) -> None:
-        done = progress.done / progress.total
-        bar = "#" * int(round(done * self.width))
-        print(f"\r[{bar:<{self.width}}] frame {progress.frame}, {progress.done}/{progress.total} object-frames",
-              end="", file=sys.stderr, flush=True)
+        filled = int(round(progress.done / progress.total * self.width))
+        text = (f"[{'#' * filled:<{self.width}}] frame {progress.frame}, {progress.done}/{progress.total} "
+                "object-frames")
+        if not sys.stderr.isatty():
+            if filled != self.shown or progress.done >= progress.total:
+                self.shown = filled
+                print(text, file=sys.stderr, flush=True)
+            return
+        print(f"\r{text}", end="", file=sys.stderr, flush=True)
         _ProgressBar.mid_line = progress.done < progress.total
         if not _ProgressBar.mid_line:
             print(file=sys.stderr)
