@@ -863,9 +863,9 @@ def _warn_lost(run: _Run, reason: list[list[str]]) -> list[str]:
     an object not found on the start frame), and why each was first lost;
     the result's ``reason`` says why on every frame. Returns the message."""
     first = []
+    no_data = {t for t, why in run.nothing_there.items() if why == NO_DATA.format(t=t)}  # (warned of apart)
     for k, row in enumerate(reason):
         lost = [t for t, why in enumerate(row) if why and t != run.start]
-        no_data = {t for t, why in run.nothing_there.items() if why == NO_DATA.format(t=t)}  # (warned of apart)
         if lost and k not in run.warned and not set(lost) <= no_data:
             t = min(lost, key=lambda frame: abs(frame - run.start))
             first.append(f"object {k} on {frame_runs(lost)}: {row[t]}")
