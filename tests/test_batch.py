@@ -293,6 +293,7 @@ def test_a_track_task_on_a_movie_without_the_object_is_not_ok_and_keeps_its_warn
     (row,) = batch._execute(_track_task(blank, tmp_path / "out", [movie.outlines[0][::6]]))
     assert row["status"] == "not found" and (row["tracked"], row["lost"]) == (0, 4)
     assert "found on none of the 4 frames" in row["error"]
+    assert row["first_lost"].startswith("frame 0: not found on the start frame: every pixel of the frame is 7")
     assert "was not found on the start frame 0" in row["warnings"]  # caught in the task, not printed there
     assert row["tracks"] == "results/blank.tif/tracks.csv"  # the CSV, written with or without pyarrow
 
@@ -315,6 +316,7 @@ def test_a_track_task_stopped_by_an_unreadable_frame_fails_and_keeps_the_frames_
     (row,) = batch._execute(_track_task(path, tmp_path / "out", [movie.outlines[0][::6]]))
     assert row["status"] == "failed" and "frame 2 has infinite pixels" in row["error"]
     assert row["tracked"] == 2 and row["last_status"] == "not processed"  # what succeeded is kept
+    assert row["first_lost"] == ""  # frames not processed are not lost
 
 
 def test_track_messages_number_the_frames_as_the_stack_does(tmp_path, movie):

@@ -245,13 +245,16 @@ def _track_task(task: _Task, tmp: Path) -> list[dict]:
     rows = []
     for k in range(tr.n_objects):
         counts = {s: tr.status[k].count(s) for s in (TRACKED, LOST, LEFT)}
+        first = tr.first_lost(k)
         found = counts[TRACKED] > 0  # else lost (or left) on every frame: not an outcome to call ok
         error = stopped or ("" if found else f"object {k} was found on none of the {tr.n_frames} frames: check "
                             "that the contours were drawn on this movie")
         rows.append({"input": task.path, "object": k, "status": FAILED if stopped else OK if found else NOT_FOUND,
                      "error": error, "frames": tr.n_frames,
                      "tracked": counts[TRACKED], "lost": counts[LOST], "left": counts[LEFT],
-                     "last_status": tr.status[k][-1], "seconds": seconds / tr.n_objects,
+                     "last_status": tr.status[k][-1],
+                     "first_lost": f"frame {frames[first[0]]}: {first[1]}" if first else "",
+                     "seconds": seconds / tr.n_objects,
                      # The CSV, written with or without pyarrow (the .parquet, if any, is next to it).
                      "contours": written[0].name if written[0].exists() else "", "tracks": written[1].name})
     return rows

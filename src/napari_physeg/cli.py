@@ -553,10 +553,9 @@ def _track(args) -> int:
                                      callback=_ProgressBar(), **options)
     for k in range(tr.n_objects):
         counts = {s: tr.status[k].count(s) for s in dict.fromkeys(tr.status[k])}
-        lost = [t for t, why in enumerate(tr.reason[k]) if why]
-        first = min(lost, key=lambda t: abs(t - tr.start)) if lost else None
+        first = tr.first_lost(k)
         print(f"object {k}: " + ", ".join(f"{n} {s}" for s, n in counts.items())
-              + (f" (first lost on frame {frames[first]}: {tr.reason[k][first]})" if lost else ""))
+              + (f" (first lost on frame {frames[first[0]]}: {first[1]})" if first else ""))
     print(f"wrote {', '.join(str(p) for p in written if p.exists())} ({tr.timings['total']:.1f} s)")
     # A frame that could not be used stopped the run (its warning says which): what was done is written.
     return 1 if tr.stop_reason != "completed" or any(LOST in row for row in tr.status) else 0

@@ -668,6 +668,8 @@ def test_an_object_that_vanishes_is_lost_not_returned_as_garbage():
     assert tr.status[0] == [TRACKED] * 4 + [LOST] * 3
     assert all(c is None for c in tr.contours[0][4:])
     assert tr.reason[0][:4] == [""] * 4 and all(tr.reason[0][4:])
+    assert tr.first_lost(0) == (4, tr.reason[0][4]) and track(_disk_movie(centres[:3]), _circle((48, 48), 16)) \
+        .first_lost(0) is None
     table = tr.table()
     assert (table[table.frame >= 4].status == LOST).all() and table[table.frame >= 4].row.isna().all()
     assert list(table[table.frame >= 4].reason) == tr.reason[0][4:]

@@ -279,6 +279,11 @@ class TrackingResult:
             raise IndexError(f"object {k!r} is not one of the {self.n_objects} tracked (0 to {self.n_objects - 1})")
         return int(k)
 
+    def first_lost(self, k: int) -> tuple[int, str] | None:
+        """The frame object ``k`` is first lost on, counting from the start
+        frame (either way), and why (see ``reason``); None if it never is."""
+        return _first_lost(self.reason[self._object(k)], self.start) if self.reason else None
+
     def centroids(self, k: int) -> np.ndarray:
         """``(T, 2)`` area centroids of object ``k`` (NaN where it has no contour)."""
         return np.array([area_centroid(c) if c is not None else (np.nan, np.nan)
@@ -840,6 +845,16 @@ def _reasons(run: _Run) -> list[list[str]]:
     return out
 
 
+def _first_lost(reason: list[str], start: int) -> tuple[int, str] | None:
+    """The frame of one object's ``reason`` row nearest ``start`` where it is
+    lost, and why; None if it is lost on none."""
+    lost = [t for t, why in enumerate(reason) if why]
+    if not lost:
+        return None
+    t = min(lost, key=lambda frame: abs(frame - start))
+    return t, reason[t]
+
+
 def frame_runs(frames: list[int]) -> str:
     """Frames (sorted) as runs: "frame 5", "frames 5-9, 20"."""
     runs, start = [], frames[0]
@@ -867,8 +882,7 @@ def _warn_lost(run: _Run, reason: list[list[str]]) -> list[str]:
     for k, row in enumerate(reason):
         lost = [t for t, why in enumerate(row) if why and t != run.start]
         if lost and k not in run.warned and not set(lost) <= no_data:
-            t = min(lost, key=lambda frame: abs(frame - run.start))
-            first.append(f"object {k} on {frame_runs(lost)}: {row[t]}")
+            first.append(f"object {k} on {frame_runs(lost)}: {_first_lost(row, run.start)[1]}")
     if not first:
         return []
     named = "; ".join(first[:LOST_NAMED]) + (f"; and {len(first) - LOST_NAMED} more" if len(first) > LOST_NAMED
