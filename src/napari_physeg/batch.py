@@ -415,11 +415,10 @@ def check_contours(shapes, frame_shape, name) -> None:
     """What :func:`~napari_physeg.core.segment` would refuse for a contour (fewer than 3 nodes but
     one, a click; wholly outside the image), found before the first one runs; ``name`` names the
     contours in the message."""
-    from .core._validation import clicked
-    from .core.contour import as_contour
+    from .core.contour import as_drawing
 
     for k, shape in enumerate(shapes):
-        c = as_contour(clicked(shape), name=f"shape {k} of {name}")
+        c = as_drawing(shape, name=f"shape {k} of {name}")
         if np.any(c.max(0) < 0) or np.any(c.min(0) > np.array(frame_shape) - 1):
             raise ValueError(f"shape {k} of {name} lies wholly outside the image ({frame_shape[0]} x "
                              f"{frame_shape[1]} px): check that the contours were drawn on this image")
@@ -621,8 +620,7 @@ def drawn_frame(leading, name) -> int | None:
 
 def _checked_run(inputs, inits, out):
     """Inputs that exist, contours as tuples of float lists, a writable out."""
-    from .core._validation import clicked
-    from .core.contour import as_contour
+    from .core.contour import as_drawing
 
     # Absolute: the workers of a cluster may start elsewhere (the files on a shared file system).
     # One path is one input (a string is not a list of its letters).
@@ -647,7 +645,7 @@ def _checked_run(inputs, inits, out):
     check_inputs_kept(out, paths + ([inits] if isinstance(inits, (str, Path)) else []))
     if isinstance(inits, (str, Path)):
         inits = read_shapes_csv(inits)
-    inits = tuple(as_contour(clicked(c), name=f"contour {k}").tolist() for k, c in enumerate(inits))
+    inits = tuple(as_drawing(c, name=f"contour {k}").tolist() for k, c in enumerate(inits))
     if not inits:
         raise ValueError("no initial contour given")
     check_writable(out, folder=True)

@@ -16,7 +16,7 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist, pdist
 
-from ._validation import node_array
+from ._validation import clicked, node_array
 
 __all__ = [
     "as_contour",
@@ -74,6 +74,12 @@ def as_contour(points, *, name: str = "contour", min_nodes: int = 3) -> np.ndarr
     if singular[1] <= 1e-9 * singular[0]:
         raise ValueError(f"{name} is degenerate: its nodes lie on one line and enclose no area")
     return np.ascontiguousarray(arr)
+
+
+def as_drawing(points, *, name: str = "contour") -> np.ndarray:
+    """:func:`as_contour` of a person's drawing, where one point is a click
+    (a circle of a few pixels about it, see :func:`._validation.clicked`)."""
+    return as_contour(clicked(points), name=name)
 
 
 def signed_area(contour: np.ndarray) -> float:

@@ -545,11 +545,10 @@ def _ground_about_a_hole(s: _DrawingReading, image_sides) -> float | None:
     than the body about it: a thin wall that rings a region at the ground's
     level (a membrane-stained cell) is that region's background.
     """
-    shape, body_level = s.intensity.shape, s.outside
+    body_level = s.outside
     if np.isnan(body_level) or abs(body_level - s.on_line) <= 2 * s.floor:
         return None
-    extent = _reach_in_view(s.drawing, shape)
-    rings = s.intensity[extent & ~_fill(_scaled(s.drawing, _OUTER_RINGS[0][0]), shape)]
+    extent, rings = _far_rings(s.intensity, s.drawing, inside=True)
     ground = _other_level(rings, body_level, s.floor)
     if (ground - body_level) * np.sign(s.on_line - body_level) < abs(s.on_line - body_level) - s.floor:
         return None
@@ -914,8 +913,7 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, ima
     might = least if traced else max(abs(texture - on_line), floor)
     if max(intensity.max() - on_line, on_line - intensity.min()) <= might:
         return None, _FAR_SCALE  # no level differs enough (most drawings: cheaper than reading the rings)
-    extent = _reach_in_view(drawing, shape) if inside else _fill(_scaled(drawing, _FAR_SCALE), shape)
-    rings = intensity[extent & ~_fill(_scaled(drawing, _OUTER_RINGS[0][0]), shape)]
+    extent, rings = _far_rings(intensity, drawing, inside)
     far = _other_level(rings, on_line, floor)
     dome = abs(far - on_line) < least
     if abs(far - on_line) <= might or (dome and (far - on_line) * (texture - on_line) <= 0):
@@ -949,6 +947,15 @@ def _enclosing_background(intensity, drawing, line, on_line, texture, floor, ima
     if piece is None or np.count_nonzero(_on_side(intensity, texture, on_line)[piece]) >= 0.5 * piece.sum():
         return None, _FAR_SCALE
     return far, scale
+
+
+def _far_rings(intensity, drawing, inside: bool):
+    """The pixels out to the far rings' reach about ``drawing`` (see
+    :func:`_reach_in_view` for a drawing read as inside its object) and the
+    levels of those beyond its outer rings' start."""
+    shape = intensity.shape
+    extent = _reach_in_view(drawing, shape) if inside else _fill(_scaled(drawing, _FAR_SCALE), shape)
+    return extent, intensity[extent & ~_fill(_scaled(drawing, _OUTER_RINGS[0][0]), shape)]
 
 
 #: How many times further than the far rings an object's body is looked

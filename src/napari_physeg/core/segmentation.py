@@ -1650,7 +1650,12 @@ LEAST_WIDTH = 1.0
 
 def _folded(contour: np.ndarray, shape) -> bool:
     """Whether ``contour``, away from the image's sides, is thinner than LEAST_WIDTH on average."""
-    return 2.0 * abs(signed_area(contour)) < LEAST_WIDTH * perimeter(contour) and _sides_met(contour, shape) == 0
+    return _thinner_than(contour, LEAST_WIDTH) and _sides_met(contour, shape) == 0
+
+
+def _thinner_than(contour: np.ndarray, width: float) -> bool:
+    """Whether ``contour`` is thinner than ``width`` px on average (twice its area over its length)."""
+    return 2.0 * abs(signed_area(contour)) < width * perimeter(contour)
 
 
 def _checked_avoid(avoid, shape) -> np.ndarray | None:
@@ -1802,7 +1807,7 @@ def _magnified(view: MagnifiedView, features: _FeatureWindow, options: dict, t_s
 def _encloses_nothing(contour: np.ndarray) -> bool:
     """Whether ``contour`` is thinner than half a pixel on average (twice its
     area over its length): a sliver, not an outline."""
-    return 2.0 * abs(signed_area(contour)) < 0.5 * perimeter(contour)
+    return _thinner_than(contour, 0.5)
 
 
 def _before_collapse(features: _FeatureWindow, settled, drawing, steps: int, max_line_length: float):

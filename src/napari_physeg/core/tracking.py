@@ -45,8 +45,8 @@ from skimage.filters import threshold_otsu
 from skimage.segmentation import watershed
 
 from ._drain import drain
-from ._validation import check_callback, check_count, check_drawing, clicked, signature_of
-from .contour import (area_centroid, as_contour, bounding_window, closest_on_polyline, depth_inside, nearest_node,
+from ._validation import check_callback, check_count, check_drawing, signature_of
+from .contour import (area_centroid, as_contour, as_drawing, bounding_window, closest_on_polyline, depth_inside, nearest_node,
                       outward_normals, perimeter, positively_oriented, remove_loops, resample, rotation_matrix,
                       signed_area, through_nodes, window_mask)
 from .background import plane_removed
@@ -393,7 +393,7 @@ def _check_inits(inits, frame_shape):
         inits = [inits]
     # As segment() checks its drawing (its error, before any frame is read,
     # rather than the object reported lost on the start frame).
-    out = [check_drawing(as_contour(clicked(c), name=f"inits[{k}]"), f"inits[{k}]") for k, c in enumerate(inits)]
+    out = [check_drawing(as_drawing(c, name=f"inits[{k}]"), f"inits[{k}]") for k, c in enumerate(inits)]
     if not out:
         raise ValueError("inits is empty: give one (N, 2) contour per object to track")
     for k, c in enumerate(out):
@@ -770,9 +770,9 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
             said += _warn_not_found(run, image) if t == start else _warn_divided(run, t, step)
             if t != start:
                 dimmed += _faded_as_the_frame_dimmed(run, t, brightness)
-                together += _lost_together(run, t, step, image, shared.missing)
                 if (nothing := _nothing_to_find(run, t, image, shared.missing)) is not None:
                     run.nothing_there[t] = nothing
+                together += _lost_together(run, t, step, nothing)
         if stop_reason == "cancelled":
             break
     said += _warn_dimmed(dimmed) + _warn_lost_together(together)
@@ -825,17 +825,17 @@ def _reasons(run: _Run) -> list[list[str]]:
         for t, status in enumerate(run.status[k]):
             if status != LOST:
                 continue
-            ended = [d for d in seen.divided if (t - d) * (d - run.start) >= 0 and d != run.start]
+            step = 1 if t > run.start else -1
+            ended = _division_before(seen, t, run.start, step)
             if t in run.nothing_there:
                 row[t] = run.nothing_there[t]
             elif t in seen.divided:
                 row[t] = "it divided here: its two bodies stand apart (see the warnings)"
-            elif ended:
-                row[t] = f"its track ended where it divided, on frame {ended[0]}"
+            elif ended is not None:
+                row[t] = f"its track ended where it divided, on frame {ended}"
             elif seen.why.get(t):
                 row[t] = seen.why[t]
             else:
-                step = 1 if t > run.start else -1
                 went = t
                 while 0 <= went - step < len(row) and run.status[k][went - step] == LOST and went != run.start:
                     went -= step
@@ -902,12 +902,12 @@ LOST_TOGETHER_SHARE = 1 / 3
 LOST_TOGETHER_LEAST = 3
 
 
-def _lost_together(run: _Run, t: int, step: int, image: np.ndarray, missing) -> list[tuple[int, int, int, bool]]:
-    """``[(t, lost, followed, blank)]`` if frame ``t`` (``image``, its NaN
-    pixels filled) lost many of the objects followed on the frame before (see
-    LOST_TOGETHER_SHARE), else ``[]``; ``blank``: the frame holds one value. A
-    frame without data is warned of on its own."""
-    if missing is not None and missing.all():
+def _lost_together(run: _Run, t: int, step: int, nothing: str | None) -> list[tuple[int, int, int, bool]]:
+    """``[(t, lost, followed, blank)]`` if frame ``t`` lost many of the
+    objects followed on the frame before (see LOST_TOGETHER_SHARE), else
+    ``[]``; ``blank``: the frame holds one value (``nothing``: see
+    _nothing_to_find). A frame without data is warned of on its own."""
+    if nothing == NO_DATA.format(t=t):
         return []
     followed = [k for k in range(len(run.inits)) if run.status[k][t - step] == TRACKED]
     lost = [k for k in followed if run.status[k][t] == LOST and t not in run.seen[k].fades
@@ -915,7 +915,7 @@ def _lost_together(run: _Run, t: int, step: int, image: np.ndarray, missing) -> 
     if len(lost) < max(LOST_TOGETHER_LEAST, LOST_TOGETHER_SHARE * len(followed)):
         return []
     run.warned.update(lost)
-    return [(t, len(lost), len(followed), bool(np.ptp(image) == 0))]
+    return [(t, len(lost), len(followed), nothing is not None)]
 
 
 def _warn_lost_together(frames: list) -> list[str]:
@@ -1644,12 +1644,18 @@ def _history(run: _Run, k: int, t: int, step: int):
     the direction of travel (after a gap, the last one only: where it went
     meanwhile is not known)."""
     last = _last_seen(run.status[k], t, step)
-    # A division ends a track, from its frame on in the direction of travel (see _divisions).
-    if last is None or any((t - d) * step >= 0 and (d - run.start) * step > 0 for d in run.seen[k].divided):
+    if last is None or _division_before(run.seen[k], t, run.start, step) is not None:
         return None, []
     contours = run.contours[k]
     before = contours[last - step] if last == t - step and 0 <= last - step < len(contours) else None
     return last, [c for c in (before, contours[last]) if c is not None]
+
+
+def _division_before(seen: _Seen, t: int, start: int, step: int) -> int | None:
+    """The frame, if any, of a division that ended the object's track before
+    frame ``t`` (or on it), going from ``start`` in the direction ``step``: a
+    division ends a track from its frame on (see _divisions)."""
+    return next((d for d in seen.divided if (t - d) * step >= 0 and (d - start) * step > 0), None)
 
 
 def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, handed=None):
