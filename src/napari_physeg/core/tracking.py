@@ -46,9 +46,9 @@ from skimage.segmentation import watershed
 
 from ._drain import drain
 from ._validation import check_callback, check_count, check_drawing, signature_of
-from .contour import (area_centroid, as_contour, as_drawing, bounding_window, closest_on_polyline, depth_inside, nearest_node,
-                      outward_normals, perimeter, positively_oriented, remove_loops, resample, rotation_matrix,
-                      signed_area, through_nodes, window_mask)
+from .contour import (area_centroid, as_contour, as_drawing, bounding_window, closest_on_polyline, depth_inside,
+                      nearest_node, outward_normals, perimeter, positively_oriented, remove_loops, resample,
+                      rotation_matrix, signed_area, through_nodes, window_mask)
 from .background import plane_removed
 from .dynamics import DivergenceError
 from .features import _masked_as_missing, _without_missing
