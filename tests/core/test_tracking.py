@@ -106,7 +106,7 @@ def test_arc_origin_is_carried_and_maps_have_the_movie_shape(tracked):
     assert np.isfinite(curvature_map).all() and curvature_map.mean() > 0
     with pytest.raises(ValueError, match="quantity"):
         tracked.membrane_map(0, "speed")
-    for ask in (tracked.membrane_map, tracked.centroids):  # numpy's bare IndexError before session 64
+    for ask in (tracked.membrane_map, tracked.centroids, tracked.first_lost):  # numpy's bare IndexError before session 64
         with pytest.raises(IndexError, match="object 3 is not one of the 1 tracked"):
             ask(3)
 

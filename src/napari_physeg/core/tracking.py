@@ -282,7 +282,8 @@ class TrackingResult:
     def first_lost(self, k: int) -> tuple[int, str] | None:
         """The frame object ``k`` is first lost on, counting from the start
         frame (either way), and why (see ``reason``); None if it never is."""
-        return _first_lost(self.reason[self._object(k)], self.start) if self.reason else None
+        k = self._object(k)
+        return _first_lost(self.reason[k], self.start) if self.reason else None
 
     def centroids(self, k: int) -> np.ndarray:
         """``(T, 2)`` area centroids of object ``k`` (NaN where it has no contour)."""
