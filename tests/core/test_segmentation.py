@@ -431,6 +431,20 @@ def test_contour_partly_outside_is_clipped_with_a_warning():
     assert iou(res.contour, obj.mask) >= 0.9
 
 
+def test_a_click_by_the_image_s_side_is_not_warned_of_as_clipped():
+    """A click a pixel from the side: the circle it stands for is the
+    package's, and its nodes beyond the image no news to the user, who
+    clicked inside it (an outside tester's clicks on rods by the side were
+    told "5 of 12 nodes of init lie outside the image and were clipped")."""
+    import warnings
+
+    obj = data.ellipse()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        res = segment(obj.image, np.array([[1.0, 60.0]]), max_steps=3)  # (a UserWarning raises)
+    assert not res.converged  # (on the ground: 3 steps find nothing there)
+
+
 def test_a_figure_8_drawing_is_warned_of_and_an_overshooting_lasso_is_not():
     """Found by probing (session 29): a bow-tie drawn around a disk ended on
     part of it (IoU 0.77), silently. A lasso that overshoots its start makes

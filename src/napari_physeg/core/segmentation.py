@@ -37,7 +37,8 @@ from .materials import Material, get_material, suggested_stiffness
 from .region import (RegionModel, _box_of, _disk, _fill, _least_contrast, _scaled, drawing_levels,
                      drawing_limit, level_beyond_object, object_region, objectness)
 from .subpixel import level_along, polish
-from ._validation import CLICK_RADIUS, check_callback, check_count, check_number, signature_of, with_defaults
+from ._validation import (CLICK_RADIUS, check_callback, check_count, check_number, clicked, signature_of,
+                          with_defaults)
 
 __all__ = ["segment", "iter_segment", "SegmentationResult", "SegmentationProgress", "FrameFeatures", "region_features"]
 
@@ -1511,7 +1512,9 @@ def _set_up(options: dict) -> _Setup:
         # (stacklevel: this, _set_up, _evolve, drain, segment, its caller)
         warn_if_figure_eight(drawing, "init", "the result may hold a part of the object only; draw one outline that "
                              "does not cross itself, around (or inside) the object", stacklevel=6)
-    init = _clip_to_image(init, image.shape, warn)
+    # A click's circle is the package's, not the user's: its nodes beyond the
+    # image, clipped, are no news to someone who clicked inside it.
+    init = _clip_to_image(init, image.shape, warn and clicked(o["init"]) is o["init"])
     first = init if start is None else _clip_to_image(check_contour(start, "start"), image.shape, warn)
     nodes, spacing, sigma = _initial_nodes(first, o["n_nodes"], o["sigma"], o["sigma_factor"])
     if o["integrator"] == "modal" and len(nodes) > MODAL_MAX_NODES:
