@@ -1029,6 +1029,25 @@ def test_a_contour_along_the_image_s_sides_leaked_only_if_the_drawing_did_not_re
     assert not _took_the_whole_image(np.array([[-0.5, -0.5], [-0.5, 89.5], [40, 89.5], [40, -0.5]]), click, (80, 90))
 
 
+def test_a_contour_along_a_padded_frame_took_most_of_the_image():
+    """A contour 7-9 px inside the sides of a 470 x 469 image (a frame of
+    white padding lies between), holding 93 % of it from a lasso 69 times
+    smaller, took the ground, not an object (an outside tester's
+    phase-contrast field: said converged). A disk of half the image, grown
+    from a click at its edge, lies a tenth of the side from each side: an
+    object, not a leak."""
+    from napari_physeg.core.segmentation import _took_most_of_the_image
+
+    shape = (470, 469)
+    frame = np.array([[8.5, 8.5], [8.5, 461.3], [462.4, 461.3], [462.4, 8.5]])
+    t = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    lasso = np.column_stack([30 + 30 * np.sin(t), 240 + 31 * np.cos(t)])
+    assert _took_most_of_the_image(frame, lasso, shape)
+    half = np.column_stack([235 + 187 * np.sin(t), 234 + 187 * np.cos(t)])
+    click = np.column_stack([50 + 3 * np.sin(t), 234 + 3 * np.cos(t)])
+    assert not _took_most_of_the_image(half, click, shape)
+
+
 def test_a_circle_wholly_beyond_the_image_that_stays_on_its_frame_is_not_converged():
     """A circle 1.4 times the horse, wholly beyond the image, is clipped to
     its four sides; in noise the contour stayed there, the horse and its

@@ -554,14 +554,23 @@ def _took_the_whole_image(contour: np.ndarray, drawing: np.ndarray, shape) -> bo
 MOST_OF_THE_IMAGE = 0.5
 MOST_GROWTH = 20.0
 
+#: A contour runs along a side of the image when it comes within this share
+#: of the image's extent of it: a frame of constant padding (or a
+#: registration's margin) may lie between (a phase-contrast field padded
+#: with white 7 px wide: a lasso about one cell rested 7-9 px from each
+#: side, on the padding's edge, held 93 % of the image and 69 times the
+#: lasso, and said converged). A disk of half a square image lies a tenth
+#: of its side from each side.
+ALONG_THE_SIDE = 0.03
+
 
 def _took_most_of_the_image(contour: np.ndarray, drawing: np.ndarray, shape) -> bool:
     """Whether ``contour`` holds more than MOST_OF_THE_IMAGE of the image,
-    along two of its sides or more, and MOST_GROWTH times what ``drawing``
-    (clipped to the image) holds."""
+    along two of its sides or more (see ALONG_THE_SIDE), and MOST_GROWTH
+    times what ``drawing`` (clipped to the image) holds."""
     area = abs(signed_area(contour))
     return bool(area > MOST_OF_THE_IMAGE * shape[0] * shape[1] and area > MOST_GROWTH * abs(signed_area(drawing))
-                and _sides_met(contour, shape) >= 2)
+                and _sides_met(contour, shape, max(1.0, ALONG_THE_SIDE * min(shape))) >= 2)
 
 
 #: A contour with at least this share of its nodes on the image's sides, along
