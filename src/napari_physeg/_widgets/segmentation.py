@@ -58,7 +58,7 @@ from ._inputs import (
 from ._layers import (
     contours_to_labels,
     contours_to_shapes_data,
-    PointsAsPolygon,
+    PointsAsClicks,
     image_transform_kwargs,
     shapes_to_image_coords,
     slice_index,
@@ -321,7 +321,7 @@ def _plane_2d(image_layer, leading, channel: str | None) -> np.ndarray:
 
 
 def _checked_layers(image_layer, shapes_layer, world_point):
-    """The initial contours' layer (a Points layer read as one polygon),
+    """The initial contours' layer (a Points layer read as clicks),
     once both layers are there and of the right kind (InputError saying
     what to do if not)."""
     if image_layer is None:
@@ -334,7 +334,7 @@ def _checked_layers(image_layer, shapes_layer, world_point):
                          "a polygon, ellipse or rectangle around (or inside) the object and select it in "
                          "'initial contours'")
     if isinstance(shapes_layer, Points):
-        shapes_layer = PointsAsPolygon(shapes_layer, world_point, click=True)
+        shapes_layer = PointsAsClicks(shapes_layer, world_point)
     if (why := nothing_drawn(shapes_layer, "segment")) is not None:
         raise InputError(why)
     return shapes_layer
@@ -538,7 +538,7 @@ _TIPS = {
     "channel": "Which channel of an RGB image to segment: red, green, blue, or grey (the luminance).",
     "shapes": "Shapes layer with the initial contours: polygons, lassos, ellipses, rectangles or paths drawn "
               "around (or inside) the objects. Each shape on the current slice is segmented. A Points layer "
-              "works too: its points on the current slice, in the order clicked, are one contour.",
+              "works too: each of its points on the current slice is a click inside one object.",
     "sigma": "Width of the interaction between nodes relative to the node spacing, typically 0.75-1.5 "
              "(max 2). Larger couples more nodes: a smoother, stiffer contour.",
     "w_edges": "Weight of the edge force (Shen-Castan edges pull nodes onto the border), 0-1, typically 0.4. "

@@ -33,7 +33,7 @@ from skimage.util import montage
 from ..core import LEFT, LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, segment, track
 from ._inputs import (MAP_NUMBERS_KEY, PHYSICS_TIPS, PREVIEW_COLOR, PREVIEW_KEY, PhysicsControls, check_plane_view,
                       contour_layer_choices, core_default, image_layer_choices, nothing_drawn, off_image)
-from ._layers import PointsAsPolygon, image_transform_kwargs, shapes_to_image_coords, slice_index, slices_drawn_on
+from ._layers import PointsAsClicks, image_transform_kwargs, shapes_to_image_coords, slice_index, slices_drawn_on
 from ._worker import WorkerWidget, relay
 
 __all__ = ["TrackingWidget", "tracking_layer_data", "node_trajectories"]
@@ -224,7 +224,8 @@ def track_movie(run, cancel, interval: float = 0.0):
 _TIPS = {
     **PHYSICS_TIPS,
     "image": "An image with a time axis: its first axis is time, its last two the frame.",
-    "shapes": "Contours drawn on one frame of the movie (around or inside each object). Stand on that frame.",
+    "shapes": "Contours drawn on one frame of the movie (around or inside each object), or a Points layer with a "
+              "click inside each object. Stand on that frame.",
     "max_steps": "Time steps per object and frame (each frame starts from the previous result).",
     "run": "Track the contours of the current frame through the whole movie (forward, then backward).",
     "cancel": "Stop: the frames tracked so far become layers.",
@@ -300,8 +301,8 @@ class TrackingWidget(WorkerWidget):
         point = tuple(self.viewer.dims.point)
         check_plane_view(len(point), self.viewer.dims.ndisplay, tuple(self.viewer.dims.order),
                          "track from the current frame")
-        if isinstance(shapes, Points):  # its points on this frame, in the order clicked: one contour
-            shapes = PointsAsPolygon(shapes, point, click=True)
+        if isinstance(shapes, Points):  # its points on this frame: a click on each object
+            shapes = PointsAsClicks(shapes, point)
         if (why := nothing_drawn(shapes, "track")) is not None:  # (not "go to the frame ...": nothing is drawn)
             raise ValueError(why)
         sliced = shapes_to_image_coords(shapes, image, world_point=point)
