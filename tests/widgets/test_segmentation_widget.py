@@ -679,6 +679,22 @@ def test_closing_the_viewer_during_a_run_is_clean(make_napari_viewer, qtbot):
 # --------------------------------------------------------------------------
 
 
+def test_shapes_partly_beyond_the_image_are_one_warning_and_clicks_by_its_side_none():
+    """An outside GUI tester: 40 circles along the image's sides gave 40
+    warnings from one run; a click by the side was told its circle's nodes
+    lie outside the image (the circle is the package's)."""
+    from napari.layers import Image, Points, Shapes
+
+    image = Image(np.zeros((60, 80)), name="image")
+    t = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    circles = [np.column_stack([r + 8 * np.sin(t), c + 8 * np.cos(t)]) for r, c in ((2, 20), (30, 40), (57, 60))]
+    job = prepare_segmentation(image, Shapes(circles, shape_type="polygon", name="drawn"))
+    beyond = [w for w in job.warnings if "outside the image" in w]
+    assert len(job.contours) == 3 and len(beyond) == 1 and "shapes 0, 2 of 'drawn'" in beyond[0]
+    job = prepare_segmentation(image, Points([[1.0, 20.0], [30.0, 40.0]], name="clicks"))
+    assert len(job.contours) == 2 and not any("outside the image" in w for w in job.warnings)
+
+
 def test_headless_scripting(qtbot, hand):
     viewer = napari.Viewer(show=False)
     try:

@@ -340,12 +340,14 @@ def _checked_layers(image_layer, shapes_layer, world_point):
     return shapes_layer
 
 
-def _contours_on_image(sliced, image_shape, shapes_name: str, image_name: str):
+def _contours_on_image(sliced, image_shape, shapes_name: str, image_name: str, clicks: bool = False):
     """The contours of the current slice that lie on the image, their shapes'
-    indices, and warnings for those partly beyond it or left out (InputError
-    if none is left, or one has NaN coordinates)."""
+    indices, and warnings for those partly beyond it (not for ``clicks``,
+    whose circles are the package's) or left out (InputError if none is
+    left, or one has NaN coordinates). One warning says which shapes lie
+    partly beyond the image: 40 circles along its sides gave 40."""
     hi = np.array(image_shape, dtype=float) - 1.0
-    contours, indices, warnings, off_images = [], [], [], []
+    contours, indices, warnings, off_images, partly = [], [], [], [], []
     for k, c in zip(sliced.indices, sliced.contours):
         if not np.all(np.isfinite(c)):
             raise InputError(f"shape {k} of {shapes_name!r} has non-finite coordinates (NaN); redraw it")
@@ -354,16 +356,17 @@ def _contours_on_image(sliced, image_shape, shapes_name: str, image_name: str):
         if outside_image:
             off_images.append(outside_image)
             continue
-        outside = np.any((c < 0) | (c > hi), axis=1)
-        if outside.any():
+        if np.any((c < 0) | (c > hi)):
             # Passed as drawn: the part beyond the image tells the core where
             # the background is (its copy clipped onto the image would not).
-            warnings.append(f"{int(outside.sum())} of {len(c)} vertices of shape {k} lie outside the image and "
-                            "were moved onto its border")
+            partly.append(k)
         contours.append(c)
         indices.append(k)
     if not contours:
         raise InputError("; ".join(off_images))
+    if partly and not clicks:
+        warnings.append(f"shape{'s' if len(partly) > 1 else ''} {', '.join(map(str, partly))} of {shapes_name!r} "
+                        "lie partly outside the image: the vertices beyond it were moved onto its border")
     warnings.extend(f"{message}; it was left out" for message in sliced.refused + off_images)
     return contours, indices, warnings
 
@@ -412,7 +415,8 @@ def prepare_segmentation(image_layer, shapes_layer, *, world_point=None, channel
         where = f" (slice {leading})" if leading else ""
         raise InputError(f"no shape of {shapes_layer.name!r} lies on the current slice{where}: draw an initial "
                          f"contour on this slice, or move to a slice with one ({sliced.off_slice} shapes elsewhere)")
-    contours, indices, warnings = _contours_on_image(sliced, plane.shape, shapes_layer.name, image_layer.name)
+    contours, indices, warnings = _contours_on_image(sliced, plane.shape, shapes_layer.name, image_layer.name,
+                                                     clicks=isinstance(shapes_layer, PointsAsClicks))
     missing = int(np.isnan(plane).sum()) if plane.dtype.kind == "f" else 0
     if missing:  # said here: the core's warning is not relayed (see relay_warnings)
         warnings.append(f"{missing} NaN pixels of {image_layer.name!r} ({missing / plane.size:.1%}) were read as no "
