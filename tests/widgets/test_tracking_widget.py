@@ -207,6 +207,28 @@ def test_one_point_clicked_inside_a_cell_is_a_click(movie_in_viewer, wait_done):
     assert widget.last_result.status == [["tracked"] * 8]
 
 
+def test_the_time_slider_follows_the_preview_unless_the_user_moves_it(movie_in_viewer, wait_done):
+    """The live preview is drawn on the frame being tracked: the slider
+    follows it there, and comes back to the start frame at the end (it
+    stayed on the start frame, and an outside tester saw no preview at
+    all); a slider the user moved is left where they put it."""
+    from napari_physeg.core.tracking import TrackingProgress
+
+    viewer, widget = movie_in_viewer
+    widget.run()
+    wait_done(widget)
+    assert widget.last_result.status == [["tracked"] * 8] and viewer.dims.current_step[0] == 0
+    contour = widget.last_result.contours[0][5]
+    widget._followed, widget._start_frame = None, 0  # (a run begins)
+    for frame in (4, 5):
+        widget._show_preview(TrackingProgress(frame, 0, contour, "tracked", frame, 8))
+        assert viewer.dims.current_step[0] == frame
+    viewer.dims.set_current_step(0, 2)  # the user looks at frame 2
+    widget._show_preview(TrackingProgress(6, 0, contour, "tracked", 6, 8))
+    assert viewer.dims.current_step[0] == 2
+    widget._remove_preview()
+
+
 def test_the_preview_does_not_take_the_users_selection(movie_in_viewer, qtbot, wait_done):
     """The live preview layer goes in without changing which layer the user
     has selected (napari selects every layer it adds: the layer controls

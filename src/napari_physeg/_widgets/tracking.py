@@ -253,6 +253,7 @@ class TrackingWidget(WorkerWidget):
         self.last_result: TrackingResult | None = None
         self.output_layers: list = []
         self._preview = None
+        self._followed = self._start_frame = None  # (see _follow)
         self._run_info = None
         self._movie_name = None  # the last run's movie, for the file name the export suggests
         self._image = ComboBox(label="movie (image)", choices=self._image_choices, tooltip=_TIPS["image"])
@@ -346,6 +347,7 @@ class TrackingWidget(WorkerWidget):
         self._movie_name = image.name
         self._run_info = dict(transform=image_transform_kwargs(image), name=f"{image.name} tracked ({material})",
                               frame_shape=tuple(frames.shape[-2:]))
+        self._followed, self._start_frame = None, start  # (see _follow)
         self._begin(f"Tracking {len(contours)} object(s) from frame {start}…")
         total = len(contours) * frames.shape[0]
         # Cancel stops after the current object and frame; what was tracked is kept.
@@ -373,6 +375,21 @@ class TrackingWidget(WorkerWidget):
                                                      metadata={PREVIEW_KEY: True}, **common))
         else:
             self._preview.data = data
+        self._follow(update.frame)
+
+    def _follow(self, frame: int):
+        """Move the time slider to ``frame``, where the preview is drawn, so
+        that it shows (it stayed on the start frame while the preview ran on:
+        an outside tester saw no preview at all), unless the user moved the
+        slider since it was last moved here."""
+        axis = self.viewer.dims.ndim - 3
+        if axis < 0 or self._preview is None:
+            return
+        if self._followed is not None and self.viewer.dims.current_step[axis] != self._followed:
+            return  # the user looks at another frame: leave it
+        world = np.asarray(self._preview.data_to_world(np.array([frame, 0.0, 0.0])), dtype=float)
+        self.viewer.dims.set_point(axis, float(world[-3]))
+        self._followed = self.viewer.dims.current_step[axis]
 
     def _remove_preview(self):
         if self._preview is not None and self._preview in self.viewer.layers:
@@ -392,6 +409,7 @@ class TrackingWidget(WorkerWidget):
             self._fail("Nothing was tracked: no object was found on the start frame (see the warnings); "
                        "draw around (or inside) each object on the frame you stand on")
             return
+        self._follow(self._start_frame)  # back where the user drew (the result's layers hold every frame)
         preview, self._preview = self._preview, None
         try:
             for data, meta, kind in tracking_layer_data(result, **self._run_info):
