@@ -558,12 +558,15 @@ def test_a_circle_on_the_ground_that_spreads_over_it_has_leaked(dsb, centre, rad
     inside a dark object, the contour spreads over the ground, 190-290 times
     the drawing, until the farthest reach of such a drawing holds 23-46 % of
     its nodes and nuclei the rest. That was reported converged; no border of
-    the ground held it, and the evolution stops there with "leaked"."""
+    the ground held it, and the evolution stops there with "leaked". (Where
+    the ground just about the circle differs from its middle by many
+    standard errors, since session 71, it is not read as inside the ground:
+    the contour stalls near it, sooner.)"""
     image, labels = dsb
     drawing = circle(np.array(centre, float), radius)
     assert not (polygon2mask(labels.shape, drawing) & (labels > 0)).any()
     res = segment(image, drawing)
-    assert (res.stop_reason, res.converged) == ("leaked", False)
+    assert res.stop_reason in ("leaked", "stalled") and not res.converged
     assert res.steps < 1000
 
 

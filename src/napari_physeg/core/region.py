@@ -157,6 +157,24 @@ _INSIDE_LIMIT = 25.0
 #: was invisible: 1.2 % of the range, ten deviations of the smoothed noise.)
 MIN_CONTRAST_SIGMAS = 3.0
 MIN_CONTRAST = 0.005
+#: Gaussian noise puts 0.13 % of a region's pixels more than three
+#: deviations (the least contrast) above its level and as many below; a
+#: drawing with more than this share of its pixels so far from its line's
+#: level both ways holds structure, not one faint object and noise.
+_TWO_SIDED_SHARE = 0.01
+#: The contour reads the object pixel by pixel along its normals: below
+#: this share of one pixel's least contrast (1.5 deviations of the smoothed
+#: noise), a quarter of the object's pixels lie nearer the background's
+#: level than its own, and the contour rests on noise, however many pixels
+#: tell the two levels apart (the inside of a nuclear rim, 0.07 of it
+#: darker than the ground about it: a ragged contour, said converged).
+_PIXEL_SHARE = 0.5
+#: A median's standard error over a mean's, in Gaussian noise (sqrt(pi / 2)).
+_MEDIAN_EFFICIENCY = float(np.sqrt(np.pi / 2.0))
+#: The noise's standard deviation in the intensity the levels are read on
+#: (smoothed with a Gaussian of 1 px) over the pixels' own: that intensity's
+#: pixels are averages of about 1 / _SMOOTHED_GAIN**2 (4 pi) pixels.
+_SMOOTHED_GAIN = 1.0 / (2.0 * np.sqrt(np.pi))
 
 
 @dataclass(frozen=True)
@@ -331,7 +349,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
         # its line on the edge's ramp gave the background another level and
         # the border moved at each new start (on crowded nuclei, 107 of 226
         # results started from again lost a tenth of their IoU and more).
-        return _traced_model(s.centre, s.outside, s.floor, border)
+        return _traced_model(s.centre, s.outside, s.visible_floor, border)
     inner, outer = _either_side(intensity, s.drawn, s.line, s.size)
     beyond = _beyond_the_border(inner, outer, s.centre, s.outside, s.on_line, s.floor)
     around = _line_around(s)
@@ -348,7 +366,7 @@ def drawing_levels(intensity: np.ndarray, drawing: np.ndarray, polarity: int | N
     elif user_drawing and polarity in (None, np.sign(s.centre - s.outside)) and \
             (border := traced_border_level(intensity, drawing, s.size, s.centre, s.outside, s.floor,
                                            TRACED_AMONG_NEIGHBOURS_SHARE, TRACED_AMONG_NEIGHBOURS_LENGTH)) is not None:
-        return _traced_model(s.centre, s.outside, s.floor, border)
+        return _traced_model(s.centre, s.outside, s.visible_floor, border)
     else:  # inside its object
         obj, background = s.on_line, s.outside
     return _model_of(s, around, obj, background, polarity, user_drawing, image_sides, traced=beyond is not None)
@@ -376,6 +394,7 @@ class _DrawingReading:
     outside: float
     floor: float
     span: float
+    visible_floor: float
 
 
 def _read_drawing(intensity: np.ndarray, drawing: np.ndarray, noise: float | None) -> _DrawingReading:
@@ -400,13 +419,40 @@ def _read_drawing(intensity: np.ndarray, drawing: np.ndarray, noise: float | Non
     drawn = _fill(drawing, shape)
     within = intensity[box][drawn[box]]
     within = within[:: max(1, within.size // _MAX_SAMPLES)]
-    outside = _outside_level(intensity, drawing, centre, on_line, along, within, floor)
+    visible = _least_visible_contrast(floor, within, on_line, along.size, np.count_nonzero(middle[box]))
+    outside = _outside_level(intensity, drawing, centre, on_line, along, within, floor, visible)
     # What differs from the line within the drawing: the object, if the
     # drawing is around it; texture, if inside it. (A classes' split is only
     # made when the pixels' spread leaves room for a rule below to use it.)
     span = max(abs(float(within.max()) - on_line), abs(float(within.min()) - on_line)) if within.size else 0.0
     return _DrawingReading(intensity, drawing, size, line, middle, drawn, along, within, on_line, centre, outside,
-                           floor, span)
+                           floor, span, visible)
+
+
+def _least_visible_contrast(floor: float, within: np.ndarray, on_line: float, n_line: int, n_middle: int) -> float:
+    """The least contrast between a drawing's levels that tells an object
+    there: ``floor`` (a contrast one pixel shows, see _least_contrast) where
+    the levels are the medians of a few pixels, less where they are those of
+    many (``n_line`` on its line, ``n_middle`` in its middle): as many
+    standard errors of the medians' difference as ``floor`` is deviations
+    of one pixel's noise. A nucleus 70 px across, as dim as 2.8 deviations
+    of the smoothed noise (a single pixel's 0.8), is plain to the eye, and
+    its contour comes to rest on it; read as no object, no region force
+    held the contour, which the edges of bright neighbours drew out.
+
+    Not where the pixels the drawing holds (``within``) stand more than
+    ``floor`` from the line's level ``on_line`` both ways (more than
+    _TWO_SIDED_SHARE of them each way): the drawing holds what a pixel's
+    noise does not hide and that is not one faint object (the dark core
+    of a phase-contrast rod in its bright halo, 0.02-0.07 below the ground,
+    took the contour off the halo: IoU 0.80 -> 0.31). Nor less than
+    _PIXEL_SHARE of ``floor``."""
+    beyond = (within - on_line) / floor
+    if min(n_line, n_middle) == 0 or min(np.mean(beyond > 1), np.mean(beyond < -1)) > _TWO_SIDED_SHARE:
+        return floor
+    # A median of n smoothed pixels: the noise of n pixels' mean, not of one smoothed pixel.
+    errors = _MEDIAN_EFFICIENCY * np.sqrt(1.0 / n_line + 1.0 / n_middle) / _SMOOTHED_GAIN
+    return max(MIN_CONTRAST, floor * float(np.clip(errors, _PIXEL_SHARE, 1.0)))
 
 
 def _line_around(s: _DrawingReading) -> bool:
@@ -518,8 +564,13 @@ def _model_of(s: _DrawingReading, around: bool, obj: float, background: float, p
         # The user knows better: take the levels in the order they say.
         obj, background = (max(obj, background), min(obj, background)) if polarity > 0 else \
             (min(obj, background), max(obj, background))
-    return RegionModel(int(polarity), float(obj), float(background), bool(around), s.floor,
-                       user_drawing=user_drawing, reach=reach)
+    # Levels read as the medians of two of the drawing's middle, its line and
+    # a ring outside it are those of many pixels (see _least_visible_contrast);
+    # a level a rule read elsewhere (a ramp's foot, a class of the pixels
+    # within) may be that of a few.
+    many = {obj, background} <= {s.centre, s.on_line, s.outside}
+    return RegionModel(int(polarity), float(obj), float(background), bool(around),
+                       s.visible_floor if many else s.floor, user_drawing=user_drawing, reach=reach)
 
 
 #: A drawing read as inside a region at its line's level lies in a hole of a
@@ -708,15 +759,18 @@ def _ring_mask(drawing, shape, lo: float, hi: float) -> np.ndarray:
     return _fill(_scaled(drawing, hi), shape) & ~_fill(_scaled(drawing, lo), shape)
 
 
-def _outside_level(intensity, drawing, centre, on_line, along, within, floor) -> float:
+def _outside_level(intensity, drawing, centre, on_line, along, within, floor, visible) -> float:
     """The background's level for a drawing made inside the object: that of
     the ring outside it that differs most from the drawing's centre (NaN if
     no ring lies in the view, or only a sliver of one: _RING_SEEN_SHARE).
 
     ``centre`` and ``on_line`` are the levels at the drawing's centre and on
     its line (``along``, the line's pixels; ``within``, the drawing's),
-    ``floor`` the least contrast. Rings further out are read while no near
-    ring differs visibly from the centre. So they are when the near ring that
+    ``floor`` the least contrast of a pixel, ``visible`` that of the medians
+    of many (see _least_visible_contrast). Rings further out are read while
+    no near ring differs visibly from the centre (by ``visible``: the
+    ground about a faint nucleus, read through as no contrast, gave way to
+    bright neighbours further out, and the nucleus was read as a hole in them). So they are when the near ring that
     differs most does not stand out of the scatter of its own pixels or of
     the drawing's, around a line that does not either and differs from the
     centre less (a small drawing inside a textured object): then until one
@@ -738,7 +792,7 @@ def _outside_level(intensity, drawing, centre, on_line, along, within, floor) ->
                 return step
             through = (textured and floor < near_best and abs(on_line - centre) <= near_best
                        and near_best <= _TEXTURE_SPREADS * max(_scatter(best_ring), _scatter(within)))
-        if far and best > (near_best if through else floor):
+        if far and best > (near_best if through else visible):
             break
         ring = intensity[_ring_mask(drawing, intensity.shape, lo, hi)]
         if ring.size < _RING_SEEN_SHARE * (hi ** 2 - lo ** 2) * drawn_area:

@@ -894,7 +894,9 @@ class _FeatureWindow:
             # where its own reading of the drawing sees no object, the
             # image's reading stands (the view's pixel statistics, smoothed
             # by the interpolation, are not the image's).
-            seen = _in_units(self.raw_model, self.levels, least_contrast=self.model.least_contrast)
+            # (At the least contrast of one of the view's pixels: the image's
+            # levels were not read on the view's many pixels.)
+            seen = _in_units(self.raw_model, self.levels, least_contrast=_least_contrast(intensity, noise))
             if seen.is_visible:
                 self.model = seen
         self.polarity = self.model.polarity
