@@ -470,6 +470,18 @@ def test_a_simulation_beside_a_movie_plays_on_its_time_slider_at_its_step(viewer
     assert layer.scale[0] == 5
 
 
+def test_a_slider_with_napari_s_default_label_is_named_for_what_it_is():
+    """An outside GUI tester: beside a movie with napari's default axis
+    labels the message said "Move the '-3' slider"."""
+    from types import SimpleNamespace
+
+    from napari_physeg._widgets.simulation import _slider_name
+
+    assert _slider_name(SimpleNamespace(axis_labels=("-3", "-2", "-1"), ndim=3), 0) == "the time slider"
+    assert _slider_name(SimpleNamespace(axis_labels=("-4", "-3", "-2", "-1"), ndim=4), 1) == "the slider of axis 1"
+    assert _slider_name(SimpleNamespace(axis_labels=("t", "y", "x"), ndim=3), 0) == "the 't' slider"
+
+
 def test_a_and_b_follow_the_matching_it_uses_and_shape_numbers_stay_in_range(dock, wait_done, notes):
     """An outside tester (session 68): the simulation widget, opened after a
     matching of the hands, said it used that matching while a and b stayed on

@@ -341,6 +341,17 @@ _TIPS = {
 }
 
 
+def _slider_name(dims, axis: int) -> str:
+    """How to name the viewer's slider of world ``axis`` to a user: by its
+    label, unless that is napari's default, the axis' number counted from
+    the end ('-3': no slider shows it), when it is the time slider of a movie
+    or the slider of axis ``axis``."""
+    label = str(dims.axis_labels[axis])
+    if not label.lstrip("-").isdigit():
+        return f"the '{label}' slider"
+    return "the time slider" if dims.ndim == 3 else f"the slider of axis {axis}"
+
+
 class SimulationWidget(WorkerWidget):
     """Simulate the deformation of one contour into another (paper section 4.2).
 
@@ -520,7 +531,7 @@ class SimulationWidget(WorkerWidget):
             show_warning("no Tracks layer: napari's tracks have at most 3 spatial axes and the contours have "
                          f"{len(pair.leading) + 2}")
         axis = self.viewer.dims.ndim - len(pair.leading) - 3  # the world axis the frames play on
-        slider = f"'{self.viewer.dims.axis_labels[axis]}'" if axis >= 0 else "'frame'"
+        slider = _slider_name(self.viewer.dims, axis) if axis >= 0 else "the 'frame' slider"
         try:
             for data, meta, kind in simulation_layer_data(outcome, pair, tracks=self._tracks.value,
                                                           material=self._material.value):
@@ -541,8 +552,8 @@ class SimulationWidget(WorkerWidget):
         self._export_btn.enabled = True
         self._status.value = (f"{len(res.frames)} frames, {res.steps} steps, {how}; last frame {gap:.2f} px from "
                               f"the targets on b ({via}, {outcome.seconds:.2f} s)")
-        show_info(f"Simulation {pair.a_label!r} → {pair.b_label!r}: {self._status.value}. Move the {slider} "
-                  "slider to play it")
+        show_info(f"Simulation {pair.a_label!r} → {pair.b_label!r}: {self._status.value}. Move {slider} to "
+                  "play it")
         if not res.converged:
             show_warning(f"the simulation did not come to rest within max steps ({res.steps}); raise 'max steps'")
         crossing = crossing_frames(res)
