@@ -514,6 +514,7 @@ _CLI_TERMS = {
     "TrackingResult.reason (the table's reason column)": "The reason column of OUT/tracks.csv",
     "the segment_options (e.g. max_steps, material and stiffness)": "--steps-per-frame, --material or --stiffness",
     "or pass a Material": "or make one with --young, --poisson and --density",
+    "max_steps and segment_options of track()": "--steps-per-frame, --material or --stiffness",
 }
 
 

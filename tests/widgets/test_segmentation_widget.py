@@ -1018,3 +1018,20 @@ def test_a_node_spacing_too_fine_for_a_large_drawing_gives_it_the_most_nodes_wit
     with pytest.warns(UserWarning, match=f"it gets {MAX_NODES}"):
         assert node_count(drawn, node_spacing=0.5) == MAX_NODES
     assert node_count(drawn, node_spacing=3.0) < MAX_NODES
+
+
+def test_the_core_s_messages_are_told_in_the_widget_s_words():
+    """An outside GUI tester was told of ``init``, ``np.argwhere``,
+    ``skimage.measure.find_contours`` and ``np.nan_to_num``."""
+    import re
+
+    from napari_physeg._widgets._inputs import in_widget_terms
+    from napari_physeg.core._validation import check_drawing
+
+    with pytest.raises(ValueError) as caught:
+        check_drawing(np.array([[20, 20], [80, 80], [80, 20], [20, 80.0]]))
+    told = in_widget_terms(str(caught.value))
+    assert told.startswith("the drawing goes back and forth") and "draw one outline around the object" in told
+    assert not re.search(r"\binit\b|np\.|skimage\.", told)
+    assert in_widget_terms("clip or replace them first, e.g. np.nan_to_num(image, posinf=..., neginf=...)") == \
+        "clip or replace them first"

@@ -10,6 +10,7 @@ No widget module imports another: what two widgets share lives here or in
 from __future__ import annotations
 
 import inspect
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -92,6 +93,25 @@ def check_plane_view(n_world: int, ndisplay: int, dims_order=None, what: str = "
     if dims_order is not None and set(tuple(dims_order)[-2:]) != {n_world - 2, n_world - 1}:
         raise InputError("the displayed plane is not the image's last two axes: reset the axis order "
                          "(the 'transpose'/'roll dimensions' buttons) so that rows and columns are displayed")
+
+
+#: The core's words for a script's user, and what they are in the widgets
+#: (an outside GUI tester was told of ``init``, ``np.argwhere`` and the
+#: ``segment_options of track()``).
+_WIDGET_TERMS = (
+    (r"(?<![\w.'])init\b", "the drawing"),
+    (r", or a mask's pixels as np\.argwhere lists them", ""),
+    (r", or pass a mask's outline in order, e\.g\. skimage\.measure\.find_contours\(mask, 0\.5\)\[0\]", ""),
+    (r"max_steps and segment_options of track\(\)", "the Tracking widget's steps per frame, material and stiffness"),
+    (r",? \(?e\.g\. np\.nan_to_num(\([^)]*\))?\)?", ""),
+)
+
+
+def in_widget_terms(message: str) -> str:
+    """A message of the core as a widget's user acts on it: no Python name."""
+    for pattern, words in _WIDGET_TERMS:
+        message = re.sub(pattern, words, message)
+    return message
 
 
 def nothing_drawn(layer, what: str) -> str | None:

@@ -51,6 +51,7 @@ from ._inputs import (
     contour_layer_choices,
     core_default,
     image_layer_choices,
+    in_widget_terms,
     node_count,
     nothing_drawn,
     off_image,
@@ -453,9 +454,9 @@ def _failure_message(index, err, job) -> str:
     if job is not None:  # the image may not be the one the user chose (theirs was removed)
         which += f" on {job.image_name!r}"
     if isinstance(err, DivergenceError):
-        return f"Segmentation{which} diverged: {err}"
+        return f"Segmentation{which} diverged: {in_widget_terms(str(err))}"
     if isinstance(err, ValueError):
-        return f"Segmentation{which} failed: {err}"
+        return f"Segmentation{which} failed: {in_widget_terms(str(err))}"
     return (f"Segmentation{which} failed with {type(err).__name__}: {err}. Try other parameters "
             "(e.g. the defaults: rubber, r = 2000) and report this if it persists")
 

@@ -32,7 +32,8 @@ from skimage.util import montage
 
 from ..core import LEFT, LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, segment, track
 from ._inputs import (MAP_NUMBERS_KEY, PHYSICS_TIPS, PREVIEW_COLOR, PREVIEW_KEY, PhysicsControls, check_plane_view,
-                      contour_layer_choices, core_default, image_layer_choices, nothing_drawn, off_image)
+                      contour_layer_choices, core_default, image_layer_choices, in_widget_terms, nothing_drawn,
+                      off_image)
 from ._layers import PointsAsClicks, image_transform_kwargs, shapes_to_image_coords, slice_index, slices_drawn_on
 from ._worker import WorkerWidget, relay
 
@@ -237,7 +238,7 @@ _TIPS = {
 
 def _for_the_widget(message: str) -> str:
     """A warning of ``track()`` as the widget's user acts on it: no Python argument."""
-    message = message.replace("TrackingResult.reason (the table's reason column)",
+    message = in_widget_terms(message).replace("TrackingResult.reason (the table's reason column)",
                               "The reason column of the table Save CSV writes")
     return re.sub(r"track from there \(start=(\d+)\)", r"press Run standing on frame \1", message)
 

@@ -1067,8 +1067,7 @@ def _warn_not_found(run: _Run, image: np.ndarray) -> list[str]:
                    f"each object once, and objects that touch each closely (a polygon or a box about each)")
         else:
             why = ("no object came to rest under its drawing; check that it is drawn around (or inside) one "
-                   "object, or the contour's options (steps per frame, material and stiffness: the Tracking "
-                   "widget's; max_steps and segment_options of track())")
+                   "object, or the contour's options (max_steps and segment_options of track())")
         run.seen[k].why[run.start] = f"not found on the start frame: {why}"
         run.warned.add(k)
         said.append(f"object {k} was not found on the start frame {run.start} and is reported lost: {why}")
