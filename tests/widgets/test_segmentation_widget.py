@@ -832,18 +832,10 @@ def test_each_point_of_a_points_layer_is_a_click_on_one_object(viewer_widget, wa
     of them)."""
     from skimage import data as skdata
 
-    viewer, widget = viewer_widget
     coins = skdata.coins()
     points = np.array([[54.0, 44.0], [127.0, 154.0], [192.0, 277.0]])  # three coins' centres
-    viewer.add_image(coins, name="coins")
-    viewer.add_points(points, name="clicked")
-    widget.reset_choices()
-    widget._shapes.value = viewer.layers["clicked"]
-    widget.run()
-    wait_done(widget)
-    assert widget.last_outcome.ok and errors == []
-    (out,) = output_layers(viewer)
-    assert len(out.data) == len(points)
+    out = _segmented_from_points(*viewer_widget, wait_done, coins, points)
+    assert errors == [] and len(out.data) == len(points)
     for result, point in zip(out.data, points):
         alone = segment(coins, clicked(point[None])).contour
         assert iou(result, polygon2mask(coins.shape, alone)) >= 0.97  # (the layer holds float32)
