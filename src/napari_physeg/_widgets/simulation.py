@@ -37,6 +37,7 @@ from napari.utils.notifications import show_info, show_warning
 
 from ..core import MATERIALS, DivergenceError, iter_match, iter_simulate, match, simulate
 from ..core.contour import crosses_itself
+from ..core.tracking import frame_runs
 from ._inputs import (
     MATCHING_KEY,
     SIMULATION_KEY,
@@ -564,7 +565,14 @@ class SimulationWidget(WorkerWidget):
             else:
                 why = (f"the {method!r} matching pairs nodes out of their order along the contours. Use a matching "
                        "made with method 'order'")
-            show_warning(f"frame(s) {', '.join(map(str, crossing))} cross themselves: {why}")
+            last = len(res.frames) - 1
+            if last in crossing and (targets := len(np.unique(np.round(res.targets, 6), axis=0))) < len(res.targets):
+                # Not on the way: the end, where several nodes share a target.
+                why = (f"in the last frame, {len(res.targets)} nodes of a rest on {targets} distinct targets on b, "
+                       "several on one, which folds the outline there; give a about as many nodes as b (an "
+                       "ellipse drawn with napari's tool has hundreds)")
+            show_warning(f"{frame_runs(crossing)} {'crosses itself' if len(crossing) == 1 else 'cross themselves'}: "
+                         f"{why}")
 
     def _on_errored(self, err: Exception):
         # simulate_contours catches the core's errors itself; this is a last resort.
