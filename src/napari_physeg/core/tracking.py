@@ -711,6 +711,10 @@ def _shared_area(a: np.ndarray, b: np.ndarray, shape) -> int:
     return 0 if in_a is None else int((in_a & in_b).sum())
 
 
+#: segment()'s own step budget (see _on_the_start_frame).
+_SEGMENT_MAX_STEPS = signature_of(segment).parameters["max_steps"].default
+
+
 def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_options: dict | None = None,
                match_options: dict | None = None):
     """:func:`track` as a generator: one :class:`TrackingProgress` per object and frame.
@@ -1665,7 +1669,7 @@ def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, hand
     seen, options = run.seen[k], run.options
     if t == run.start:
         return _found(image, shared, _others(run, owner, k), t, _Drawing.on(run.inits[k], shared.intensity), None,
-                      None, seen, options)
+                      None, seen, _on_the_start_frame(options))
     last, history = _history(run, k, t, step)
     if last is None:  # lost or out of view for more than MAX_GAP frames: stays so
         return None, run.status[k][t - step]
@@ -1710,6 +1714,16 @@ def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, hand
     if verdict != TRACKED and last != t - step:
         verdict = run.status[k][last + step]  # not found again: as it went missing
     return contour, verdict
+
+
+def _on_the_start_frame(options: dict) -> dict:
+    """The segment options of the start frame: at least :func:`segment`'s own
+    step budget. Its contours start from the user's drawings, as segment()'s
+    do, not from the frame before, near the border: a circle about a large,
+    faint mesenchymal stem cell of the Cell Tracking Challenge came to rest
+    after 333 steps, and with the 300 of a tracked frame the cell was not
+    found, nor looked for again."""
+    return {**options, "max_steps": max(options["max_steps"], _SEGMENT_MAX_STEPS)}
 
 
 def _common_motion(moved: list) -> np.ndarray:
@@ -2291,7 +2305,8 @@ def track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_option
         to the last frame, then backward from it to the first.
     max_steps : int, optional
         Time steps per object and frame (each frame starts from the previous
-        result, so a few dozen are usually enough).
+        result, so a few dozen are usually enough); on the start frame, at
+        least :func:`segment`'s own default (it starts from the drawings).
     segment_options : dict, optional
         Further options of :func:`segment` (material, stiffness, ...).
     match_options : dict, optional
