@@ -1039,3 +1039,14 @@ def test_an_empty_path_is_refused_not_read_as_the_current_folder(scene, capsys, 
     assert main(["segment", "", "--init", str(init), "--out", str(tmp / "o.csv")]) == 2
     assert "image: an empty path" in capsys.readouterr().err
     assert sorted(p.name for p in tmp.iterdir()) == ["image.tif", "init.csv"]
+
+
+def test_the_core_s_option_names_are_given_as_the_program_s():
+    """track()'s advice for an object not found names its own options; the
+    program's user is told of its flags instead."""
+    from napari_physeg.cli import _in_cli_terms
+
+    told = _in_cli_terms("object 0 was not found on the start frame 0 and is reported lost: no object came to rest "
+                         "under its drawing; check that it is drawn around (or inside) one object, or the "
+                         "contour's options (max_steps and segment_options of track())")
+    assert "(--steps-per-frame, --material or --stiffness)" in told and "track()" not in told
