@@ -277,7 +277,7 @@ class _PointsAsShapes:
     :func:`shapes_to_image_coords`: the parts of one it reads (``name``,
     ``ndim``, ``data``, ``shape_type`` and the layer's transforms)."""
 
-    def __init__(self, layer, world_point, shapes: list):
+    def __init__(self, layer, shapes: list):
         self.name, self.ndim = layer.name, int(layer.ndim)
         self.data_to_world, self.world_to_data = layer.data_to_world, layer.world_to_data
         self.data, self.shape_type = shapes, ["polygon"] * len(shapes)
@@ -290,7 +290,7 @@ class PointsAsPolygon(_PointsAsShapes):
     def __init__(self, layer, world_point=None):
         points = _points_here(layer, world_point)
         self.n_points = len(points)
-        super().__init__(layer, world_point, [points] if len(points) >= 3 else [])
+        super().__init__(layer, [points] if len(points) >= 3 else [])
 
 
 class PointsAsClicks(_PointsAsShapes):
@@ -308,7 +308,7 @@ class PointsAsClicks(_PointsAsShapes):
         for point in points:
             circle = clicked(point[None, -2:])
             shapes.append(np.hstack([np.repeat(point[None, :-2], len(circle), axis=0), circle]))
-        super().__init__(layer, world_point, shapes)
+        super().__init__(layer, shapes)
 
 
 def shapes_to_image_coords(shapes_layer, image_layer, world_point=None) -> SlicedShapes:
