@@ -443,5 +443,6 @@ class TrackingWidget(WorkerWidget):
         return {name: table[name].to_numpy() for name in table.columns}
 
     def _on_errored(self, err: Exception):
+        self._follow(self._start_frame)  # back where the user drew, as after a run
         self._remove_preview()
         self._fail(f"Tracking failed: {type(err).__name__}: {err}")
