@@ -37,6 +37,7 @@ from .materials import Material, get_material, suggested_stiffness
 from .region import (RegionModel, _box_of, _disk, _fill, _least_contrast, _scaled, drawing_levels,
                      drawing_limit, level_beyond_object, object_region, objectness)
 from .subpixel import level_along, polish
+from .texture import CONTRASTS, told_by_texture, texture_map
 from ._validation import (CLICK_RADIUS, check_callback, check_count, check_number, clicked, signature_of,
                           with_defaults)
 
@@ -125,7 +126,13 @@ class SegmentationResult:
         Sub-sampled evolution, first the resampled initial contour, last the
         final one.
     polarity : int
-        +1 when the object was taken as brighter than its background, -1 darker.
+        +1 when the object was taken as brighter than its background, -1
+        darker (on its texture, for ``contrast="texture"``: +1 when it
+        varies more than its background).
+    contrast : str
+        What told the object from its background: ``"intensity"`` (its
+        level) or ``"texture"`` (its local variation, see segment's
+        ``contrast``).
     timings : dict
         Seconds spent on ``"features"``, ``"model"`` (element assembly and
         factorisation), ``"evolution"`` and ``"total"`` (which also counts
@@ -139,6 +146,7 @@ class SegmentationResult:
     history: tuple
     polarity: int
     timings: dict = field(default_factory=dict)
+    contrast: str = "intensity"
 
     @property
     def n_nodes(self) -> int:
@@ -1259,7 +1267,7 @@ MAX_SIGMA_FACTOR = 2.0
 
 def _checked_options(material, forces, weights, stiffness, reference, integrator, polarity, max_step_length, tol,
                      max_steps, n_nodes, sigma, sigma_factor, dt=1.0, damping_ratio=1.0, patience=5,
-                     max_line_length=40.0, history_every=5, refine=True, magnify=True):
+                     max_line_length=40.0, history_every=5, refine=True, magnify=True, contrast="auto"):
     """The material, the force weights and the stiffness (None: the one that
     suits the material), once every option is checked (ValueError naming the bad one)."""
     _check_run_options(dt, damping_ratio, max_steps, patience, max_line_length, history_every, refine, magnify)
@@ -1279,6 +1287,7 @@ def _checked_options(material, forces, weights, stiffness, reference, integrator
         raise ValueError(f"integrator must be 'newmark' or 'modal', got {integrator!r}")
     if polarity not in ("auto", "bright", "dark"):
         raise ValueError(f"polarity must be 'auto', 'bright' or 'dark', got {polarity!r}")
+    _check_contrast(contrast)
     check_number(max_step_length, "max_step_length", inclusive=False)
     check_number(tol, "tol", inclusive=False)
     if check_count(n_nodes, "n_nodes", 3, allow_none=True) is not None and n_nodes > MAX_NODES:
@@ -1393,7 +1402,39 @@ def iter_segment(image, init, **options):
     arguments = _segment_arguments(image, init, options)
     if options.get("callback") is not None:
         raise TypeError("iter_segment takes no callback: it yields its progress")
-    return _evolve(**arguments)
+    return _evolve_read(**arguments)
+
+
+def _evolve_read(image, init, *, contrast: str, **options):
+    """:func:`_evolve` on what tells the object from its background (see
+    segment's ``contrast``): the image itself, or its texture. (Not a
+    generator of its own: the warnings' stack levels count _evolve's frames.)"""
+    _check_contrast(contrast)  # (before the texture is made: the other options are checked in _set_up)
+    if contrast == "auto":
+        given = options["polarity"] != "auto" or options["features"] is not None
+        contrast = "intensity" if given or not _textured(image, init) else "texture"
+    if contrast == "texture":
+        if options["features"] is not None:
+            raise ValueError("contrast='texture' reads its own features: pass features=None")
+        image = texture_map(_validate_image(image))
+    return _evolve(image, init, contrast=contrast, **options)
+
+
+def _check_contrast(contrast) -> None:
+    if contrast not in CONTRASTS:
+        raise ValueError(f"contrast must be one of {', '.join(map(repr, CONTRASTS))}, got {contrast!r}")
+
+
+def _textured(image, init) -> bool:
+    """Whether the object ``init`` marks is told by its texture (see
+    :func:`~.texture.told_by_texture`); False where the input is bad, which
+    the segmentation then names."""
+    try:
+        from ._validation import check_drawing
+
+        return told_by_texture(_validate_image(image), check_drawing(init, "init"))
+    except ValueError:
+        return False
 
 
 def _segment_arguments(image, init, options: dict) -> dict:
@@ -1416,6 +1457,7 @@ def _evolve(
     forces,
     weights: dict | None,
     polarity: str,
+    contrast: str,
     damping_ratio: float,
     dt: float,
     reference: str,
@@ -1483,7 +1525,7 @@ def _evolve(
     t_end = time.perf_counter()
     return SegmentationResult(
         contour=nodes, steps=steps, converged=stop_reason == "converged", stop_reason=stop_reason,
-        history=tuple(history), polarity=features.polarity,
+        history=tuple(history), polarity=features.polarity, contrast=contrast,
         timings={"features": t_features - t_start, "model": body.model_time,
                  "evolution": t_end - t_features - body.model_time, "total": t_end - t_start},
     )
@@ -1924,6 +1966,7 @@ def segment(
     forces=FORCE_NAMES,
     weights: dict | None = None,
     polarity: str = "auto",
+    contrast: str = "auto",
     damping_ratio: float = 1.0,
     dt: float = 1.0,
     reference: str = "incremental",
@@ -1991,6 +2034,15 @@ def segment(
         Whether the object is brighter or darker than its background; "auto"
         reads it from ``init`` (its middle, its line and rings outside it),
         drawn around or inside the object (see :mod:`.region`).
+    contrast : {"auto", "intensity", "texture"}, optional
+        What tells the object from its background: its level
+        ("intensity": fluorescence, stains), or its local variation
+        ("texture": flat cells in phase contrast or bright field, whose
+        bodies lie at the ground's level; the image's local standard
+        deviation, :func:`~.texture.texture_map`, is then segmented, and
+        ``polarity`` is that of the texture). "auto" reads it from ``init``
+        (:func:`~.texture.told_by_texture`); with a ``polarity`` or
+        ``features`` given, it is "intensity".
     damping_ratio : float, optional
         Rayleigh damping ratio at the lowest and highest natural frequencies.
     dt : float, optional
@@ -2088,7 +2140,7 @@ def segment(
     options = {name: value for name, value in locals().items() if name not in ("image", "init", "callback")}
     check_callback(callback)
     on_progress = None if callback is None else (lambda state: callback(state.step, state.contour))
-    return drain(_evolve(image, init, **options), on_progress)
+    return drain(_evolve_read(image, init, **options), on_progress)
 
 
 def _segment_from(image, drawing, start, max_area: float | None = None, **options) -> SegmentationResult:
@@ -2101,5 +2153,8 @@ def _segment_from(image, drawing, start, max_area: float | None = None, **option
     drawing, it would first have to travel back the drawing's margin. (Read
     as traced, a margin of 3 px around a blurred nucleus lay on its edge's
     ramp: the contour grew to it, and the tracker lost the nucleus.)
-    ``max_area``: see :func:`_evolve`."""
-    return drain(_evolve(**_segment_arguments(image, drawing, options), start=start, max_area=max_area))
+    ``max_area``: see :func:`_evolve`. With ``contrast="texture"``, ``image``
+    and ``features`` are already the texture's (see :func:`_evolve_read`)."""
+    arguments = _segment_arguments(image, drawing, options)
+    arguments["contrast"] = "intensity" if arguments["contrast"] == "auto" else arguments["contrast"]
+    return drain(_evolve(**arguments, start=start, max_area=max_area))

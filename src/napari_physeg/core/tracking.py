@@ -55,6 +55,7 @@ from .features import _masked_as_missing, _without_missing
 from .matching import _match_arguments, _match_pairs, _prepare, match
 from .region import _fill, hasty_margin
 from .segmentation import FrameFeatures, _segment_from, check_on_image, check_segment_options, segment
+from .texture import texture_map, told_by_texture
 
 __all__ = ["track", "iter_track", "TrackingResult", "TrackingProgress", "TRACKED", "LOST", "LEFT"]
 
@@ -730,6 +731,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
     options = _checked_segment_options(segment_options, max_steps)
     match_options = _checked_match_options(match_options)
     polarity = options.pop("polarity", "auto")  # then each object's, from its first frame
+    contrast = options.pop("contrast", "auto")  # likewise (see _read_by)
     n_obj = len(inits)
     run = _Run(inits=inits, start=start, options=options,
                contours=[[None] * n_frames for _ in range(n_obj)], status=[[None] * n_frames for _ in range(n_obj)],
@@ -764,6 +766,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
             before = looks
             if t == start:
                 start_looks = looks
+                _read_by(run, image, contrast, polarity)
             for k in _segment_frame(run, image, shared, t, step):
                 done += 1
                 stop = yield TrackingProgress(t, k, run.contours[k][t], run.status[k][t], done, total)
@@ -1304,7 +1307,8 @@ def _link_lost(run: _Run, image, shared, owner, t: int, step: int) -> None:
         last, history = _history(run, k, t, step) if run.status[k][t] == LOST else (None, [])
         if last is None:
             continue
-        found = _unclaimed_blob(shared.intensity, owner, history[-1], run.seen[k].polarity, run.before,
+        found = _unclaimed_blob(_seen_as(run, k, t, image, shared)[1].intensity, owner, history[-1],
+                                run.seen[k].polarity, run.before,
                                 [history[-1], *held_before])
         if found is not None:
             bids.append((found[0], k, found[1], last == t - step and t not in run.seen[k].parted))
@@ -1336,7 +1340,8 @@ def _divisions(run: _Run, shared, owner: np.ndarray, t: int, step: int) -> None:
             continue
         if _touches_side(contour, shape, shared.missing) or _touches_side(before, shape, shared.missing):
             continue  # the side hides a part of an object it cuts (a nucleus leaving a drifting field: 0.49)
-        sister = _sister(shared.intensity, owner, contour, before, run.seen[k].polarity)
+        sister = _sister(_seen_as(run, k, t, None, shared)[1].intensity, owner, contour, before,
+                         run.seen[k].polarity)
         if sister is not None:
             run.seen[k].divided[t] = (contour, sister)
             _unpainted(run, owner, k)
@@ -1447,6 +1452,7 @@ class _Seen:
     divided: dict = field(default_factory=dict)  # frame -> its two bodies where it divided (see _divisions)
     drawing: _Drawing | None = None  # the drawing its last tracked frame was segmented in (see _carried)
     why: dict = field(default_factory=dict)  # frame -> why it was not tracked there, as found (see _reasons)
+    contrast: str = "intensity"  # what tells it from its background (see _read_by)
 
     def copy(self) -> _Seen:
         return replace(self, contrasts=dict(self.contrasts), parted=dict(self.parted), fades=set(self.fades),
@@ -1478,6 +1484,7 @@ class _Run:
     painted: dict = field(default_factory=dict)  # see _paint: per object, the box of its pixels on the current frame
     warned: set = field(default_factory=set)  # the objects a warning named lost (see _warn_lost)
     nothing_there: dict = field(default_factory=dict)  # frame -> why nothing is found there (see _nothing_to_find)
+    textured: tuple | None = None  # (frame, its texture, the texture's features), for objects told by it (see _seen_as)
 
 
 def _claim_before(run: _Run, k: int, t: int, step: int) -> np.ndarray | None:
@@ -1667,6 +1674,7 @@ def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, hand
     (or from ``handed``, a contour another object found); its contour (or
     None) and status."""
     seen, options = run.seen[k], run.options
+    image, shared = _seen_as(run, k, t, image, shared)
     if t == run.start:
         return _found(image, shared, _others(run, owner, k), t, _Drawing.on(run.inits[k], shared.intensity), None,
                       None, seen, _on_the_start_frame(options))
@@ -1724,6 +1732,32 @@ def _on_the_start_frame(options: dict) -> dict:
     after 333 steps, and with the 300 of a tracked frame the cell was not
     found, nor looked for again."""
     return {**options, "max_steps": max(options["max_steps"], _SEGMENT_MAX_STEPS)}
+
+
+def _read_by(run: _Run, image: np.ndarray, contrast: str, polarity: str) -> None:
+    """What tells each object from its background (see segment's
+    ``contrast``), read once from its drawing on the start frame ``image``
+    and kept through the movie: an object does not turn from a fluorescent
+    body into a textured one between frames."""
+    for k, seen in enumerate(run.seen):
+        by_texture = contrast == "texture" or (contrast == "auto" and polarity == "auto"
+                                               and told_by_texture(image, run.inits[k]))
+        seen.contrast = "texture" if by_texture else "intensity"
+
+
+def _seen_as(run: _Run, k: int, t: int, image, shared):
+    """Frame ``t`` (``image``, NaN pixels filled) and its ``shared``
+    features as object ``k`` is read on them: for an object told by its
+    texture, those of the frame's texture (see :mod:`.texture`), made once
+    per frame for all such objects."""
+    if run.seen[k].contrast != "texture":
+        return image, shared
+    if run.textured is None or run.textured[0] != t:
+        frame = shared.intensity if image is None else image
+        texture = texture_map(np.where(shared.missing, np.nan, frame) if shared.missing is not None else frame)
+        features = replace(FrameFeatures.of(texture, run.options.get("isef_b", 0.7)), missing=shared.missing)
+        run.textured = (t, np.nan_to_num(texture), features)
+    return run.textured[1], run.textured[2]
 
 
 def _common_motion(moved: list) -> np.ndarray:
