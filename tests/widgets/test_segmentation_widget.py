@@ -531,7 +531,7 @@ def test_defaults_are_the_cores(viewer_widget):
     _, widget = viewer_widget
     defaults = {k: v.default for k, v in inspect.signature(segment).parameters.items()}
     params = widget.parameters()
-    for name in ("material", "sigma_factor", "polarity", "max_steps"):
+    for name in ("material", "sigma_factor", "polarity", "contrast", "max_steps"):
         assert params[name] == defaults[name], name
     # segment()'s stiffness is the one that suits its material, which the widget shows.
     from napari_physeg.core.materials import suggested_stiffness
@@ -540,6 +540,14 @@ def test_defaults_are_the_cores(viewer_widget):
     assert params["weights"] == DEFAULT_WEIGHTS
     contour = np.array([[0, 0], [0, 30.0], [30, 30], [30, 0]])
     assert segment_kwargs(contour, **params)["n_nodes"] == 40  # 120 px at the default 3 px spacing
+
+
+def test_told_by_texture_reaches_segment(viewer_widget):
+    # The 'told by' control is segment()'s contrast.
+    _, widget = viewer_widget
+    widget._contrast.value = "texture"
+    contour = np.array([[0, 0], [0, 30.0], [30, 30], [30, 0]])
+    assert segment_kwargs(contour, **widget.parameters())["contrast"] == "texture"
 
 
 def test_all_weights_zero_is_an_input_error(viewer_widget, errors):

@@ -572,3 +572,22 @@ def test_closing_the_dock_during_a_run_cancels_it(make_napari_viewer, qtbot):
     qtbot.waitUntil(lambda: widget._cancel.is_set(), timeout=5000)
     qtbot.wait(2000)
     assert len(viewer.layers) == n_layers  # (nor is its preview left behind)
+
+
+def test_told_by_goes_to_every_object_and_frame(movie_in_viewer, monkeypatch):
+    # The 'told by' control is segment()'s contrast, passed to track() for its segmentations.
+    from napari_physeg._widgets import tracking as tracking_widget
+
+    viewer, widget = movie_in_viewer
+    assert widget._contrast.value == "auto"
+    seen = {}
+
+    def capture(frames, contours, **kwargs):
+        seen.update(kwargs)
+        raise ValueError("captured")
+
+    monkeypatch.setattr(tracking_widget, "iter_track", capture)
+    widget._contrast.value = "texture"
+    with pytest.raises(ValueError, match="captured"):
+        widget.run()
+    assert seen["segment_options"]["contrast"] == "texture"

@@ -145,6 +145,18 @@ def core_default(function, name: str):
     return inspect.signature(function).parameters[name].default
 
 
+def contrast_box() -> ComboBox:
+    """The "told by" control of the Segmentation and Tracking widgets: segment()'s ``contrast``."""
+    from ..core import segment
+    from ..core.texture import CONTRASTS
+
+    return ComboBox(label="told by", choices=list(CONTRASTS), value=core_default(segment, "contrast"),
+                    tooltip="What tells the object from its background: its intensity (fluorescence, stains) or "
+                            "its texture (flat cells in phase contrast or bright field, whose inside averages "
+                            "the background's grey); 'auto' reads it from your drawing. With 'object is' bright "
+                            "or dark, 'auto' is the intensity.")
+
+
 def image_layer_choices(viewer, min_ndim: int = 2) -> list:
     """(name, layer) of the viewer's Image layers with at least ``min_ndim`` dimensions."""
     return [(layer.name, layer) for layer in viewer.layers if isinstance(layer, Image) and layer.ndim >= min_ndim]

@@ -49,6 +49,7 @@ from ._inputs import (
     PhysicsControls,
     check_plane_view,
     contour_layer_choices,
+    contrast_box,
     core_default,
     image_layer_choices,
     in_widget_terms,
@@ -234,7 +235,8 @@ def segment_contours(image, contours, kwargs_list, *, cancel: threading.Event | 
 def segment_kwargs(contour, *, material=core_default(segment, "material"),
                    stiffness=None, node_spacing=None, n_nodes=None,
                    sigma_factor=core_default(segment, "sigma_factor"), weights=None,
-                   polarity=core_default(segment, "polarity"), max_steps=core_default(segment, "max_steps")) -> dict:
+                   polarity=core_default(segment, "polarity"), contrast=core_default(segment, "contrast"),
+                   max_steps=core_default(segment, "max_steps")) -> dict:
     """Keyword arguments of :func:`segment` for one initial contour.
 
     ``node_spacing`` (px) is turned into a node count for this contour's
@@ -254,6 +256,7 @@ def segment_kwargs(contour, *, material=core_default(segment, "material"),
         "forces": forces,
         "weights": {name: float(weights[name]) for name in forces},
         "polarity": polarity,
+        "contrast": contrast,
         "max_steps": int(max_steps),
     }
 
@@ -610,6 +613,7 @@ class SegmentationWidget(WorkerWidget):
                                             step=0.05, tooltip=_TIPS[f"w_{name}"]) for name in DEFAULT_WEIGHTS}
         self._polarity = ComboBox(label="object is", choices=["auto", "bright", "dark"],
                                   value=core_default(segment, "polarity"), tooltip=_TIPS["polarity"])
+        self._contrast = contrast_box()
         self._max_steps = SpinBox(label="max steps", value=core_default(segment, "max_steps"), min=1, max=100000,
                                   step=100, tooltip=_TIPS["max_steps"])
         self._labels = CheckBox(text="also add Labels mask", value=False, tooltip=_TIPS["labels"])
@@ -617,8 +621,8 @@ class SegmentationWidget(WorkerWidget):
         self._cancel_btn = PushButton(text="Cancel", tooltip=_TIPS["cancel"], enabled=False)
         self._status = Label(value="")
         self._lay_out([self._image, self._channel, self._shapes, *self.physics.main, self._labels],
-                      advanced=[self._polarity, *self.physics.advanced, self._sigma, *self._weights.values(),
-                                self._max_steps])
+                      advanced=[self._polarity, self._contrast, *self.physics.advanced, self._sigma,
+                                *self._weights.values(), self._max_steps])
         self._image.changed.connect(self._on_image_changed)
         self._connect_signals()
         self._on_image_changed()
@@ -648,6 +652,7 @@ class SegmentationWidget(WorkerWidget):
             "sigma_factor": self._sigma.value,
             "weights": {name: w.value for name, w in self._weights.items()},
             "polarity": self._polarity.value,
+            "contrast": self._contrast.value,
             "max_steps": self._max_steps.value,
         }
 

@@ -32,8 +32,8 @@ from skimage.util import montage
 
 from ..core import LEFT, LOST, TRACKED, TrackingProgress, TrackingResult, iter_track, segment, track
 from ._inputs import (MAP_NUMBERS_KEY, PHYSICS_TIPS, PREVIEW_COLOR, PREVIEW_KEY, PhysicsControls, check_plane_view,
-                      contour_layer_choices, core_default, image_layer_choices, in_widget_terms, nothing_drawn,
-                      off_image)
+                      contour_layer_choices, contrast_box, core_default, image_layer_choices, in_widget_terms,
+                      nothing_drawn, off_image)
 from ._layers import PointsAsClicks, image_transform_kwargs, shapes_to_image_coords, slice_index, slices_drawn_on
 from ._worker import WorkerWidget, relay
 
@@ -262,11 +262,12 @@ class TrackingWidget(WorkerWidget):
         self.physics = PhysicsControls(segment, nodes=False)
         self._max_steps = SpinBox(label="steps per frame", value=core_default(track, "max_steps"), min=10,
                                   max=10000, step=50, tooltip=_TIPS["max_steps"])
+        self._contrast = contrast_box()
         self._run_btn = PushButton(text="Run", tooltip=_TIPS["run"])
         self._cancel_btn = PushButton(text="Cancel", tooltip=_TIPS["cancel"], enabled=False)
         self._export_btn = PushButton(text="Save CSV…", tooltip=_TIPS["export"], enabled=False)
         self._status = Label(value="")
-        self._lay_out([self._image, self._shapes, *self.physics.main], advanced=[self._max_steps],
+        self._lay_out([self._image, self._shapes, *self.physics.main], advanced=[self._contrast, self._max_steps],
                       buttons=[self._export_btn])
         self._export_btn.changed.connect(self._ask_export)
         self._connect_signals()
@@ -344,6 +345,7 @@ class TrackingWidget(WorkerWidget):
         self.output_layers = []
         self._export_btn.enabled = False
         options = {k: v for k, v in self.physics.parameters().items() if k in ("material", "stiffness")}
+        options["contrast"] = self._contrast.value
         material = getattr(options["material"], "name", options["material"])
         self._movie_name = image.name
         self._run_info = dict(transform=image_transform_kwargs(image), name=f"{image.name} tracked ({material})",
