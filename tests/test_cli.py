@@ -379,6 +379,7 @@ def _bad_outputs(tmp):
         "out folder missing": (["--out", str(tmp / "nowhere" / "o.csv")], "does not exist"),
         "bad material": (["--material", "unobtainium"], "material"),
         "bad polarity": (["--polarity", "grey"], "polarity"),
+        "bad contrast": (["--contrast", "phase"], "contrast must be one of"),
         "bad weights": (["--weights", "edges=0"], "every force off"),
         "bad frame": (["--frames", "99"], "frames 0 to"),
         "bad stiffness": (["--stiffness", "abc"], "--stiffness"),
@@ -390,7 +391,7 @@ def _bad_outputs(tmp):
 
 @pytest.mark.parametrize("case", [
     "missing init", "out is init", "out exists", "out in a file", "out folder missing", "bad material",
-    "bad polarity", "bad weights", "bad frame", "bad stiffness", "bad poisson", "contour outside"])
+    "bad polarity", "bad contrast", "bad weights", "bad frame", "bad stiffness", "bad poisson", "contour outside"])
 def test_segment_refuses_bad_input_before_any_work(scene, capsys, no_work, case):
     obj, image, init, tmp = scene
     (tmp / "init.csvx").write_text("kept")
@@ -665,7 +666,7 @@ def test_every_option_of_every_command_is_explained():
 
     seen = {(name, a.dest) for name, a in walk(build_parser(), "napari-physeg")}
     for command in ("segment", "track", "batch segment", "batch track"):
-        for option in ("material", "stiffness", "polarity", "weights", "n_nodes", "frames"):
+        for option in ("material", "stiffness", "polarity", "contrast", "weights", "n_nodes", "frames"):
             assert (f"napari-physeg {command}", option) in seen
     assert ("napari-physeg batch track", "scheduler") in seen and ("napari-physeg match", "method") in seen
 

@@ -143,6 +143,9 @@ def _add_segment_options(p, *, spacing: bool = True, max_steps: bool = True) -> 
                    "afar); a force left out or weighted 0 is off")
     g.add_argument("--polarity", help=f"the object is 'bright' or 'dark' on its background, or 'auto' (read from "
                    f"the initial contour: its middle, its line and rings outside it); default {d['polarity']}")
+    g.add_argument("--contrast", help="what tells the object from its background: 'intensity' (fluorescence, "
+                   "stains), 'texture' (flat cells in phase contrast or bright field), or 'auto' (read from the "
+                   f"initial contour; 'intensity' with --polarity bright or dark); default {d['contrast']}")
     if max_steps:
         g.add_argument("--max-steps", type=_number(int, 1), metavar="N",
                        help=f"upper bound on time steps per contour; default {d['max_steps']}")
@@ -184,7 +187,8 @@ def _segment_options(args) -> dict:
 
     from .core import segment
 
-    opts = {name: getattr(args, name) for name in ("stiffness", "n_nodes", "sigma_factor", "polarity", "max_steps")
+    opts = {name: getattr(args, name)
+            for name in ("stiffness", "n_nodes", "sigma_factor", "polarity", "contrast", "max_steps")
             if getattr(args, name, None) is not None}
     material = _material_option(args, _defaults(segment)["material"])
     if material is not None:
