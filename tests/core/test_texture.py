@@ -1,13 +1,16 @@
 """What tells an object from its background: its level or its texture (core.texture)."""
 
+import os
 import warnings
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
 from scipy import ndimage as ndi
 from skimage.draw import polygon2mask
 
 from napari_physeg.core import segment, track
+from napari_physeg.core.dynamics import DivergenceError
 from napari_physeg.core.segmentation import FrameFeatures
 from napari_physeg.core.texture import TEXTURE_SIGMA, texture_map, told_by_texture
 
@@ -153,3 +156,28 @@ def test_a_bright_object_and_its_neighbours_in_a_large_box_are_read_by_level(mon
 
     monkeypatch.setattr(texture, "_grainy", lambda middle, ground: True)
     assert told_by_texture(image, box)  # (what the rule keeps out)
+
+
+@settings(max_examples=int(os.environ.get("TEXTURE_FUZZ_EXAMPLES", 15)), deadline=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(radius=st.floats(22, 40), scale=st.floats(1.1, 1.5), offset=st.floats(0.0, 0.2), angle=st.floats(0, 6.3),
+       grain=st.floats(0.1, 0.4), noise=st.floats(0.005, 0.04), seed=st.integers(0, 100))
+def test_flat_cells_give_honest_results_or_documented_errors(radius, scale, offset, angle, grain, noise, seed):
+    # Grainy cells of any size, grain and ground noise, circled as people draw them.
+    rng = np.random.default_rng(seed)
+    shape, centre = (160, 160), np.array([80.0, 80.0])
+    rows, cols = np.mgrid[: shape[0], : shape[1]]
+    body = np.hypot(rows - centre[0], cols - centre[1]) < radius
+    texture = ndi.gaussian_filter(rng.normal(0.0, 1.0, shape), 1.5)
+    image = 0.5 + np.where(body, grain * texture / texture.std(), 0.0) + rng.normal(0.0, noise, shape)
+    drawn = circle(centre + offset * radius * np.array([np.sin(angle), np.cos(angle)]), scale * radius)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # nodes clipped to the image
+        try:
+            res = segment(image, drawn, max_steps=400)
+        except (ValueError, DivergenceError) as err:
+            assert str(err)
+            return
+    assert np.all(np.isfinite(res.contour)) and res.contrast in ("intensity", "texture")
+    if res.converged:
+        assert iou(res.contour, body) >= 0.5, res.contrast
