@@ -130,12 +130,13 @@ def test_track_follows_a_flat_cell_by_its_texture():
         frames.append(image)
         bodies.append(body)
     tr = track(np.stack(frames), [circle((82, 58), 38)])
-    assert tr.status[0] == ["tracked"] * 5
+    assert tr.status[0] == ["tracked"] * 5 and tr.contrast == ["texture"]
     assert min(iou(tr.contours[0][t], bodies[t]) for t in range(5)) > 0.85
     # Read by its level, the grain's edges hold the contour (as segment's, see above).
     with warnings.catch_warnings():  # (it reports the cell lost as having divided)
         warnings.simplefilter("ignore", UserWarning)
         by_level = track(np.stack(frames), [circle((82, 58), 38)], segment_options={"contrast": "intensity"})
+    assert by_level.contrast == ["intensity"]
     worst = min(iou(c, b) if c is not None else 0.0 for c, b in zip(by_level.contours[0], bodies))
     assert worst < min(iou(tr.contours[0][t], bodies[t]) for t in range(5))
 

@@ -251,6 +251,9 @@ class TrackingResult:
         Why object ``k`` is lost on frame ``t`` (it faded, what was found
         there is another object, its contour did not come to rest, its
         track ended at a division, ...); ``""`` where it is not lost.
+    contrast : list of str
+        What told object ``k`` from its background, read on the start frame
+        and kept: ``"intensity"`` or ``"texture"`` (see segment's ``contrast``).
     """
 
     contours: list
@@ -264,6 +267,7 @@ class TrackingResult:
     timings: dict = field(default_factory=dict)
     warnings: tuple = ()
     reason: list = field(default_factory=list)
+    contrast: list = field(default_factory=list)
 
     @property
     def n_objects(self) -> int:
@@ -802,7 +806,8 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
     return TrackingResult(
         contours=run.contours, status=status, **analysis, start=start, stop_reason=stop_reason,
         timings={"segmentation": t_segmented - t_start, "correspondence": t_end - t_segmented,
-                 "total": t_end - t_start}, warnings=tuple(said), reason=reason)
+                 "total": t_end - t_start}, warnings=tuple(said), reason=reason,
+        contrast=[seen.contrast for seen in run.seen])
 
 
 #: Why nothing is found on a frame of no data (see _nothing_to_find); iter_track warns of such frames.
