@@ -1678,7 +1678,7 @@ def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, hand
     """Segment object ``k`` on frame ``t`` from where its motion predicts it
     (or from ``handed``, a contour another object found); its contour (or
     None) and status."""
-    seen, options = run.seen[k], run.options
+    seen, options = run.seen[k], {**run.options, "contrast": run.seen[k].contrast}
     image, shared = _seen_as(run, k, t, image, shared)
     if t == run.start:
         return _found(image, shared, _others(run, owner, k), t, _Drawing.on(run.inits[k], shared.intensity), None,
