@@ -591,3 +591,28 @@ def test_told_by_goes_to_every_object_and_frame(movie_in_viewer, monkeypatch):
     with pytest.raises(ValueError, match="captured"):
         widget.run()
     assert seen["segment_options"]["contrast"] == "texture"
+
+
+def test_the_status_says_how_many_objects_were_read_by_their_texture(dock, wait_done):
+    # A grainy flat cell crawling, as phase contrast shows it: read by its texture, and said so.
+    from scipy import ndimage as ndi
+
+    rng = np.random.default_rng(0)
+    rows, cols = np.mgrid[:120, :120]
+    frames = []
+    for t in range(4):
+        grain = ndi.gaussian_filter(rng.normal(0.0, 1.0, rows.shape), 1.5)
+        body = np.hypot(rows - 60, cols - 50 - 3 * t) < 26
+        frames.append(0.5 + np.where(body, 0.25 * grain / grain.std(), 0.0) + rng.normal(0.0, 0.02, rows.shape))
+    viewer, widget = dock(TrackingWidget)
+    viewer.add_image(np.stack(frames), name="flat cell")
+    angle = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    viewer.add_shapes([np.c_[np.zeros(32), 60 + 33 * np.sin(angle), 50 + 33 * np.cos(angle)]], shape_type="polygon",
+                      name="drawn")
+    widget._on_layers_changed()
+    viewer.dims.set_point(0, 0)
+    widget._image.value, widget._shapes.value = viewer.layers["flat cell"], viewer.layers["drawn"]
+    assert widget.run() is not None
+    wait_done(widget)
+    assert widget.last_result.contrast == ["texture"]
+    assert "1 object(s), 1 read by their texture, 4 object-frames tracked" in widget._status.value

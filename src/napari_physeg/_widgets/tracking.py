@@ -426,7 +426,9 @@ class TrackingWidget(WorkerWidget):
                 "frame error": "stopped at a frame that could not be used (see the warning): the frames tracked "
                                "so far were kept"}.get(result.stop_reason, "done")
         left = f", {counts[LEFT]} out of the field of view" if counts[LEFT] else ""
-        self._status.value = (f"{result.n_objects} object(s), {counts[TRACKED]} object-frames tracked, "
+        textured = result.contrast.count("texture")
+        by_texture = f", {textured} read by their texture" if textured else ""
+        self._status.value = (f"{result.n_objects} object(s){by_texture}, {counts[TRACKED]} object-frames tracked, "
                               f"{counts[LOST]} lost{left} ({done}, {result.timings['total']:.1f} s)")
         show_info(f"Tracking: {self._status.value}. The membrane maps (frame x arc, one tile per object) are "
                   "hidden image layers")
