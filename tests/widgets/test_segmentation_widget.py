@@ -175,6 +175,28 @@ def test_sample_coins_end_to_end(viewer_widget, wait_done, errors, monkeypatch):
         assert labels[row, col] > 0 and iou(contour, labels == labels[row, col]) >= 0.9
 
 
+def test_a_flat_grainy_cell_is_read_by_its_texture_and_said_so(viewer_widget, wait_done, errors):
+    # As phase contrast shows a flat cell: its body at the ground's grey, grainy.
+    from scipy import ndimage as ndi
+
+    rng = np.random.default_rng(1)
+    rows, cols = np.mgrid[:120, :120]
+    body = np.hypot(rows - 60, cols - 60) < 26
+    grain = ndi.gaussian_filter(rng.normal(0.0, 1.0, rows.shape), 1.5)
+    viewer, widget = viewer_widget
+    viewer.add_image(0.5 + np.where(body, 0.25 * grain / grain.std(), 0.0) + rng.normal(0.0, 0.02, rows.shape),
+                     name="flat cell")
+    angle = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    viewer.add_shapes([np.c_[60 + 33 * np.sin(angle), 60 + 33 * np.cos(angle)]], shape_type="polygon", name="drawn")
+    widget.reset_choices()
+    widget._shapes.value = viewer.layers["drawn"]
+    widget.run()
+    wait_done(widget)
+    assert errors == [] and widget.last_outcome.results[0].contrast == "texture"
+    assert iou(output_layers(viewer)[0].data[0], body) > 0.85
+    assert "1 read by their texture" in widget._status.value
+
+
 def test_each_shape_is_segmented_ellipse_rectangle_polygon(viewer_widget, wait_done, errors, hand):
     viewer, widget = viewer_widget
     viewer.add_image(hand.image, name="hand")

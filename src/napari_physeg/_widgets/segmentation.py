@@ -767,7 +767,9 @@ class SegmentationWidget(WorkerWidget):
             show_warning(message)
         rested = sum(r.converged for r in outcome.results)
         cancelled = f"Cancelled: of {len(job.contours)} shapes, the finished ones kept. " if outcome.cancelled else ""
+        textured = sum(r.contrast == "texture" for r in outcome.results)
         self._status.value = (f"{cancelled}Segmented {len(outcome.results)} shape(s) in {outcome.seconds:.2f} s"
+                              + (f", {textured} read by their texture" if textured else "")
                               + ("" if rested == len(outcome.results) else
                                  f"; {len(outcome.results) - rested} did not reach a border (see the warnings)"))
         if outcome.error is not None:  # the others were kept; say which failed and why
