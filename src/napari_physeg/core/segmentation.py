@@ -1410,13 +1410,16 @@ def _evolve_read(image, init, *, contrast: str, **options):
     segment's ``contrast``): the image itself, or its texture. (Not a
     generator of its own: the warnings' stack levels count _evolve's frames.)"""
     _check_contrast(contrast)  # (before the texture is made: the other options are checked in _set_up)
-    if contrast == "auto":
-        given = options["polarity"] != "auto" or options["features"] is not None
-        contrast = "intensity" if given or not _textured(image, init) else "texture"
-    if contrast == "texture":
-        if options["features"] is not None:
-            raise ValueError("contrast='texture' reads its own features: pass features=None")
-        image = texture_map(_validate_image(image))
+    if contrast == "texture" and options["features"] is not None:
+        raise ValueError("contrast='texture' reads its own features: pass features=None")
+    if contrast == "auto" and (options["polarity"] != "auto" or options["features"] is not None):
+        contrast = "intensity"
+    if contrast != "intensity":
+        checked = _validate_image(image)  # (the error _set_up would raise, raised first)
+        if contrast == "auto":
+            contrast = "texture" if _textured(checked, init) else "intensity"
+        if contrast == "texture":
+            image = texture_map(checked)
     return _evolve(image, init, contrast=contrast, **options)
 
 
@@ -1425,14 +1428,14 @@ def _check_contrast(contrast) -> None:
         raise ValueError(f"contrast must be one of {', '.join(map(repr, CONTRASTS))}, got {contrast!r}")
 
 
-def _textured(image, init) -> bool:
-    """Whether the object ``init`` marks is told by its texture (see
-    :func:`~.texture.told_by_texture`); False where the input is bad, which
-    the segmentation then names."""
+def _textured(image: np.ndarray, init) -> bool:
+    """Whether the object ``init`` marks on ``image`` (validated) is told by
+    its texture (see :func:`~.texture.told_by_texture`); False for a bad
+    drawing, which the segmentation then names."""
     try:
         from ._validation import check_drawing
 
-        return told_by_texture(_validate_image(image), check_drawing(init, "init"))
+        return told_by_texture(image, check_drawing(init, "init"))
     except ValueError:
         return False
 

@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 from .contour import bounding_window, signed_area
-from .region import _TWO_SIDED_SHARE, _fill
+from .region import _TWO_SIDED_SHARE, _fill, _scatter
 
 __all__ = ["CONTRASTS", "texture_map", "told_by_texture"]
 
@@ -135,7 +135,7 @@ def _grainy(middle: np.ndarray, ground: np.ndarray) -> bool:
     grain does: more than _TWO_SIDED_SHARE of them beyond GROUND_SPREADS
     spreads of the ground's from its median, each way, and about as far
     each way (see GRAIN_SYMMETRY)."""
-    level, spread = float(np.median(ground)), GROUND_SPREADS * _mad(ground)
+    level, spread = float(np.median(ground)), GROUND_SPREADS * _scatter(ground)
     if min(np.mean(middle > level + spread), np.mean(middle < level - spread)) <= _TWO_SIDED_SHARE:
         return False
     brighter, darker = np.percentile(middle, 99) - level, level - np.percentile(middle, 1)
@@ -147,12 +147,7 @@ def _separation(values: np.ndarray, middle: np.ndarray, ring: np.ndarray) -> flo
     ``ring``, in units of their pixels' robust spread (the root mean square
     of the two median absolute deviations)."""
     a, b = values[middle], values[ring]
-    spread = np.sqrt(0.5 * (_mad(a) ** 2 + _mad(b) ** 2))
+    spread = np.sqrt(0.5 * (_scatter(a) ** 2 + _scatter(b) ** 2))
     difference = float(np.median(a) - np.median(b))
     return difference / spread if spread > 0 else (0.0 if difference == 0 else np.inf * np.sign(difference))
-
-
-def _mad(values: np.ndarray) -> float:
-    """The median absolute deviation, scaled to a normal law's deviation."""
-    return 1.4826 * float(np.median(np.abs(values - np.median(values))))
 

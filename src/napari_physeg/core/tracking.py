@@ -1276,7 +1276,7 @@ def _segment_frame(run: _Run, image, shared, t: int, step: int):
             others = order[n + 1:] if run.status[k][t] != TRACKED else [i for i in astray if i != k]
             _give_back(run, image, shared, owner, t, k, step, others)
         _link_lost(run, image, shared, owner, t, step)
-        _divisions(run, shared, owner, t, step)
+        _divisions(run, image, shared, owner, t, step)
     yield from order
 
 
@@ -1332,7 +1332,7 @@ def _link_lost(run: _Run, image, shared, owner, t: int, step: int) -> None:
             run.contours[k][t], run.status[k][t], run.seen[k] = kept
 
 
-def _divisions(run: _Run, shared, owner: np.ndarray, t: int, step: int) -> None:
+def _divisions(run: _Run, image, shared, owner: np.ndarray, t: int, step: int) -> None:
     """End the track of each object that divided on frame ``t`` (see
     DIVIDED_AREA): lost there and on, its two bodies kept for the warning
     (see _warn_divided). Tracking backward, two bodies that came together.
@@ -1345,7 +1345,7 @@ def _divisions(run: _Run, shared, owner: np.ndarray, t: int, step: int) -> None:
             continue
         if _touches_side(contour, shape, shared.missing) or _touches_side(before, shape, shared.missing):
             continue  # the side hides a part of an object it cuts (a nucleus leaving a drifting field: 0.49)
-        sister = _sister(_seen_as(run, k, t, None, shared)[1].intensity, owner, contour, before,
+        sister = _sister(_seen_as(run, k, t, image, shared)[1].intensity, owner, contour, before,
                          run.seen[k].polarity)
         if sister is not None:
             run.seen[k].divided[t] = (contour, sister)
@@ -1758,8 +1758,7 @@ def _seen_as(run: _Run, k: int, t: int, image, shared):
     if run.seen[k].contrast != "texture":
         return image, shared
     if run.textured is None or run.textured[0] != t:
-        frame = shared.intensity if image is None else image
-        texture = texture_map(np.where(shared.missing, np.nan, frame) if shared.missing is not None else frame)
+        texture = texture_map(np.where(shared.missing, np.nan, image) if shared.missing is not None else image)
         features = replace(FrameFeatures.of(texture, run.options.get("isef_b", 0.7)), missing=shared.missing)
         run.textured = (t, np.nan_to_num(texture), features)
     return run.textured[1], run.textured[2]
