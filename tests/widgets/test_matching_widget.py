@@ -497,3 +497,23 @@ def test_a_mirror_image_is_matched_with_a_warning_napari_shows(viewer_widget, wa
     assert notes["error"] == []
     said = [str(n.message) for n in napari_notifications] + notes["warning"] + notes["info"]
     assert any("mirror image" in s for s in said), said
+
+
+def test_the_same_matching_again_replaces_its_layer_in_place(viewer_widget, wait_done, notes):
+    """A run done again takes over its last layer (a simulation that reads it
+    keeps its reference); another method's matching is a layer of its own."""
+    viewer, widget = viewer_widget
+    viewer.open_sample("napari-physeg", "hand_poses")
+    widget.run()
+    wait_done(widget)
+    (first,) = matching_layers(viewer)
+    widget._n_modes.value = 8
+    widget.run()
+    wait_done(widget)
+    assert matching_layers(viewer) == [first] and widget.output_layer is first
+    assert first.metadata["matching"] is widget.last_outcome.matching and first.metadata["matching"].n_modes >= 8
+    assert len(first.data) == len(first.features["cost"]) and notes["error"] == []
+    widget._method.value = "global"
+    widget.run()
+    wait_done(widget)
+    assert len(matching_layers(viewer)) == 2 and first in viewer.layers

@@ -139,11 +139,14 @@ def test_matching_computed_when_absent_or_for_other_contours(viewer_widgets, wai
     assert widget._matching.value is mwidget.output_layer
     assert widget._layer_a.value is lb and widget._layer_b.value is la
     widget._layer_a.value, widget._layer_b.value = la, lb
+    (first,) = sim_layers(viewer)
     widget.run()
     wait_done(widget)
     assert len(notes["warning"]) == 1 and "computed for other contours" in notes["warning"][0]
     assert widget.last_outcome.matching_computed and widget.last_outcome.matching.method == "order"
-    assert len(sim_layers(viewer)) == 2 and notes["error"] == []
+    # The same simulation again (same contours, material and method) took over the first's layer.
+    assert sim_layers(viewer) == [first] and notes["error"] == []
+    assert first.metadata["simulation"] is widget.last_outcome.result
 
 
 def test_nd_input_keeps_leading_coordinates_and_transform(viewer_widgets, wait_done, notes):

@@ -616,3 +616,32 @@ def test_the_status_says_how_many_objects_were_read_by_their_texture(dock, wait_
     wait_done(widget)
     assert widget.last_result.contrast == ["texture"]
     assert "1 object(s), 1 read by their texture, 4 object-frames tracked" in widget._status.value
+
+
+def test_a_run_done_again_replaces_its_layers_and_keeps_a_renamed_one(movie_in_viewer, wait_done):
+    """Each run added five layers: a user who tried a few settings had a list
+    of look-alikes to weed out. The same run again takes over the last run's
+    layers (in place: references to them hold); a layer the user renamed is
+    theirs."""
+    viewer, widget = movie_in_viewer
+    widget.run()
+    wait_done(widget)
+    first = list(widget.output_layers)
+    n_layers = len(viewer.layers)
+    assert len(first) == 5
+    maps = next(layer for layer in first if isinstance(layer, Image))
+    maps.visible = True  # the user looks at the maps: they stay shown
+    drawn = widget._shapes.value
+    drawn.data = [drawn.data[0] + np.array([0.0, 1.0, 1.0])]  # the drawing moved: another result
+    widget.run()
+    wait_done(widget)
+    assert len(viewer.layers) == n_layers and [id(x) for x in widget.output_layers] == [id(x) for x in first]
+    assert maps.visible and "tracking preview" not in [layer.name for layer in viewer.layers]
+    contours = first[0]
+    assert contours.metadata["tracking"] is widget.last_result and len(contours.data) == 8
+    assert list(contours.features["frame"]) == list(range(8))
+    contours.name = "kept by the user"
+    widget.run()
+    wait_done(widget)
+    assert len(viewer.layers) == n_layers + 1 and contours in viewer.layers
+    assert widget.output_layers[0] is not contours and widget.output_layers[1:] == first[1:]

@@ -29,6 +29,10 @@ from ._layers import created_layer, write_csv
 
 __all__ = ["WorkerWidget", "ask_save_path", "relay", "run_to_completion"]
 
+#: Layer arguments a result layer is made with and keeps when a later run's
+#: result takes it over (see WorkerWidget._take_over).
+_GIVEN_AT_CREATION = frozenset({"ndim", "shape_type"})
+
 
 #: At most this share of a run's time goes to showing its updates (previews, progress): the CPU
 #: time of every thread but the worker's, the GUI thread's and those software OpenGL paints in.
@@ -76,6 +80,7 @@ class WorkerWidget(Container):
         self._last_draw = None  # (wall, display CPU) seconds when an update was last shown
         self._worker_clock = None  # the CPU-time clock of the worker's thread
         self._pending = deque()  # worker signals waiting for the one before to be handled
+        self._results_put = []  # (layer, the name it was given) for the last run's result layers
 
     def _lay_out(self, controls, advanced=(), buttons=()):
         """``controls``, then a collapsed "Advanced" section holding ``advanced``,
@@ -180,29 +185,85 @@ class WorkerWidget(Container):
         """
         if kind != "shapes" or preview is None or preview not in self.viewer.layers:
             return self.viewer.add_layer(created_layer(data, meta, kind))
-        if self.viewer.dims.ndisplay != 2:
+        return self._take_over(preview, data, meta, kind)
+
+    def _take_over(self, layer, data, meta: dict, kind: str, keep_visibility: bool = False):
+        """``layer`` (of ``kind``) with a result's ``data`` and ``meta``: the layer
+        itself, or a new one in its place where napari cannot take them
+        (``keep_visibility``: leave it shown or hidden as the user left it)."""
+        if kind == "shapes" and self.viewer.dims.ndisplay != 2:
             # The user went to the 3D view during the run: napari takes no new
             # data on a Shapes layer there (the results were lost), but adds a
             # new layer. (The collection a removal runs is the lesser harm.)
-            self.viewer.layers.remove(preview)
-            return self.viewer.add_layer(created_layer(data, meta, kind))
+            return self._replaced(layer, data, meta, kind)
+        try:
+            if kind == "shapes":
+                shape_type = meta.get("shape_type", "polygon")
+                layer.data = (data, [shape_type] * len(data) if isinstance(shape_type, str) else shape_type)
+            else:
+                layer.data = data
+        except RuntimeError:  # a face napari cannot triangulate: see created_layer
+            return self._replaced(layer, data, meta, kind)
+        # The features first: a colour may name one (a matching's lines are coloured by their cost).
+        for key in sorted(meta, key=lambda key: (key != "features", key.endswith("_color"))):
+            if key in _GIVEN_AT_CREATION or (keep_visibility and key == "visible"):
+                continue
+            if kind == "shapes" and key in ("edge_color", "face_color"):
+                self._set_shape_colours(layer, key, meta[key])
+            else:
+                setattr(layer, key, meta[key])
+        return layer
+
+    @staticmethod
+    def _set_shape_colours(layer, key: str, value) -> None:
+        """A feature's name, one colour, or one per shape; shapes drawn next get the first colour."""
         from napari.utils.colormaps.standardize_color import transform_color
 
-        shape_type = meta.get("shape_type", "polygon")
-        try:
-            preview.data = (data, [shape_type] * len(data) if isinstance(shape_type, str) else shape_type)
-        except RuntimeError:  # a face napari cannot triangulate: see created_layer
+        if isinstance(value, str) and value in layer.features:
+            setattr(layer, key, value)
+            return
+        colours = transform_color(value)
+        setattr(layer, key, colours[0] if len(colours) == 1 else colours)
+        setattr(layer, f"current_{key}", colours[0])
+
+    def _replaced(self, layer, data, meta: dict, kind: str):
+        """A new layer made of ``data`` and ``meta``, where ``layer`` was."""
+        index = self.viewer.layers.index(layer)
+        self.viewer.layers.remove(layer)
+        new = created_layer(data, meta, kind)
+        self.viewer.layers.insert(min(index, len(self.viewer.layers)), new)
+        return new
+
+    def _put_results(self, layer_data, preview=None) -> list:
+        """Add a run's result layers (``(data, meta, kind)`` tuples) and return them.
+
+        A run done again (the same inputs and choices, so the same layer
+        names) replaces the layers the last run added, in place, as magicgui
+        updates the layer of the name a function returns: each run added a
+        set of five layers of its own, and a user who tried a few settings
+        had a list of look-alikes to weed out. A layer the user renamed, or
+        removed, is theirs: it is left alone. A Shapes result that finds no
+        such layer takes over the run's Shapes ``preview`` (see
+        _add_result); a preview left over is removed, and so are the last
+        run's layers that this run has no result for.
+        """
+        earlier = {(name, layer._type_string): layer for layer, name in self._results_put
+                   if layer in self.viewer.layers and layer.name == name}
+        put, again = [], False
+        for data, meta, kind in layer_data:
+            layer = earlier.pop((meta.get("name"), kind), None)
+            if layer is not None:
+                put.append(self._take_over(layer, data, meta, kind, keep_visibility=True))
+                again = True
+            else:
+                put.append(self._add_result(data, meta, kind, preview))
+                preview = None if kind == "shapes" else preview
+        for layer in earlier.values() if again else ():  # the same run had nothing to show there this time
+            self.viewer.layers.remove(layer)
+        if preview is not None and preview in self.viewer.layers:
             self.viewer.layers.remove(preview)
-            return self.viewer.add_layer(created_layer(data, meta, kind))
-        for key in ("edge_color", "face_color"):
-            if key in meta:  # one colour, or one per shape; shapes drawn next get the first
-                colours = transform_color(meta[key])
-                setattr(preview, key, colours[0] if len(colours) == 1 else colours)
-                setattr(preview, f"current_{key}", colours[0])
-        for key in ("edge_width", "features", "metadata", "name"):
-            if key in meta:
-                setattr(preview, key, meta[key])
-        return preview
+        self._results_put = [(layer, layer.name) for layer in put]
+        return put
 
     def _connect_signals(self):
         self._run_btn.changed.connect(self.run)

@@ -31,7 +31,6 @@ from functools import partial
 import napari
 import numpy as np
 from magicgui.widgets import CheckBox, ComboBox, Label, PushButton, SpinBox
-from napari.layers import Layer
 from napari.utils.colormaps import Colormap
 from napari.utils.notifications import show_info
 
@@ -423,8 +422,7 @@ class MatchingWidget(WorkerWidget):
             return
         m, pair = outcome.matching, self.pair
         try:
-            data, meta, kind = matching_layer_data(m, pair, kind=self._output.value)
-            self.output_layer = self.viewer.add_layer(Layer.create(data, meta, kind))
+            (self.output_layer,) = self._put_results([matching_layer_data(m, pair, kind=self._output.value)])
         except Exception as err:  # never leave the user with a silent failure
             self._fail(f"Could not add the matching layer: {type(err).__name__}: {err}")
             return

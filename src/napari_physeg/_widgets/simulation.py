@@ -52,7 +52,7 @@ from ._inputs import (
     pick_default_b,
     read_contour_pair,
 )
-from ._layers import contours_to_shapes_data, created_layer, prepend_axes_transform
+from ._layers import contours_to_shapes_data, prepend_axes_transform
 from ._worker import WorkerWidget, relay, run_to_completion
 
 __all__ = [
@@ -534,15 +534,14 @@ class SimulationWidget(WorkerWidget):
         axis = self.viewer.dims.ndim - len(pair.leading) - 3  # the world axis the frames play on
         slider = _slider_name(self.viewer.dims, axis) if axis >= 0 else "the 'frame' slider"
         try:
-            for data, meta, kind in simulation_layer_data(outcome, pair, tracks=self._tracks.value,
-                                                          material=self._material.value):
-                if axis >= 0:
-                    # An axis the viewer has (a movie's time): it keeps its name, and
-                    # the frames its step (at scale 1 against a movie's 5 s a frame,
-                    # the slider went from 30 steps to 146, and the frames between two).
-                    meta.pop("axis_labels", None)
-                    meta["scale"] = np.r_[self.viewer.dims.range[axis].step, np.asarray(meta["scale"])[1:]]
-                self.output_layers.append(self.viewer.add_layer(created_layer(data, meta, kind)))
+            layer_data = simulation_layer_data(outcome, pair, tracks=self._tracks.value, material=self._material.value)
+            for _, meta, _ in layer_data if axis >= 0 else ():
+                # An axis the viewer has (a movie's time): it keeps its name, and
+                # the frames its step (at scale 1 against a movie's 5 s a frame,
+                # the slider went from 30 steps to 146, and the frames between two).
+                meta.pop("axis_labels", None)
+                meta["scale"] = np.r_[self.viewer.dims.range[axis].step, np.asarray(meta["scale"])[1:]]
+            self.output_layers = self._put_results(layer_data)
         except Exception as err:  # never leave the user with a silent failure
             self._fail(f"Could not add the simulation layers: {type(err).__name__}: {err}")
             return

@@ -415,8 +415,7 @@ class TrackingWidget(WorkerWidget):
         self._follow(self._start_frame)  # back where the user drew (the result's layers hold every frame)
         preview, self._preview = self._preview, None
         try:
-            for data, meta, kind in tracking_layer_data(result, **self._run_info):
-                self.output_layers.append(self._add_result(data, meta, kind, preview))
+            self.output_layers = self._put_results(tracking_layer_data(result, **self._run_info), preview)
         except Exception as err:  # never a silent failure
             self._fail(f"Could not add the tracking layers: {type(err).__name__}: {err}")
             return
