@@ -237,11 +237,12 @@ class WorkerWidget(Container):
     def _put_results(self, layer_data, preview=None) -> list:
         """Add a run's result layers (``(data, meta, kind)`` tuples) and return them.
 
-        A run done again (the same inputs and choices, so the same layer
-        names) replaces the layers the last run added, in place, as magicgui
-        updates the layer of the name a function returns: each run added a
-        set of five layers of its own, and a user who tried a few settings
-        had a list of look-alikes to weed out. A layer the user renamed, or
+        A run done again (its layers' names say its inputs and main choice,
+        a material or a method) updates the layers the last run added of
+        those names, in place, as magicgui updates the layer of the name a
+        function returns: each tracking run added five layers of its own,
+        and a user who tried a few settings had a list of look-alikes to
+        weed out. A layer the user renamed, or
         removed, is theirs: it is left alone. A Shapes result that finds no
         such layer takes over the run's Shapes ``preview`` (see
         _add_result); a preview left over is removed, and so are the last
