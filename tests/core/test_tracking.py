@@ -817,7 +817,9 @@ def test_most_objects_lost_on_one_frame_are_named_in_a_warning():
     one its own way (no stage shift), are lost together: a warning names the
     frame and says what a movie sampled that sparsely needs."""
     start = [(20, 20), (20, 76), (76, 20), (76, 76)]
-    jumped = [(44, 20), (20, 52), (52, 20), (76, 52)]  # 24 px: four radii, beyond the second looks' three
+    # 24 px: four radii, beyond the second looks' three; down, left, right, up. (Two that jumped alike
+    # would be a stage's shift that took the other two out of view, as the pixels show.)
+    jumped = [(44, 20), (20, 52), (76, 44), (52, 76)]
     frames = _disk_movie([start, start, jumped], radius=6)
     with pytest.warns(UserWarning, match=r"many of the objects followed were lost at once on frame\(s\) 2 "
                                          r"\(4 of 4\): .*laptrack"):
@@ -1445,3 +1447,50 @@ def test_the_start_frame_has_segment_s_own_step_budget():
     assert segment(frames[0], far, max_steps=8).stop_reason == "max_steps"  # more than 8 steps from there
     tr = track(frames, far, max_steps=8)
     assert tr.status[0][0] == "tracked"
+
+
+def _field_of_nuclei(rng, shape=(220, 220), n=26, spacing=24):
+    """A sample of ``n`` blurred disks of random radius (7-10 px) and
+    brightness, at least ``spacing`` px apart: (image, centres, radii)."""
+    from scipy import ndimage as ndi
+
+    centres = []
+    while len(centres) < n:
+        c = rng.uniform(12, np.array(shape) - 12)
+        if all(np.hypot(*(c - o)) >= spacing for o in centres):
+            centres.append(c)
+    centres, radii = np.array(centres), rng.uniform(7, 10, n)
+    rr, cc = np.mgrid[: shape[0], : shape[1]]
+    image = np.full(shape, 0.1)
+    for (r, c), radius, level in zip(centres, radii, rng.uniform(0.5, 1.0, n)):
+        image[(rr - r) ** 2 + (cc - c) ** 2 <= radius**2] = level
+    return ndi.gaussian_filter(image, 1.0) + 0.02 * rng.standard_normal(shape), centres, radii
+
+
+def test_nuclei_on_a_jittering_stage_are_found_where_it_brought_them_and_again_when_back_in_view():
+    """A crowd of alike nuclei seen through a window that jumps up to 20 px
+    a frame, twice their radius: nuclei leave the view and come back. Each
+    is looked for where the stage moved it, never at its old place (which
+    shows a neighbour after a jump), and one that left is looked for again
+    whenever the stage brings it back, however long it was out (an outside
+    tester, session 73: on a real frame so moved, 32 object-frames lay on
+    another nucleus and 11 nuclei in view were said to have left it)."""
+    rng = np.random.default_rng(7)
+    sample, centres, radii = _field_of_nuclei(rng)
+    jumps = np.vstack([[0, 0], rng.integers(-20, 21, (9, 2))])
+    offsets = np.clip(50 + np.cumsum(jumps, axis=0), 0, 100)
+    frames = np.stack([sample[r:r + 120, c:c + 120] for r, c in offsets])
+    wholly_in = [np.all((centres - o - radii[:, None] >= 1) & (centres - o + radii[:, None] <= 118), axis=1)
+                 for o in offsets]
+    drawn = np.flatnonzero(wholly_in[0])
+    tr = track(frames, [_circle(centres[j] - offsets[0], 1.3 * radii[j]) for j in drawn])
+    came_back = 0
+    for k, j in enumerate(drawn):
+        for t, o in enumerate(offsets):
+            if wholly_in[t][j] and tr.status[k][t] == TRACKED:  # on its own nucleus, never a neighbour's
+                assert np.hypot(*(tr.centroids(k)[t] - (centres[j] - o))) < 0.5 * radii[j], (k, t)
+            left_before = any(tr.status[k][s] == LEFT for s in range(t))
+            if wholly_in[t][j] and left_before:
+                came_back += 1
+                assert tr.status[k][t] == TRACKED, (k, t, tr.status[k])
+    assert came_back >= 10

@@ -43,6 +43,21 @@ CHEAP_DRAW = 0.01
 SCROLL_MIN_HEIGHT = 40
 
 
+def _holds(layer, key: str, value) -> bool:
+    """Whether ``layer``'s ``key`` already has ``value`` (a transform the
+    preview was made with): set again, each refreshes the layer, and a
+    preview of a thousand nodes took over by its result held the GUI up."""
+    if key in ("features", "metadata") or key.endswith("_color"):
+        return False
+    current = getattr(layer, key, None)
+    if key == "affine":
+        current = getattr(current, "affine_matrix", current)
+    try:
+        return bool(np.array_equal(np.asarray(current), np.asarray(value)))
+    except (TypeError, ValueError):
+        return False
+
+
 class WorkerWidget(Container):
     """A magicgui ``Container`` that runs its computation in a background worker.
 
@@ -206,7 +221,7 @@ class WorkerWidget(Container):
             return self._replaced(layer, data, meta, kind)
         # The features first: a colour may name one (a matching's lines are coloured by their cost).
         for key in sorted(meta, key=lambda key: (key != "features", key.endswith("_color"))):
-            if key in _GIVEN_AT_CREATION or (keep_visibility and key == "visible"):
+            if key in _GIVEN_AT_CREATION or (keep_visibility and key == "visible") or _holds(layer, key, meta[key]):
                 continue
             if kind == "shapes" and key in ("edge_color", "face_color"):
                 self._set_shape_colours(layer, key, meta[key])

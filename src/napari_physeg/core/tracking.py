@@ -766,6 +766,7 @@ def iter_track(frames, inits, *, start: int = 0, max_steps: int = 300, segment_o
             if shared.missing is not None:
                 (empty if shared.missing.all() else with_missing).append(t)
             run.stage = np.zeros(2) if before is None else _stage_shift(run, before, looks, t, step)
+            run.stages[t] = run.stage
             run.before, run.looks = before, looks
             before = looks
             if t == start:
@@ -1306,15 +1307,18 @@ def _link_lost(run: _Run, image, shared, owner, t: int, step: int) -> None:
     never seen again); a far look by the object's looks alone matched
     neighbours, and a dividing cell's two daughters together.
     """
-    held_before = [c[t - step] for c in run.contours if c[t - step] is not None]  # (run.before's objects)
+    # The frame before and its objects as the stage moved them onto this one (see _stage_shift).
+    shift = np.rint(run.stage).astype(int)
+    before = np.roll(run.before, tuple(shift), axis=(0, 1)) if run.before is not None and shift.any() else run.before
+    held_before = [c[t - step] + shift for c in run.contours if c[t - step] is not None]
     bids = []
     for k in range(len(run.inits)):
         last, history = _history(run, k, t, step) if run.status[k][t] == LOST else (None, [])
         if last is None:
             continue
-        found = _unclaimed_blob(_seen_as(run, k, t, image, shared)[1].intensity, owner, history[-1],
-                                run.seen[k].polarity, run.before,
-                                [history[-1], *held_before])
+        where = history[-1] + _staged_since(run, last, t, step)
+        found = _unclaimed_blob(_seen_as(run, k, t, image, shared)[1].intensity, owner, where,
+                                run.seen[k].polarity, before, [where, *held_before])
         if found is not None:
             bids.append((found[0], k, found[1], last == t - step and t not in run.seen[k].parted))
     granted = []
@@ -1483,6 +1487,7 @@ class _Run:
     seen: list
     moved: list = field(default_factory=list)  # see _common_motion: of the objects done on the current frame
     stage: np.ndarray = field(default_factory=lambda: np.zeros(2))  # see _stage_shift: of the current frame
+    stages: dict = field(default_factory=dict)  # frame -> the stage's shift onto it (see _staged_since)
     drift: np.ndarray = field(default_factory=lambda: np.zeros(2))  # see _field_drift: of the current frame
     looks: np.ndarray | None = None  # the current frame, its illumination taken out (see background.plane_removed)
     before: np.ndarray | None = None  # the same of the frame before, in the direction of travel
@@ -1656,15 +1661,36 @@ def _holds(a: np.ndarray, b: np.ndarray, shape) -> bool:
 
 def _history(run: _Run, k: int, t: int, step: int):
     """The frame where object ``k`` was last seen before ``t`` (None if not
-    within MAX_GAP frames) and its contours there and on the frame before in
-    the direction of travel (after a gap, the last one only: where it went
-    meanwhile is not known)."""
+    within MAX_GAP frames, nor back in view, see _back_in_view) and its
+    contours there and on the frame before in the direction of travel (after
+    a gap, the last one only: where it went meanwhile is not known)."""
     last = _last_seen(run.status[k], t, step)
+    if last is None:
+        last = _back_in_view(run, k, t, step)
     if last is None or _division_before(run.seen[k], t, run.start, step) is not None:
         return None, []
     contours = run.contours[k]
     before = contours[last - step] if last == t - step and 0 <= last - step < len(contours) else None
     return last, [c for c in (before, contours[last]) if c is not None]
+
+
+def _jumped(stage: np.ndarray, contour: np.ndarray) -> bool:
+    """Whether the stage's shift ``stage`` moved the field by the radius of
+    the object of ``contour`` or more: its old place, and the places its
+    motion before predicts, then show another part of the field. (A field
+    that drifts a pixel or two a frame leaves them on the object, where
+    they still catch one that the stage's shift alone misses: the warped
+    Data Science Bowl field lost 2 visible nucleus-frames more without them.)"""
+    return bool(np.hypot(*stage) >= _radius(contour))
+
+
+def _staged_since(run: _Run, last: int, t: int, step: int) -> np.ndarray:
+    """How far the stage moved the field from frame ``last`` to frame ``t``:
+    the sum of its shifts onto each frame between (see _stage_shift). An
+    object looked for again after a gap moved with every one of them: with
+    the last one alone, a nucleus gone out of view on a jittering stage was
+    found again on a neighbour (an outside tester, session 73)."""
+    return sum((run.stages.get(f, np.zeros(2)) for f in range(last + step, t + step, step)), np.zeros(2))
 
 
 def _division_before(seen: _Seen, t: int, start: int, step: int) -> int | None:
@@ -1688,22 +1714,30 @@ def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, hand
         return None, run.status[k][t - step]
     look = None
     if handed is None and last == t - step and run.before is not None:
-        look = _look_shift(run.before, run.looks, history[-1])
+        look = _look_shift(run.before, run.looks, history[-1], around=run.stage)
+    looked = [] if look is None else [history[-1] + look]
+    stage = _staged_since(run, last, t, step)
     if handed is not None:
         starts = [handed]
+    elif _jumped(stage, history[-1]):
+        # The stage jumped (see _stage_shift): the object is where it moved
+        # it, or where its own looks moved from there (see _look_shift). Its
+        # old place shows another part of the field, and its last motion
+        # holds the stage's last jump: started there, a nucleus on a
+        # jittering stage took its neighbour's place (an outside tester,
+        # session 73).
+        predicted = history[-1] + stage
+        starts = looked + [predicted]
     else:
-        # Where it was last seen, moved as its own looks moved (see
-        # _look_shift), if they tell; moved as the looks of the objects moved
-        # together (a jittering stage, see _stage_shift), if they did; where
-        # its last motion predicts it, moved as the objects done on this
-        # frame moved together from theirs, if they did; there; where it was
-        # last seen (the motion may overshoot one that stopped or turned
-        # back: its drawing then lies mostly on the background).
+        # Where it was last seen, moved as its own looks moved, if they tell;
+        # moved as the stage moved the field, if it did; where its last motion
+        # predicts it, moved as the objects done on this frame moved together
+        # from theirs, if they did; there; where it was last seen (the motion
+        # may overshoot one that stopped or turned back: its drawing then
+        # lies mostly on the background).
         predicted = _predicted(history)
-        together = _common_motion(run.moved)
-        staged = [history[-1] + run.stage] if run.stage.any() else []
-        looked = [] if look is None else [history[-1] + look]
-        starts = looked + staged + [predicted + together, predicted, history[-1]]
+        staged = [history[-1] + stage] if stage.any() else []
+        starts = looked + staged + [predicted + _common_motion(run.moved), predicted, history[-1]]
     # The last frame's drawing, if it may be carried over (see _carried): not
     # after a gap (the object may be anywhere within reach), nor from the
     # image's side or a margin of no data (as the object moves, the side shows
@@ -1794,9 +1828,10 @@ def _stage_shift(run: _Run, before: np.ndarray, image: np.ndarray, t: int, step:
     A stage that jumps further (a multi-position acquisition that does not
     come back to the same place, a movie not registered) moves the whole
     frame: its shift, read coarsely on the whole frames (see _frame_shift),
-    is where the looks are searched first when it lies beyond half that
+    is where the looks are searched too when it lies beyond half that
     reach; the looks must confirm it (the CTC movie on a stage jumping
-    +-30 px a frame lost every nucleus at the first jump).
+    +-30 px a frame lost every nucleus at the first jump), and by more
+    objects than they confirm a still stage.
     """
     tracked = [k for k in range(len(run.inits)) if run.status[k][t - step] == TRACKED]
     if len(tracked) < 2:
@@ -1806,28 +1841,55 @@ def _stage_shift(run: _Run, before: np.ndarray, image: np.ndarray, t: int, step:
     radius = np.median([_radius(c) for c in last])
     reach = int(np.clip(STAGE_SEARCH * radius, 4, 60))
     far = _frame_shift(before, image)
+    still = _shift_by_looks(before, image, last, reach, np.zeros(2, dtype=int))
     if np.abs(far).max() > reach / 2:
-        shift = _shift_by_looks(before, image, last, reach, far)
-        if shift.any():
-            return shift
-    return _shift_by_looks(before, image, last, reach, np.zeros(2, dtype=int))
+        # The jump must be confirmed by more objects than the still stage is:
+        # alike objects in a row match their neighbours a row's step away.
+        jump = _shift_by_looks(before, image, last, reach, far)
+        if jump[1] > still[1]:
+            return jump[0]
+    return still[0]
 
 
-def _shift_by_looks(before, image, contours, reach: int, around: np.ndarray) -> np.ndarray:
+def _shift_by_looks(before, image, contours, reach: int, around: np.ndarray) -> tuple[np.ndarray, int]:
     """The shift the looks of ``contours`` on the frame ``before`` agree on
-    within ``reach`` px of ``around`` on ``image`` (see _stage_shift), or none."""
-    maps = [found[0] for found in (_look_map(before, image, contour, reach, around=around) for contour in contours)
-            if found is not None]
+    within ``reach`` px of ``around`` on ``image`` (see _stage_shift), each
+    read at the shifts that keep it in view (see _full_look_map), or none;
+    and how many objects' looks confirm it (0 for none)."""
+    maps = [_full_look_map(before, image, contour, reach, around) for contour in contours]
     if len(maps) < 2:
-        return np.zeros(2)
-    peak = np.array(np.unravel_index(np.argmax(np.sum(maps, axis=0)), maps[0].shape))
-    moved = []
+        return np.zeros(2), 0
+    with warnings.catch_warnings():  # (shifts no object's patch can take in the image: all NaN)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        total = np.nansum(maps, axis=0)
+    peak = np.array(np.unravel_index(np.argmax(total), total.shape))
+    moved, seen = [], 0
     for score in maps:  # each object's own best match within 2 px of the common peak
         near = score[max(peak[0] - 2, 0):peak[0] + 3, max(peak[1] - 2, 0):peak[1] + 3]
-        best = np.array(np.unravel_index(np.argmax(near), near.shape)) + np.maximum(peak - 2, 0)
+        if np.isnan(near).all():
+            continue  # out of the view there: it tells nothing
+        seen += 1
+        best = np.array(np.unravel_index(np.nanargmax(near), near.shape)) + np.maximum(peak - 2, 0)
         if score[tuple(best)] >= STAGE_MATCH:
             moved.append(best - reach + around)
-    return _common_motion(moved) if 2 * len(moved) > len(maps) else np.zeros(2)
+    return (_common_motion(moved), len(moved)) if 2 * len(moved) > seen else (np.zeros(2), 0)
+
+
+def _full_look_map(before, image, contour, reach: int, around) -> np.ndarray:
+    """_look_map's scores of ``contour``'s patch at every shift within
+    ``reach`` of ``around``, NaN at the shifts that take it out of the
+    image (all of them for a flat patch): near the image's side an object's search meets it, and on a
+    small field most of them did, so that the stage's jumps went unread
+    (the looks of 2 objects of 6 cannot confirm a shift; an outside tester,
+    session 73)."""
+    full = np.full((2 * reach + 1, 2 * reach + 1), np.nan, dtype=np.float32)
+    found = _look_map(before, image, contour, reach, at_side=True, around=around)
+    if found is None:  # (out of the view at every shift, or a flat patch: it confirms nothing)
+        return full
+    score, first = found
+    at = first - (np.asarray(around) - reach)
+    full[at[0]:at[0] + score.shape[0], at[1]:at[1] + score.shape[1]] = score
+    return full
 
 
 #: The frames' shift is read on copies binned to at most this many pixels
@@ -1871,14 +1933,17 @@ def _look_map(before: np.ndarray, image: np.ndarray, contour: np.ndarray, reach:
         if not at_side:
             return None
         lo, hi = np.maximum(lo, 0), np.minimum(hi, image.shape)
+        if np.any(hi - lo < patch.shape):  # no shift searched keeps the patch in the image
+            return None
     region = image[lo[0]:hi[0], lo[1]:hi[1]].astype(np.float32)
     return np.nan_to_num(cv2.matchTemplate(region, patch, cv2.TM_CCOEFF_NORMED)), lo - corner
 
 
-def _look_shift(before: np.ndarray, image: np.ndarray, contour: np.ndarray) -> np.ndarray | None:
+def _look_shift(before: np.ndarray, image: np.ndarray, contour: np.ndarray, around=(0, 0)) -> np.ndarray | None:
     """How the object of ``contour`` on the frame ``before`` moved onto
     ``image`` by its appearance: the best match of its patch (see _look_map)
-    within LOOK_SEARCH radii, to a fraction of a pixel; None where it cannot
+    within LOOK_SEARCH radii of ``around`` (the stage's shift: an object's
+    own motion adds to it), to a fraction of a pixel; None where it cannot
     be told (a flat patch, a best match under LOOK_MATCH, or on the edge of
     the search within the image: it moved further).
 
@@ -1887,14 +1952,14 @@ def _look_shift(before: np.ndarray, image: np.ndarray, contour: np.ndarray) -> n
     its drawing limited it, and the drawing drawn around it again let it
     take a band of the neighbour each frame (see _carried).
     """
-    reach = int(np.clip(LOOK_SEARCH * _radius(contour), 4, 30))
-    found = _look_map(before, image, contour, reach, at_side=True)
+    reach, around = int(np.clip(LOOK_SEARCH * _radius(contour), 4, 30)), np.rint(around).astype(int)
+    found = _look_map(before, image, contour, reach, at_side=True, around=around)
     if found is None:
         return None
     score, first = found
     peak = np.unravel_index(np.argmax(score), score.shape)
     shift = np.array(peak) + first
-    if score[peak] < LOOK_MATCH or np.abs(shift).max() >= reach:
+    if score[peak] < LOOK_MATCH or np.abs(shift - around).max() >= reach:
         return None
     offset = np.zeros(2)
     for axis in range(2):  # the vertex of the parabola through the peak and its two neighbours
@@ -1950,7 +2015,7 @@ def _give_back(run: _Run, image, shared, owner, t: int, j: int, step: int, other
     last, history = _history(run, j, t, step)
     if last is None:
         return
-    looked_at = _drawing_around(history[-1])
+    looked_at = _drawing_around(history[-1] + _staged_since(run, last, t, step))
     least = SUSPECT_SHARE * abs(signed_area(history[-1]))
     moved = list(run.moved)  # the frame's common motion is read off first looks only
     for i in others:
@@ -1991,10 +2056,12 @@ def _misfit(run: _Run, k: int, t: int, step: int) -> float:
     its change of area."""
     if run.status[k][t] != TRACKED:
         return LOST_MISFIT
-    _, history = _history(run, k, t, step)
+    seen_on, history = _history(run, k, t, step)
     contour, last = run.contours[k][t], history[-1]
-    centre = area_centroid(contour)
-    where = [area_centroid(_predicted(history)), area_centroid(last), area_centroid(last) + run.stage]
+    centre, stage = area_centroid(contour), _staged_since(run, seen_on, t, step)
+    where = [area_centroid(last) + stage]
+    if not _jumped(stage, last):  # (else the old place and motion show another part of the field: see _one_object)
+        where += [area_centroid(_predicted(history)), area_centroid(last)]
     distance = min(np.hypot(*(centre - w)) for w in where) / _radius(last)
     return float(distance + abs(np.log(abs(signed_area(contour)) / abs(signed_area(last)))))
 
@@ -2090,6 +2157,35 @@ def _largest_kept(previous, seen: _Seen, shape, missing) -> float | None:
     if not _touches_side(previous, shape, missing):
         return LEAK_AREA_FACTOR * area
     return LEAK_AREA_FACTOR * max(seen.whole_area, area) if seen.seen_whole else None
+
+
+def _back_in_view(run: _Run, k: int, t: int, step: int) -> int | None:
+    """The frame object ``k`` was last seen on before it left the field of
+    view, when the stage's shifts since (see _staged_since) bring its place
+    back into view on frame ``t``, 1 - LEFT_FRACTION of its area or more
+    within the image; else None.
+
+    Out of view for longer than MAX_GAP frames, an object is no longer
+    looked for: nothing says where it went. But when the stage moved the
+    field, the object moved with it, and it is looked for where the stage
+    brought it, however long it was out (on a stage jittering by +-20 px
+    over a field of nuclei, 12 nucleus-frames back in view were said to
+    have left it; an outside tester, session 73). An object that crawled
+    out of a still field is not looked for again."""
+    status = run.status[k]
+    last = t - step
+    while 0 <= last < len(status) and status[last] == LEFT:
+        last -= step
+    if not 0 <= last < len(status) or status[last] != TRACKED or last == t - step:
+        return None
+    shift = _staged_since(run, last, t, step)
+    if not shift.any():
+        return None
+    moved, shape = run.contours[k][last] + shift, np.array(run.looks.shape)
+    in_view = np.clip(moved, 0, shape - 1)  # (its part beyond a side laid on that side)
+    if abs(signed_area(in_view)) < (1 - LEFT_FRACTION) * abs(signed_area(moved)):
+        return None
+    return last
 
 
 def _last_seen(status: list, t: int, step: int) -> int | None:
