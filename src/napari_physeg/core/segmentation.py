@@ -1522,7 +1522,7 @@ def _evolve(
     body = _body_of(setup, options)
     history = [body.nodes + features.origin]
     stop_reason, steps, settled = yield from _time_loop(body, setup, options, history)
-    nodes, stop_reason = _final_nodes(body, setup, stop_reason, settled, steps, max_line_length)
+    nodes, stop_reason = _final_nodes(body, setup, stop_reason, settled, steps, max_line_length, contrast)
     if not np.array_equal(history[-1], nodes):
         history.append(nodes.copy())
     t_end = time.perf_counter()
@@ -1669,7 +1669,7 @@ def _time_loop(body: _ElasticBody, setup: _Setup, options: dict, history: list):
 
 
 def _final_nodes(body: _ElasticBody, setup: _Setup, stop_reason: str, settled, steps: int,
-                 max_line_length: float) -> tuple[np.ndarray, str]:
+                 max_line_length: float, contrast: str = "intensity") -> tuple[np.ndarray, str]:
     """The result's nodes (image frame) and stop reason once the loop ended
     with ``stop_reason``: what succeeded kept, a converged contour polished
     on the raw image, and a converged one that spread beyond its object
@@ -1680,7 +1680,7 @@ def _final_nodes(body: _ElasticBody, setup: _Setup, stop_reason: str, settled, s
         nodes = settled - features.origin
         stop_reason = _rest_reason(features, nodes)
     if stop_reason != "cancelled" and body.collapsed:
-        nodes, stop_reason = _before_collapse(features, settled, setup.drawing, steps, max_line_length)
+        nodes, stop_reason = _before_collapse(features, settled, setup.drawing, steps, contrast)
     if stop_reason in ("converged", "limited") and features.with_refinement:
         # At rest every node is within a few tenths of a pixel of the border,
         # read on smoothed images and each on its own noise: measure the border
@@ -1869,10 +1869,11 @@ def _encloses_nothing(contour: np.ndarray) -> bool:
     return _thinner_than(contour, 0.5)
 
 
-def _before_collapse(features: _FeatureWindow, settled, drawing, steps: int, max_line_length: float):
+def _before_collapse(features: _FeatureWindow, settled, drawing, steps: int, contrast: str):
     """The nodes (window frame) and stop reason a collapsed contour leaves:
     where the evolution came to rest (``settled``, image frame) if it had;
-    else a ValueError saying why."""
+    else a ValueError saying why (``contrast``: what told the object, see
+    segment's)."""
     if settled is not None:
         # The refinement lost an object a few pixels across that the evolution
         # had found (the region force's lines cross it): keep what succeeded.
@@ -1888,11 +1889,25 @@ def _before_collapse(features: _FeatureWindow, settled, drawing, steps: int, max
                          "of avoid (the other objects' pixels only)")
     across = float(np.ptp(drawing, axis=0).max())
     raise ValueError(
-        f"the contour collapsed to a point after {steps} steps: no object border was found within reach "
-        f"({max_line_length:g} px) of the initial contour; draw it around the object, closer to its border"
+        f"the contour collapsed to a point after {steps} steps: {_what_was_read(features.model)}; draw it around "
+        "the object, closer to its border"
         + (f", or, inside it, larger than this {across:.0f}-px click (a few pixels say too little about "
            "the object's level)" if across < SMALL_DRAWING else "")
+        + ("" if contrast == "texture" else "; an object told by its grain rather than its level (a cell in "
+           "phase contrast or DIC) may be read by its texture: contrast='texture'")
     )
+
+
+def _what_was_read(model: RegionModel) -> str:
+    """How a collapsed contour's drawing was read, for its error: where the
+    drawing lay inside the object, its border may well lie within reach,
+    only the pixels about it were not at the object's level (an outside
+    tester, session 73: "no object border was found within 40 px", said of
+    a polygon inside a cell in DIC 9-13 px from its border)."""
+    kind = "bright" if model.polarity > 0 else "dark"
+    if model.drawn_around:
+        return f"read as drawn around a {kind} object, it found none inside"
+    return f"read as drawn inside a {kind} object, it found too few of the object's pixels about it to hold on to"
 
 
 def _avoided_share(drawing: np.ndarray, avoid: np.ndarray | None) -> float:
