@@ -1057,3 +1057,5 @@ def test_the_core_s_messages_are_told_in_the_widget_s_words():
     assert not re.search(r"\binit\b|np\.|skimage\.", told)
     assert in_widget_terms("clip or replace them first, e.g. np.nan_to_num(image, posinf=..., neginf=...)") == \
         "clip or replace them first"
+    assert in_widget_terms("may be read by its texture: contrast='texture'") == \
+        "may be read by its texture: told by: texture (Advanced)"

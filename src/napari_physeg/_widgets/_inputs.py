@@ -104,6 +104,7 @@ _WIDGET_TERMS = (
     (r", or pass a mask's outline in order, e\.g\. skimage\.measure\.find_contours\(mask, 0\.5\)\[0\]", ""),
     (r"max_steps and segment_options of track\(\)", "the Tracking widget's steps per frame, material and stiffness"),
     (r",? \(?e\.g\. np\.nan_to_num(\([^)]*\))?\)?", ""),
+    (r"contrast='(\w+)'", r"told by: \1 (Advanced)"),
 )
 
 
