@@ -1719,15 +1719,6 @@ def _one_object(run: _Run, image, shared, owner, t: int, k: int, step: int, hand
     stage = _staged_since(run, last, t, step)
     if handed is not None:
         starts = [handed]
-    elif _jumped(stage, history[-1]):
-        # The stage jumped (see _stage_shift): the object is where it moved
-        # it, or where its own looks moved from there (see _look_shift). Its
-        # old place shows another part of the field, and its last motion
-        # holds the stage's last jump: started there, a nucleus on a
-        # jittering stage took its neighbour's place (an outside tester,
-        # session 73).
-        predicted = history[-1] + stage
-        starts = looked + [predicted]
     else:
         # Where it was last seen, moved as its own looks moved, if they tell;
         # moved as the stage moved the field, if it did; where its last motion
@@ -1840,25 +1831,34 @@ def _stage_shift(run: _Run, before: np.ndarray, image: np.ndarray, t: int, step:
     last = sorted((run.contours[k][t - step] for k in tracked), key=lambda c: tuple(area_centroid(c)))
     radius = np.median([_radius(c) for c in last])
     reach = int(np.clip(STAGE_SEARCH * radius, 4, 60))
-    far = _frame_shift(before, image)
-    still = _shift_by_looks(before, image, last, reach, np.zeros(2, dtype=int))
+    far, zero = _frame_shift(before, image), np.zeros(2, dtype=int)
+    still = _shift_by_looks(before, image, last, reach, zero)
+    if still[2] < 2:  # (the searches cross the image's side: a small field) read them where they stay in view
+        still = _shift_by_looks(before, image, last, reach, zero, partial=True)
     if np.abs(far).max() > reach / 2:
         # The jump must be confirmed by more objects than the still stage is:
         # alike objects in a row match their neighbours a row's step away.
-        jump = _shift_by_looks(before, image, last, reach, far)
+        jump = _shift_by_looks(before, image, last, reach, far, partial=True)
         if jump[1] > still[1]:
             return jump[0]
     return still[0]
 
 
-def _shift_by_looks(before, image, contours, reach: int, around: np.ndarray) -> tuple[np.ndarray, int]:
+def _shift_by_looks(before, image, contours, reach: int, around: np.ndarray,
+                    partial: bool = False) -> tuple[np.ndarray, int, int]:
     """The shift the looks of ``contours`` on the frame ``before`` agree on
-    within ``reach`` px of ``around`` on ``image`` (see _stage_shift), each
-    read at the shifts that keep it in view (see _full_look_map), or none;
-    and how many objects' looks confirm it (0 for none)."""
-    maps = [_full_look_map(before, image, contour, reach, around) for contour in contours]
+    within ``reach`` px of ``around`` on ``image`` (see _stage_shift), or
+    none; how many objects' looks confirm it (0 for none); and how many
+    were read: those whose search lies wholly in the image or, if
+    ``partial``, every one, at the shifts that keep it in view (see
+    _full_look_map)."""
+    if partial:
+        maps = [_full_look_map(before, image, contour, reach, around) for contour in contours]
+    else:
+        maps = [found[0] for found in (_look_map(before, image, c, reach, around=around) for c in contours)
+                if found is not None]
     if len(maps) < 2:
-        return np.zeros(2), 0
+        return np.zeros(2), 0, len(maps)
     with warnings.catch_warnings():  # (shifts no object's patch can take in the image: all NaN)
         warnings.simplefilter("ignore", RuntimeWarning)
         total = np.nansum(maps, axis=0)
@@ -1872,7 +1872,10 @@ def _shift_by_looks(before, image, contours, reach: int, around: np.ndarray) -> 
         best = np.array(np.unravel_index(np.nanargmax(near), near.shape)) + np.maximum(peak - 2, 0)
         if score[tuple(best)] >= STAGE_MATCH:
             moved.append(best - reach + around)
-    return (_common_motion(moved), len(moved)) if 2 * len(moved) > seen else (np.zeros(2), 0)
+    if 2 * len(moved) <= seen:
+        return np.zeros(2), 0, len(maps)
+    shift = _common_motion(moved)  # (none where they did not move together: no one confirms a jump then)
+    return shift, sum(np.hypot(*(m - shift)) <= AGREED_SHIFT for m in moved), len(maps)
 
 
 def _full_look_map(before, image, contour, reach: int, around) -> np.ndarray:
@@ -1891,6 +1894,10 @@ def _full_look_map(before, image, contour, reach: int, around) -> np.ndarray:
     full[at[0]:at[0] + score.shape[0], at[1]:at[1] + score.shape[1]] = score
     return full
 
+
+#: An object's looks confirm the stage's shift when they moved within this
+#: many px of it (see _shift_by_looks).
+AGREED_SHIFT = 1.5
 
 #: The frames' shift is read on copies binned to at most this many pixels
 #: along their longer side (see _frame_shift): a stage's jump moves the whole
@@ -2060,7 +2067,7 @@ def _misfit(run: _Run, k: int, t: int, step: int) -> float:
     contour, last = run.contours[k][t], history[-1]
     centre, stage = area_centroid(contour), _staged_since(run, seen_on, t, step)
     where = [area_centroid(last) + stage]
-    if not _jumped(stage, last):  # (else the old place and motion show another part of the field: see _one_object)
+    if not _jumped(stage, last):  # (else the old place and motion show another part of the field)
         where += [area_centroid(_predicted(history)), area_centroid(last)]
     distance = min(np.hypot(*(centre - w)) for w in where) / _radius(last)
     return float(distance + abs(np.log(abs(signed_area(contour)) / abs(signed_area(last)))))
