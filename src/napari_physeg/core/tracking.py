@@ -1676,11 +1676,11 @@ def _history(run: _Run, k: int, t: int, step: int):
 
 def _jumped(stage: np.ndarray, contour: np.ndarray) -> bool:
     """Whether the stage's shift ``stage`` moved the field by the radius of
-    the object of ``contour`` or more: its old place, and the places its
-    motion before predicts, then show another part of the field. (A field
-    that drifts a pixel or two a frame leaves them on the object, where
-    they still catch one that the stage's shift alone misses: the warped
-    Data Science Bowl field lost 2 visible nucleus-frames more without them.)"""
+    the object of ``contour`` or more: its old place, and the place its
+    motion before predicts, then show another part of the field, and an
+    outcome there is no fit (see _misfit): judged against its old place, a
+    nucleus that went out of view on a jittering stage kept the neighbour
+    that came to that place (an outside tester, session 73)."""
     return bool(np.hypot(*stage) >= _radius(contour))
 
 
@@ -1881,8 +1881,9 @@ def _shift_by_looks(before, image, contours, reach: int, around: np.ndarray,
 def _full_look_map(before, image, contour, reach: int, around) -> np.ndarray:
     """_look_map's scores of ``contour``'s patch at every shift within
     ``reach`` of ``around``, NaN at the shifts that take it out of the
-    image (all of them for a flat patch): near the image's side an object's search meets it, and on a
-    small field most of them did, so that the stage's jumps went unread
+    image (all of them for a flat patch): near the image's side an
+    object's search meets it, and on a small field most of them did, so
+    that the stage's jumps went unread
     (the looks of 2 objects of 6 cannot confirm a shift; an outside tester,
     session 73)."""
     full = np.full((2 * reach + 1, 2 * reach + 1), np.nan, dtype=np.float32)
