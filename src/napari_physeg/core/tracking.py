@@ -1674,16 +1674,6 @@ def _history(run: _Run, k: int, t: int, step: int):
     return last, [c for c in (before, contours[last]) if c is not None]
 
 
-def _jumped(stage: np.ndarray, contour: np.ndarray) -> bool:
-    """Whether the stage's shift ``stage`` moved the field by the radius of
-    the object of ``contour`` or more: its old place, and the place its
-    motion before predicts, then show another part of the field, and an
-    outcome there is no fit (see _misfit): judged against its old place, a
-    nucleus that went out of view on a jittering stage kept the neighbour
-    that came to that place (an outside tester, session 73)."""
-    return bool(np.hypot(*stage) >= _radius(contour))
-
-
 def _staged_since(run: _Run, last: int, t: int, step: int) -> np.ndarray:
     """How far the stage moved the field from frame ``last`` to frame ``t``:
     the sum of its shifts onto each frame between (see _stage_shift). An
@@ -2059,17 +2049,15 @@ def _astray(run: _Run, t: int, step: int, order: list[int]) -> list[int]:
 def _misfit(run: _Run, k: int, t: int, step: int) -> float:
     """How badly object ``k``'s outcome on frame ``t`` fits what was known of
     it: LOST_MISFIT if it is not tracked, else its centroid's distance from
-    where it was predicted or last seen (moved by the stage's shift, if
-    any: see _stage_shift), in radii of the last contour, plus the log of
-    its change of area."""
+    where it was predicted or last seen, or where the stage's shifts since
+    moved it (see _staged_since), in radii of the last contour, plus the log
+    of its change of area."""
     if run.status[k][t] != TRACKED:
         return LOST_MISFIT
     seen_on, history = _history(run, k, t, step)
     contour, last = run.contours[k][t], history[-1]
     centre, stage = area_centroid(contour), _staged_since(run, seen_on, t, step)
-    where = [area_centroid(last) + stage]
-    if not _jumped(stage, last):  # (else the old place and motion show another part of the field)
-        where += [area_centroid(_predicted(history)), area_centroid(last)]
+    where = [area_centroid(last) + stage, area_centroid(_predicted(history)), area_centroid(last)]
     distance = min(np.hypot(*(centre - w)) for w in where) / _radius(last)
     return float(distance + abs(np.log(abs(signed_area(contour)) / abs(signed_area(last)))))
 
