@@ -67,6 +67,20 @@ def test_a_flat_grainy_cell_is_told_by_its_texture_and_a_bright_one_by_its_level
     assert not told_by_texture(bright, drawing)
 
 
+def test_a_cell_in_dic_lit_brighter_than_shaded_is_told_by_its_texture():
+    """Differential interference contrast lights a cell's relief on one side
+    brighter than it shades the other: its grain swings about the ground's
+    level five times as far up as down. Read by level, circles about cells
+    in DIC outlined the lit half (IoU 0.33-0.47 on 9 real CHO cells; an
+    outside tester, session 73)."""
+    image, body = flat_cell()
+    lit = np.where(body & (image > 0.5), 0.5 + 5.0 * (image - 0.5), image)
+    drawing = circle((82, 78), 38)
+    assert told_by_texture(lit, drawing)
+    result = segment(lit, drawing)
+    assert result.contrast == "texture" and result.converged and iou(result.contour, body) > 0.85
+
+
 def test_a_click_or_a_drawing_inside_is_never_read_by_texture():
     image, _ = flat_cell()
     assert not told_by_texture(image, circle((80, 80), 3, n=16))
