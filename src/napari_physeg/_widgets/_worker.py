@@ -257,11 +257,11 @@ class WorkerWidget(Container):
         those names, in place, as magicgui updates the layer of the name a
         function returns: each tracking run added five layers of its own,
         and a user who tried a few settings had a list of look-alikes to
-        weed out. A layer the user renamed, or
-        removed, is theirs: it is left alone. A Shapes result that finds no
-        such layer takes over the run's Shapes ``preview`` (see
-        _add_result); a preview left over is removed, and so are the last
-        run's layers that this run has no result for.
+        weed out. A layer the user renamed, or removed, is theirs: it is
+        left alone. A Shapes result that finds no such layer takes over the
+        run's Shapes ``preview`` (see _add_result); a preview left over is
+        removed, and so are the last run's layers that this run has no
+        result for.
         """
         earlier = {(name, layer._type_string): layer for layer, name in self._results_put
                    if layer in self.viewer.layers and layer.name == name}

@@ -1522,7 +1522,7 @@ def _evolve(
     body = _body_of(setup, options)
     history = [body.nodes + features.origin]
     stop_reason, steps, settled = yield from _time_loop(body, setup, options, history)
-    nodes, stop_reason = _final_nodes(body, setup, stop_reason, settled, steps, max_line_length, contrast)
+    nodes, stop_reason = _final_nodes(body, setup, stop_reason, settled, steps, contrast)
     if not np.array_equal(history[-1], nodes):
         history.append(nodes.copy())
     t_end = time.perf_counter()
@@ -1669,7 +1669,7 @@ def _time_loop(body: _ElasticBody, setup: _Setup, options: dict, history: list):
 
 
 def _final_nodes(body: _ElasticBody, setup: _Setup, stop_reason: str, settled, steps: int,
-                 max_line_length: float, contrast: str = "intensity") -> tuple[np.ndarray, str]:
+                 contrast: str) -> tuple[np.ndarray, str]:
     """The result's nodes (image frame) and stop reason once the loop ended
     with ``stop_reason``: what succeeded kept, a converged contour polished
     on the raw image, and a converged one that spread beyond its object

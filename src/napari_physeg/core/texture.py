@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 from .contour import bounding_window, signed_area
-from .region import _TWO_SIDED_SHARE, _fill, _scatter
+from .region import _TWO_SIDED_SHARE, _fill, _scaled, _scatter
 
 __all__ = ["CONTRASTS", "texture_map", "told_by_texture"]
 
@@ -117,13 +117,12 @@ def told_by_texture(image: np.ndarray, drawing: np.ndarray) -> bool:
     drawing = np.asarray(drawing, dtype=np.float64)
     if abs(signed_area(drawing)) < np.pi * TEXTURE_DRAWING_RADIUS**2:
         return False
-    centre = drawing.mean(0)
-    ring_outline = centre + _RING_SCALE * (drawing - centre)
+    ring_outline = _scaled(drawing, _RING_SCALE)
     window = bounding_window(ring_outline, image.shape, 3.0 * TEXTURE_SIGMA)
     values = np.asarray(image[window], dtype=np.float64)
     corner = np.array([window[0].start, window[1].start])
     known = ~np.isnan(values)
-    middle = _fill(centre + _MIDDLE_SCALE * (drawing - centre), values.shape, corner) & known
+    middle = _fill(_scaled(drawing, _MIDDLE_SCALE), values.shape, corner) & known
     ring = _fill(ring_outline, values.shape, corner) & ~_fill(drawing, values.shape, corner) & known
     if not (middle.any() and ring.any()):  # (the image's side cuts all of one off)
         return False

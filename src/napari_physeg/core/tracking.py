@@ -1873,9 +1873,8 @@ def _full_look_map(before, image, contour, reach: int, around) -> np.ndarray:
     ``reach`` of ``around``, NaN at the shifts that take it out of the
     image (all of them for a flat patch): near the image's side an
     object's search meets it, and on a small field most of them did, so
-    that the stage's jumps went unread
-    (the looks of 2 objects of 6 cannot confirm a shift; an outside tester,
-    session 73)."""
+    that the stage's jumps went unread (the looks of 2 objects of 6 cannot
+    confirm a shift; an outside tester, session 73)."""
     full = np.full((2 * reach + 1, 2 * reach + 1), np.nan, dtype=np.float32)
     found = _look_map(before, image, contour, reach, at_side=True, around=around)
     if found is None:  # (out of the view at every shift, or a flat patch: it confirms nothing)
