@@ -11,6 +11,7 @@ from napari_physeg.core._drain import drain
 from napari_physeg.core import DivergenceError, iter_segment, segment
 from napari_physeg.core._validation import CLICK_RADIUS
 from napari_physeg.core.contour import segment_lengths, signed_area
+from napari_physeg.core.region import hasty_margin
 
 
 def iou(contour, mask):
@@ -402,6 +403,25 @@ def test_a_drawing_that_cuts_the_object_off_is_not_converged():
     assert iou(middle.contour, bar & (np.abs(xx - 80) <= 24)) > 0.9  # the part drawn around
     whole = segment(image, np.column_stack([80 + 22 * np.sin(t), 80 + 66 * np.cos(t)]))
     assert whole.converged and iou(whole.contour, bar) > 0.95
+
+
+def test_a_circle_over_the_edge_of_a_body_that_is_not_convex_is_limited_to_the_drawing():
+    """Found by an outside tester (session 73, a lasso about a phase-contrast
+    cell whose dark middle ran out into the grey ground): on the crop about
+    the drawing, an arm of an L-shaped body looks convex and is read as a
+    body drawn across; seen whole, the L is none. The crop's part stood:
+    the contour rested on the crop's straight sides, 100 px from the
+    drawing, where the image has no edge, and said "converged" (IoU 0.09).
+    The drawing limits the object, and the contour says it rests there."""
+    yy, xx = np.mgrid[:400, :400]
+    body = ((yy >= 20) & (yy < 190) & (xx >= 20) & (xx < 380)) | ((yy >= 20) & (yy < 380) & (xx >= 20) & (xx < 80))
+    image = ndi.gaussian_filter(body * 1.0, 1.0) + np.random.default_rng(0).normal(0, 0.05, body.shape)
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    circle = np.column_stack([170 + 30 * np.sin(t), 205 + 30 * np.cos(t)])
+    res = segment(image, circle)
+    assert res.stop_reason == "limited" and not res.converged
+    within = np.hypot(yy - 170, xx - 205) < 30 + hasty_margin(np.pi * 30 ** 2)  # the drawing and a hasty hand's margin
+    assert iou(res.contour, body & within) > 0.85
 
 
 def test_a_circle_across_a_thin_rod_that_ends_on_a_part_of_it_is_not_converged():

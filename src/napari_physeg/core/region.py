@@ -1608,16 +1608,19 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
     # drawing size beyond, where neighbours that could take the object lie.
     found = _object_region_on_crop(signed, drawing, model, image_sides, stronger,
                                    1.0 if model.drawn_around else model.reach)
-    if found is not None and model.drawn_around and _cut_by_crop(found):
+    if found is not None and model.drawn_around and (along_crop := _share_along_crop(found)) > 0:
         # Read as drawn across a body larger than the crop around the
         # drawing (see _drawn_across): the body whole, up to the reach of a
         # drawing inside it. On the drawing's crop, a circle a sixth of a
         # disk's radius over its edge ended on the crop's side, "converged".
         # Seen whole, the body may be no body (touching nuclei, not convex
-        # together, are limited to the drawing): then the crop's part stands.
+        # together, are limited to the drawing): then the crop's part stands,
+        # unless its outline is the crop's more than the object's.
         whole = _object_region_on_crop(signed, drawing, model, image_sides, stronger, model.reach)
         if whole is not None and np.count_nonzero(found[1] & ~whole[1]) <= WHOLE_HOLDS * np.count_nonzero(found[1]):
             found = whole
+        elif along_crop >= CROP_SHAPED_SHARE:
+            found = _within_the_drawing(found, drawing, model, image_sides)
     if found is None:
         return None
     _, region, cut = found
@@ -1629,15 +1632,43 @@ def object_region(signed: np.ndarray, drawing: np.ndarray, model: RegionModel,
 WHOLE_HOLDS = 0.05
 
 
-def _cut_by_crop(cropped) -> bool:
-    """Whether a region found on a crop of ``signed`` (see
-    _object_region_on_crop) meets a side of the crop that is not one of
-    ``signed``'s."""
+#: A region found on a crop with at least this share of its outline along
+#: the crop's sides has the crop's shape, not the object's (see
+#: _within_the_drawing). The parts of touching nuclei the crop kept had a
+#: tenth of their outline there; the ground about a phase-contrast cell whose
+#: dark middle runs out into it, 0.37-0.54 (session 73's tester).
+CROP_SHAPED_SHARE = 0.2
+
+
+def _share_along_crop(cropped) -> float:
+    """The share of the outline of a region found on a crop of ``signed``
+    (see _object_region_on_crop) that runs along the crop's sides that are
+    not ``signed``'s own: 0 when the crop cut none of it."""
     box, region, _ = cropped
     local = region[box]
-    cut = (box[0].start > 0 and local[0].any(), box[0].stop < region.shape[0] and local[-1].any(),
-           box[1].start > 0 and local[:, 0].any(), box[1].stop < region.shape[1] and local[:, -1].any())
-    return any(cut)
+    cut_sides = np.zeros(local.shape, bool)
+    cut_sides[0] |= box[0].start > 0
+    cut_sides[-1] |= box[0].stop < region.shape[0]
+    cut_sides[:, 0] |= box[1].start > 0
+    cut_sides[:, -1] |= box[1].stop < region.shape[1]
+    along = np.count_nonzero(local & cut_sides)
+    if along == 0:
+        return 0.0
+    # (Beyond the crop counts as the region: its own outline is where it meets the ground.)
+    rim = local & ~cv2.erode(local.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+    return along / np.count_nonzero(rim | (local & cut_sides))
+
+
+def _within_the_drawing(cropped, drawing, model, image_sides):
+    """A region found on a crop (see _object_region_on_crop) and read as
+    drawn across a body the crop cut, limited to the drawing after all, with
+    what that cuts off kept as cut (see object_region). Seen whole there
+    was no body, and the crop's straight sides had made one: the grey
+    ground about a phase-contrast cell whose dark middle runs out into it,
+    taken 100 px beyond a lasso, "converged" on the crop's sides (IoU 0.09)."""
+    box, region, cut = cropped
+    limit = drawing_limit(drawing, region.shape, model)
+    return box, _smoothed(region & limit, image_sides), cut | (region & ~limit)
 
 
 def _object_region_on_crop(signed, drawing, model, image_sides, stronger, scale: float):
