@@ -1068,6 +1068,28 @@ def test_a_contour_along_a_padded_frame_took_most_of_the_image():
     assert not _took_most_of_the_image(half, click, shape)
 
 
+def test_a_contour_that_holds_nearly_all_of_the_image_a_few_px_from_a_side_took_the_whole_image():
+    """A whole-cell fluorescence frame brighter along its top rows (an
+    outside tester, session 74): a circle's contour spread over the ground to
+    three of the image's sides and to 4 px from the fourth, holding 98 % of
+    the image, 7.8 times the circle, and said converged. A disk 10 px from
+    each side (an object a tight crop holds) holds 75 % of the image: an
+    object, not a leak."""
+    from napari_physeg.core.segmentation import _took_the_whole_image
+
+    shape = (832, 992)
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    circle = np.clip(np.column_stack([735 + 190 * np.sin(t), 180 + 190 * np.cos(t)]), 0, np.array(shape) - 1)
+    nearly_all = np.array([[4.0, 0.0], [4.0, 991.0], [831.0, 991.0], [831.0, 0.0]])
+    assert _took_the_whole_image(nearly_all, circle, shape)
+    square = (800, 800)
+    disk = np.column_stack([399.5 + 389.5 * np.sin(t), 399.5 + 389.5 * np.cos(t)])
+    click = np.column_stack([400 + 3 * np.sin(t), 400 + 3 * np.cos(t)])
+    assert not _took_the_whole_image(disk, click, square)
+    inset = np.array([[30.0, 30.0], [30.0, 961.0], [801.0, 961.0], [801.0, 30.0]])  # 30 px from each side
+    assert not _took_the_whole_image(inset, circle, shape)
+
+
 def test_a_circle_wholly_beyond_the_image_that_stays_on_its_frame_is_not_converged():
     """A circle 1.4 times the horse, wholly beyond the image, is clipped to
     its four sides; in noise the contour stayed there, the horse and its
