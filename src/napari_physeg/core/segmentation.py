@@ -548,9 +548,8 @@ def _took_the_whole_image(contour: np.ndarray, drawing: np.ndarray, shape) -> bo
     NEARLY_ALL of the image (see there)."""
     if _sides_met(contour, shape) == 4 and _sides_met(drawing, shape) < 4:
         return True
-    near = max(1.0, ALONG_THE_SIDE * min(shape))
     return bool(abs(signed_area(contour)) > NEARLY_ALL * shape[0] * shape[1]
-                and _sides_met(contour, shape, near) == 4 and _sides_met(drawing, shape, near) < 4)
+                and _sides_along(contour, shape) == 4 and _sides_along(drawing, shape) < 4)
 
 
 #: A contour that holds more than this share of the image is the image, not
@@ -586,13 +585,18 @@ MOST_GROWTH = 20.0
 ALONG_THE_SIDE = 0.03
 
 
+def _sides_along(contour: np.ndarray, shape) -> int:
+    """How many of the image's four sides ``contour`` runs along (see ALONG_THE_SIDE)."""
+    return _sides_met(contour, shape, max(1.0, ALONG_THE_SIDE * min(shape)))
+
+
 def _took_most_of_the_image(contour: np.ndarray, drawing: np.ndarray, shape) -> bool:
     """Whether ``contour`` holds more than MOST_OF_THE_IMAGE of the image,
     along two of its sides or more (see ALONG_THE_SIDE), and MOST_GROWTH
     times what ``drawing`` (clipped to the image) holds."""
     area = abs(signed_area(contour))
     return bool(area > MOST_OF_THE_IMAGE * shape[0] * shape[1] and area > MOST_GROWTH * abs(signed_area(drawing))
-                and _sides_met(contour, shape, max(1.0, ALONG_THE_SIDE * min(shape))) >= 2)
+                and _sides_along(contour, shape) >= 2)
 
 
 #: A contour with at least this share of its nodes on the image's sides, along
