@@ -1069,8 +1069,12 @@ def _warn_not_found(run: _Run, image: np.ndarray) -> list[str]:
     for k, init in enumerate(run.inits):
         if run.status[k][run.start] == TRACKED:
             continue
-        within = [j for j in range(len(run.inits))
-                  if j != k and (_holds(run.inits[j], init, shape) or _holds(init, run.inits[j], shape))]
+        # Only an object found before k can have taken what k marks: a
+        # generous circle done after a tight one inside it did not (it was
+        # blamed for a small cell whose own contour leaked).
+        before = run.start_order[:run.start_order.index(k)] if k in run.start_order else range(len(run.inits))
+        within = [j for j in before if j != k and run.status[j][run.start] == TRACKED
+                  and (_holds(run.inits[j], init, shape) or _holds(init, run.inits[j], shape))]
         if blank:
             why = blank
         elif within:
@@ -1079,8 +1083,9 @@ def _warn_not_found(run: _Run, image: np.ndarray) -> list[str]:
                    f"were taken to mark the same object, which contours that never overlap cannot share; draw "
                    f"each object once, and objects that touch each closely (a polygon or a box about each)")
         else:
-            why = ("no object came to rest under its drawing; check that it is drawn around (or inside) one "
-                   "object, or the contour's options (max_steps and segment_options of track())")
+            found = run.seen[k].why.get(run.start, "no object came to rest under its drawing")
+            why = (f"{found}; check that it is drawn around (or inside) one object, or the contour's options "
+                   "(max_steps and segment_options of track())")
         run.seen[k].why[run.start] = f"not found on the start frame: {why}"
         run.warned.add(k)
         said.append(f"object {k} was not found on the start frame {run.start} and is reported lost: {why}")
@@ -1256,6 +1261,8 @@ def _segment_frame(run: _Run, image, shared, t: int, step: int):
     owner = np.full(image.shape, -1, dtype=np.int32)
     run.painted = {}
     order = _segmenting_order(run, t, step)
+    if t == run.start:
+        run.start_order = list(order)
     run.drift = _field_drift(run, t, step)
     for j in reversed(order):  # where claims overlap, the object done first has them
         _paint(run, owner, _claim_before(run, j, t, step), j)
@@ -1495,6 +1502,7 @@ class _Run:
     warned: set = field(default_factory=set)  # the objects a warning named lost (see _warn_lost)
     nothing_there: dict = field(default_factory=dict)  # frame -> why nothing is found there (see _nothing_to_find)
     textured: tuple | None = None  # (frame, its texture, the texture's features), for objects told by it (see _seen_as)
+    start_order: list = field(default_factory=list)  # the objects in the order done on the start frame
 
 
 def _claim_before(run: _Run, k: int, t: int, step: int) -> np.ndarray | None:
