@@ -491,6 +491,25 @@ def test_a_figure_8_drawing_is_warned_of_and_an_overshooting_lasso_is_not():
         assert iou(segment(obj.image, lasso).contour, obj.mask) >= 0.9
 
 
+def test_a_ring_closed_as_find_contours_writes_it_and_a_paused_lasso_are_drawings():
+    """A mask's outline from ``skimage.measure.find_contours`` repeats its
+    first point at its end, and a lasso whose mouse paused repeats a point
+    in a row. Both were refused ("pass each node once"), though the error
+    for a drawing that goes back and forth advises find_contours (an
+    outside tester, session 75). Each repeated node is taken once: the
+    results are those of the nodes given once."""
+    from skimage import measure
+
+    obj = data.ellipse((96, 96))
+    ring = measure.find_contours(ndi.binary_dilation(obj.mask, iterations=4).astype(float), 0.5)[0]
+    assert np.array_equal(ring[0], ring[-1])
+    paused = np.insert(ring[:-1], 10, ring[10], axis=0)
+    once = segment(obj.image, ring[:-1]).contour
+    assert np.array_equal(segment(obj.image, ring).contour, once)
+    assert np.array_equal(segment(obj.image, paused).contour, once)
+    assert iou(once, obj.mask) > 0.95
+
+
 @pytest.mark.parametrize("n_vertices, centre_row, radius", [(9, -30, 40), (13, -30, 60), (13, -20, 40)])
 def test_drawing_mostly_beyond_the_image_side_is_repaired(n_vertices, centre_row, radius):
     """A coarse polygon mostly beyond the top side, clipped to the image, runs

@@ -139,14 +139,31 @@ def clicked(points):
     return arr[0].astype(float) + CLICK_RADIUS * np.column_stack([np.sin(angles), np.cos(angles)])
 
 
+def once_each(points):
+    """``points`` with every node that the next repeats exactly (the last,
+    if the first repeats it) left out, if they are a numeric (N, 2) array;
+    else as given. A closed ring as ``skimage.measure.find_contours``, QuPath
+    and shapely write it repeats its first node at its end, and a mouse that
+    paused repeats one in a row: neither says more than the nodes once."""
+    try:
+        arr = np.asarray(points)
+    except (TypeError, ValueError):  # (ragged: check_contour says what is wrong)
+        return points
+    if arr.dtype.kind not in "iuf" or arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < 2:
+        return points
+    repeats = np.all(arr == np.roll(arr, -1, axis=0), axis=1)  # (the last, where it repeats the first)
+    return arr[~repeats] if repeats.any() and not repeats.all() else points
+
+
 def check_drawing(points, name: str = "init") -> np.ndarray:
     """:func:`check_contour` for a drawing that stands for an object's
     outline (segment's and track's): also a ValueError when its nodes do not
     follow one outline in order (see IN_ORDER_SHARE). One point is a click
-    (see :func:`clicked`)."""
+    (see :func:`clicked`); a node repeated in a row, or the first at the end,
+    is taken once (see :func:`once_each`: the contour is resampled anyway)."""
     from .contour import signed_area  # (contour imports this module)
 
-    arr = check_contour(clicked(points), name)
+    arr = check_contour(once_each(clicked(points)), name)
     area = abs(signed_area(arr))
     if area >= IN_ORDER_SHARE * float(np.prod(np.ptp(arr, axis=0))):  # most: the hull is no larger than the box
         return arr

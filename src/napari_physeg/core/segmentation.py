@@ -2040,8 +2040,10 @@ def segment(
     init : (N, 2) array_like
         Initial contour, ``(row, col)`` nodes, closed without a repeated node,
         ``N >= 3``; or one point (a click), taken as a circle of
-        ``CLICK_RADIUS`` (3) px about it. Nodes outside the image are clipped
-        to it (with a warning).
+        ``CLICK_RADIUS`` (3) px about it. A node repeated in a row, or the
+        first repeated at the end (a ring as ``skimage.measure.find_contours``
+        writes it), is taken once. Nodes outside the image are clipped to it
+        (with a warning).
     material : str or Material, optional
         Virtual material: a preset of :data:`MATERIALS` (``"rubber"``,
         ``"copper"``, ...) or a :class:`Material`.
