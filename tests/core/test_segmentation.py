@@ -140,6 +140,12 @@ GOOD_IMAGE = data.ellipse((64, 64)).image
 GOOD_INIT = data.ellipse((64, 64)).init_near
 
 
+def _with_a_far_pixel(image, value):
+    image = image.copy()
+    image[-1, -1] = value
+    return image
+
+
 @pytest.mark.parametrize(
     "image, init, message",
     [
@@ -149,6 +155,10 @@ GOOD_INIT = data.ellipse((64, 64)).init_near
         (GOOD_IMAGE, GOOD_INIT + 500, "wholly outside"),
         (GOOD_IMAGE, GOOD_INIT[:, :1], r"\(N, 2\)"),
         (np.where(np.eye(64, dtype=bool), np.inf, GOOD_IMAGE), GOOD_INIT, "infinite"),
+        # One pixel far from the drawing, beyond the window the features read
+        # (an outside tester, session 75: it passed in silence).
+        (_with_a_far_pixel(np.pad(GOOD_IMAGE, ((0, 400), (0, 400)), mode="reflect"), -np.inf), GOOD_INIT,
+         "infinite"),
         (np.full((64, 64), np.nan), GOOD_INIT, "NaN pixels only"),
         (np.dstack([GOOD_IMAGE] * 3), GOOD_INIT, r"RGB.*rgb2gray.*stain.*rgb2hed"),
         (np.stack([GOOD_IMAGE] * 5), GOOD_INIT, "2D"),
@@ -299,6 +309,20 @@ def test_nan_pixels_are_no_data_where_the_object_ends_as_at_the_image_side(brigh
     as_cropped = np.zeros_like(inside)
     as_cropped[cut:] = polygon2mask(blob.image[cut:].shape, cropped.contour)
     assert (inside & as_cropped).sum() / (inside | as_cropped).sum() > 0.98
+
+
+@pytest.mark.parametrize("margin", [0.5, 0.995])
+def test_a_drawing_on_pixels_without_data_is_refused_for_that(margin):
+    """A circle drawn on a registration's NaN margin (an outside tester,
+    session 75): it came to rest as 3 nodes on no data ("stalled"), or, the
+    margin over nearly all of the image, collapsed with an error about
+    ``avoid``, an option never passed. The error names the cause."""
+    blob = data.blob(seed=3)
+    image = blob.image.astype(float)
+    image[:, : int(margin * image.shape[1])] = np.nan
+    with pytest.raises(ValueError, match="init encloses pixels that hold no data") as caught:
+        segment(image, _circle((image.shape[0] / 2, 10), 6))
+    assert "avoid" not in str(caught.value)
 
 
 def test_a_masked_arrays_mask_is_no_data_as_nan_is():

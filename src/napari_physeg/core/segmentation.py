@@ -28,9 +28,8 @@ from .contour import (DENSE_PAIRS_MAX_POINTS, as_contour, bounding_window, conto
 from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
-from .features import (_as_image, _check_2d, _intensity_range, _masked_as_missing, _noise_sigma, _normalize,
-                       _rounding_sigma,
-                       _without_missing, _without_spikes, chamfer_distance, normalized_intensity, shen_castan_edges)
+from .features import (_as_image, _check_2d, _check_image, _intensity_range, _masked_as_missing, _noise_sigma,
+                       _normalize, _rounding_sigma, _without_missing, _without_spikes, chamfer_distance, normalized_intensity, shen_castan_edges)
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .magnify import MagnifiedView, magnification
 from .materials import Material, get_material, suggested_stiffness
@@ -179,8 +178,12 @@ def _in_working_range(image: np.ndarray) -> np.ndarray:
     if image.dtype.kind != "f":
         return image
     largest = max(-float(image.min()), float(image.max()))  # (no copy: a tracked frame is read per object)
-    if largest == 0.0 or not np.isfinite(largest) or WORKING_RANGE[0] <= largest <= WORKING_RANGE[1]:
-        return image  # (infinite pixels are refused where the features read them)
+    if not np.isfinite(largest):
+        # Anywhere in the image, not only where the features read it (an
+        # infinite pixel away from the drawing passed in silence).
+        _check_image(image)
+    if largest == 0.0 or WORKING_RANGE[0] <= largest <= WORKING_RANGE[1]:
+        return image
     return image.astype(np.float64) / largest
 
 
@@ -1589,6 +1592,7 @@ def _set_up(options: dict) -> _Setup:
     # A click's circle is the package's, not the user's: its nodes beyond the
     # image, clipped, are no news to someone who clicked inside it.
     init = _clip_to_image(init, image.shape, warn and clicked(o["init"]) is o["init"])
+    _check_on_data(init, missing)
     first = init if start is None else _clip_to_image(check_contour(start, "start"), image.shape, warn)
     nodes, spacing, sigma = _initial_nodes(first, o["n_nodes"], o["sigma"], o["sigma_factor"])
     if o["integrator"] == "modal" and len(nodes) > MODAL_MAX_NODES:
@@ -1611,6 +1615,22 @@ def _set_up(options: dict) -> _Setup:
                               pixel_noise=o["pixel_noise"], raw_model=o["raw_model"], evenly_lit=o["evenly_lit"])
     return _Setup(shape=image.shape, drawing=drawing, init=init, first=first, nodes=nodes, spacing=spacing,
                   sigma=sigma, material=material, stiffness=stiffness, features=features)
+
+
+#: A drawing that encloses more than this share of pixels without data lies
+#: off the object: on a registration's NaN margin, a circle came to rest as 3
+#: nodes there ("stalled"), or collapsed with an error about ``avoid``.
+NO_DATA_SHARE = 0.5
+
+
+def _check_on_data(init: np.ndarray, missing: np.ndarray | None) -> None:
+    """ValueError if ``init`` (clipped to the image) lies mostly on pixels
+    that hold no data (``missing``: NaN or masked in the image)."""
+    share = _avoided_share(init, missing)
+    if share > NO_DATA_SHARE:
+        raise ValueError(f"init encloses pixels that hold no data (NaN or masked) for {share:.0%} of its area "
+                         f"({missing.mean():.1%} of the image holds none): draw it around an object where the image "
+                         "has data")
 
 
 def _body_of(setup: _Setup, options: dict) -> _ElasticBody:
