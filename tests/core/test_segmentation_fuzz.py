@@ -7,6 +7,7 @@ deep inside numpy or scipy.
 """
 
 import os
+import re
 import warnings
 
 import numpy as np
@@ -181,3 +182,28 @@ def test_a_result_started_from_again_stays_where_it_settled(radius, aspect, blur
     held = polygon2mask(SHAPE, again)
     assert _iou(contour, held) >= 0.95
     assert abs(polygon2mask(SHAPE, contour).sum() / held.sum() - 1) < 0.04
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(init=drawings(), repeats=st.lists(st.integers(0, 10_000), min_size=0, max_size=4), closed=st.booleans())
+def test_a_drawings_exact_repeats_change_nothing(init, repeats, closed):
+    """Nodes repeated in a row (a mouse that paused) and the first repeated at
+    the end (a ring as find_contours writes it) are taken once: the same
+    result, or the same error, as the drawing with each node once."""
+    image, _ = _blob(np.float64, True, 0.05, 0)
+    repeated = init
+    for i in sorted({r % len(init) for r in repeats}, reverse=True):
+        repeated = np.insert(repeated, i, repeated[i], axis=0)
+    if closed:
+        repeated = np.vstack([repeated, repeated[:1]])
+
+    def outcome(drawing):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # nodes clipped to the image
+            try:
+                res = segment(image, drawing, max_steps=60)
+            except (ValueError, DivergenceError) as err:
+                return type(err), re.sub(r"\d+", "#", str(err))  # (node numbers shift with the repeats)
+        return res.stop_reason, res.contour.tobytes()
+
+    assert outcome(repeated) == outcome(init)
