@@ -29,7 +29,8 @@ from ._drain import drain
 from .dynamics import DivergenceError, ModalIntegrator, NewmarkIntegrator
 from .element import coefficient_system, rayleigh_coefficients, reference_frequency_range
 from .features import (_as_image, _check_2d, _check_image, _intensity_range, _masked_as_missing, _noise_sigma,
-                       _normalize, _rounding_sigma, _without_missing, _without_spikes, chamfer_distance, normalized_intensity, shen_castan_edges)
+                       _normalize, _rounding_sigma, _without_missing, _without_spikes, chamfer_distance,
+                       normalized_intensity, shen_castan_edges)
 from .forces import FORCE_NAMES, ForceField, normalize_weights
 from .magnify import MagnifiedView, magnification
 from .materials import Material, get_material, suggested_stiffness
