@@ -125,15 +125,21 @@ IN_ORDER_SHARE = 0.05
 CLICK_RADIUS = 3.0
 
 
+def _pairs(points) -> np.ndarray | None:
+    """``points`` as a numeric (N, 2) array, or None if they are not one
+    (check_contour then says what is wrong: ragged, 3D, text...)."""
+    try:
+        arr = np.asarray(points)
+    except (TypeError, ValueError):
+        return None
+    return arr if arr.dtype.kind in "iuf" and arr.ndim == 2 and arr.shape[1] == 2 else None
+
+
 def clicked(points):
     """A circle of CLICK_RADIUS px about the one point of ``points``, if
     they are one point given once or more; else ``points`` as given."""
-    try:
-        arr = np.asarray(points)
-    except (TypeError, ValueError):  # (ragged: check_contour says what is wrong)
-        return points
-    if arr.dtype.kind not in "iuf" or arr.ndim != 2 or arr.shape[1] != 2 or not len(arr) or \
-            not np.all(np.isfinite(arr)) or np.ptp(arr, axis=0).any():
+    arr = _pairs(points)
+    if arr is None or not len(arr) or not np.all(np.isfinite(arr)) or np.ptp(arr, axis=0).any():
         return points
     angles = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
     return arr[0].astype(float) + CLICK_RADIUS * np.column_stack([np.sin(angles), np.cos(angles)])
@@ -145,11 +151,8 @@ def once_each(points):
     else as given. A closed ring as ``skimage.measure.find_contours``, QuPath
     and shapely write it repeats its first node at its end, and a mouse that
     paused repeats one in a row: neither says more than the nodes once."""
-    try:
-        arr = np.asarray(points)
-    except (TypeError, ValueError):  # (ragged: check_contour says what is wrong)
-        return points
-    if arr.dtype.kind not in "iuf" or arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < 2:
+    arr = _pairs(points)
+    if arr is None or len(arr) < 2:
         return points
     repeats = np.all(arr == np.roll(arr, -1, axis=0), axis=1)  # (the last, where it repeats the first)
     return arr[~repeats] if repeats.any() and not repeats.all() else points

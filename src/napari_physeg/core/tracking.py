@@ -1066,14 +1066,15 @@ def _warn_not_found(run: _Run, image: np.ndarray) -> list[str]:
     frame ``image``: it is reported lost on every frame, which is seldom what
     was meant. Returns the messages."""
     said, shape, blank = [], image.shape, _blank(image)
+    order = _segmenting_order(run, run.start, 1)  # (the start frame's: the drawings' areas alone)
     for k, init in enumerate(run.inits):
         if run.status[k][run.start] == TRACKED:
             continue
         # Only an object found before k can have taken what k marks: a
         # generous circle done after a tight one inside it did not (it was
         # blamed for a small cell whose own contour leaked).
-        before = run.start_order[:run.start_order.index(k)] if k in run.start_order else range(len(run.inits))
-        within = [j for j in before if j != k and run.status[j][run.start] == TRACKED
+        before = order[:order.index(k)]
+        within = [j for j in before if run.status[j][run.start] == TRACKED
                   and (_holds(run.inits[j], init, shape) or _holds(init, run.inits[j], shape))]
         if blank:
             why = blank
@@ -1261,8 +1262,6 @@ def _segment_frame(run: _Run, image, shared, t: int, step: int):
     owner = np.full(image.shape, -1, dtype=np.int32)
     run.painted = {}
     order = _segmenting_order(run, t, step)
-    if t == run.start:
-        run.start_order = list(order)
     run.drift = _field_drift(run, t, step)
     for j in reversed(order):  # where claims overlap, the object done first has them
         _paint(run, owner, _claim_before(run, j, t, step), j)
@@ -1502,7 +1501,6 @@ class _Run:
     warned: set = field(default_factory=set)  # the objects a warning named lost (see _warn_lost)
     nothing_there: dict = field(default_factory=dict)  # frame -> why nothing is found there (see _nothing_to_find)
     textured: tuple | None = None  # (frame, its texture, the texture's features), for objects told by it (see _seen_as)
-    start_order: list = field(default_factory=list)  # the objects in the order done on the start frame
 
 
 def _claim_before(run: _Run, k: int, t: int, step: int) -> np.ndarray | None:
