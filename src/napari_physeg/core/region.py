@@ -1667,8 +1667,13 @@ def _within_the_drawing(cropped, drawing, model, image_sides):
     ground about a phase-contrast cell whose dark middle runs out into it,
     taken 100 px beyond a lasso, "converged" on the crop's sides (IoU 0.09)."""
     box, region, cut = cropped
-    limit = drawing_limit(drawing, region.shape, model)
-    return box, _smoothed(region & limit, image_sides), cut | (region & ~limit)
+    region, cut_off = _limited(region, drawing_limit(drawing, region.shape, model), image_sides)
+    return box, region, cut | cut_off
+
+
+def _limited(region: np.ndarray, limit: np.ndarray, image_sides) -> tuple[np.ndarray, np.ndarray]:
+    """``region`` within ``limit``, smoothed, and what ``limit`` cut off it."""
+    return _smoothed(region & limit, image_sides), region & ~limit
 
 
 def _object_region_on_crop(signed, drawing, model, image_sides, stronger, scale: float):
@@ -1824,8 +1829,7 @@ def _object_region_near(signed: np.ndarray, drawing: np.ndarray, model: RegionMo
             return None
     if model.drawn_around and _drawn_across(region, limit):
         limit = _fill(_scaled(drawing, model.reach), shape)
-    cut = region & ~limit
-    region = _smoothed(region & limit, image_sides)
+    region, cut = _limited(region, limit, image_sides)
     # A person's drawing around the object holds all of it: bodies of its
     # own region that lie apart (the two masses of a dividing cell) are
     # joined, else the contour pinched between them and kept one. (A
